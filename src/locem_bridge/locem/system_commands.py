@@ -1,0 +1,126 @@
+"""The system commands every LOCEM offers, whatever the robot: HELP, STATUS, STOP, WAIT.
+
+``WAIT`` is a cancelable, pausable long-running command that touches no device: it is how the action and
+procedure semantics are exercised without hardware. ``hold=`` lets it occupy a resource, so the resource
+policy (``BUSY``, ``STOP``) can be shown on a machine without devices.
+"""
+
+from typing import Any, Dict, List
+
+from .dispatcher import Dispatcher
+from .errors import InvalidArgument
+from .execution import CommandContext
+from .registry import Arg, CommandSpec
+
+STANDARD_RESOURCES = ("base", "arm", "compressor", "tool")
+"""Resources of a mobile manipulator as LOCEM schedules them (one running command each)."""
+
+MAX_WAIT_S = 3600.0
+
+HELP = CommandSpec(
+    "HELP", "List every command, or show one command's signature, units and ranges.",
+    args=(Arg.word("name", "command to describe; all commands when omitted", default=""),),
+    timeout=1.0, inline=True,
+    result=(("commands", "all commands: name, usage, summary (without a name)"),
+            ("command", "the described command: args with type, unit, range, default; interfaces; resources")),
+)
+STATUS = CommandSpec(
+    "STATUS", "Report running commands, occupied resources and the health of every backend.",
+    timeout=1.0, inline=True,
+    result=(("running", "commands running now: id, command, state, progress, elapsed_s, resources"),
+            ("resources", "occupied resource -> command id"),
+            ("health", "per backend: link state, device state, last error"),
+            ("uptime_s", "seconds since LOCEM started")),
+)
+STOP = CommandSpec(
+    "STOP", "Stop every running command and every device now; always accepted, never BUSY.",
+    timeout=5.0, preemptive=True, inline=True,
+    result=(("stopped", "ids of the commands that were cancelled"),
+            ("still_running", "ids whose handlers had not returned when STOP answered"),
+            ("hook_errors", "device stops that failed")),
+)
+WAIT = CommandSpec(
+    "WAIT", "Wait for a time; cancelable and pausable (pause time does not count).",
+    args=(Arg.number("seconds", "s", 0.0, MAX_WAIT_S, "time to wait"),
+          Arg.choice("hold", ("none",) + STANDARD_RESOURCES, "resource to occupy while waiting",
+                     default="none", keyword_only=True)),
+    timeout=MAX_WAIT_S + 5.0, pausable=True,
+    claims=lambda values: frozenset() if values["hold"] == "none" else frozenset({values["hold"]}),
+    deadline=lambda values: float(values["seconds"]) + 5.0,
+    result=(("waited_s", "seconds waited, pauses excluded"),),
+)
+
+SPECS = (HELP, STATUS, STOP, WAIT)
+
+
+class SystemCommands:
+    """Binds the system handlers to a dispatcher (they need its registry and its state)."""
+
+    def __init__(self, dispatcher: Dispatcher) -> None:
+        self._dispatcher = dispatcher
+        registry = dispatcher.registry
+        for spec in SPECS:
+            registry.declare(spec)
+        registry.bind("HELP", self.help)
+        registry.bind("STATUS", self.status)
+        registry.bind("STOP", self.stop)
+        registry.bind("WAIT", self.wait)
+
+    def help(self, ctx: CommandContext, name: str) -> Dict[str, Any]:
+        registry = self._dispatcher.registry
+        if name:
+            spec = registry.lookup(name) if name.upper() in registry.names() else None
+            if spec is None:
+                raise InvalidArgument("HELP: no command named '%s'%s; send HELP to list all commands"
+                                      % (name, registry.suggest(name)), argument="name")
+            return {"message": describe(spec, registry.handler(spec.name) is not None), "command": spec.describe()}
+        lines: List[str] = []
+        commands = []
+        for spec in registry.specs():
+            served = registry.handler(spec.name) is not None
+            lines.append("%-44s %s%s" % (spec.usage, spec.summary, "" if served else "  [not served here]"))
+            commands.append({"name": spec.name, "usage": spec.usage, "summary": spec.summary,
+                             "category": spec.category, "served": served})
+        text = "%d commands (HELP NAME for units and ranges):\n%s" % (len(commands), "\n".join(lines))
+        return {"message": text, "commands": commands}
+
+    def status(self, ctx: CommandContext) -> Dict[str, Any]:
+        report = self._dispatcher.status()
+        report["running"] = [r for r in report["running"] if r["id"] != ctx.id]
+        busy = ", ".join("%s: %d" % item for item in sorted(report["resources"].items())) or "all resources idle"
+        report["message"] = "%d running; %s" % (len(report["running"]), busy)
+        return report
+
+    def stop(self, ctx: CommandContext) -> Dict[str, Any]:
+        outcome = self._dispatcher.stop_all("stopped by STOP")
+        outcome["message"] = "stopped %d command(s)%s" % (
+            len(outcome["stopped"]),
+            "; still finishing: %s" % outcome["still_running"] if outcome["still_running"] else "")
+        return outcome
+
+    def wait(self, ctx: CommandContext, seconds: float, hold: str) -> Dict[str, Any]:
+        step = 0.05
+        waited = 0.0
+        while waited < seconds:
+            chunk = min(step, seconds - waited)
+            ctx.sleep(chunk)
+            waited += chunk
+            ctx.report(waited / seconds if seconds > 0 else 1.0, "waited %.2f of %.2f s" % (waited, seconds))
+        return {"waited_s": round(waited, 6)}
+
+
+def describe(spec: CommandSpec, served: bool = True) -> str:
+    """Multi-line human description of one command (used by ``HELP NAME`` and the API documentation)."""
+    lines = ["%s -- %s" % (spec.usage, spec.summary)]
+    for arg in spec.args:
+        default = "" if arg.required else " (default %s)" % (arg.default if arg.default != "" else '""')
+        lines.append("  %-10s %s; %s%s" % (arg.name, arg.doc, arg.allowed(), default))
+    lines.append("  interfaces: %s" % ", ".join(sorted(i.value for i in spec.interfaces)))
+    lines.append("  resources: %s" % (", ".join(sorted(spec.resources)) or
+                                      ("chosen by arguments" if spec.claims else "none")))
+    lines.append("  timeout: %.6g s%s" % (spec.timeout, " (computed from arguments)" if spec.deadline else ""))
+    if spec.result:
+        lines.append("  result: " + "; ".join("%s = %s" % item for item in spec.result))
+    if not served:
+        lines.append("  not served by this LOCEM (no backend configured)")
+    return "\n".join(lines)

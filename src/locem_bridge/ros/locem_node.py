@@ -1,0 +1,205 @@
+"""The LOCEM ROS node: the core dispatcher exposed as service, action, procedure, subscriber and publisher.
+
+All names are private to the node (``~command`` ...), so with the default node name ``locem`` they are
+``/locem/command`` etc., and a robot namespace (``ROS_NAMESPACE=robot1``) moves them all together.
+
+=====================  ==========================================  ====================================
+interface              name                                        type
+=====================  ==========================================  ====================================
+service                ``~command``                                ``locem_bridge/Command``
+action                 ``~command_action``                         ``locem_bridge/CommandAction``
+subscriber             ``~command_in``                             ``locem_bridge/CommandString``
+publisher              ``~status``                                 ``locem_bridge/Status``
+procedure services     ``~procedure/{add,query_state,cancel,       ``locem_bridge/ProcedureAdd``,
+                       pause,resume}``                             ``locem_bridge/ProcedureControl``
+procedure publisher    ``~procedure/state`` (on change, latched)   ``locem_bridge/ProcedureState``
+=====================  ==========================================  ====================================
+"""
+
+import json
+import threading
+from typing import Any, Callable, Dict, Optional
+
+import actionlib
+import rospy
+from actionlib_msgs.msg import GoalStatus
+
+from locem_bridge.locem.codes import Code
+from locem_bridge.locem.core import LocemCore
+from locem_bridge.locem.errors import LocemError
+from locem_bridge.locem.execution import CommandEvent, Execution
+from locem_bridge.locem.procedures import ProcedureSnapshot
+from locem_bridge.locem.registry import Interface
+from locem_bridge.locem.response import Response
+from locem_bridge.msg import (
+    CommandString,
+    CommandAction,
+    CommandFeedback,
+    CommandResult,
+    ProcedureState,
+    Status,
+)
+from locem_bridge.srv import (
+    Command,
+    CommandResponse,
+    ProcedureAdd,
+    ProcedureAddResponse,
+    ProcedureControl,
+    ProcedureControlResponse,
+)
+
+
+class LocemNode:
+    """Wraps a :class:`LocemCore`; ``start()`` advertises every interface (call after ``rospy.init_node``)."""
+
+    def __init__(self, core: LocemCore) -> None:
+        self.core = core
+        self._goals: Dict[str, Execution] = {}
+        self._goals_lock = threading.Lock()
+
+    def start(self) -> None:
+        dispatcher = self.core.dispatcher
+        self._status_pub = rospy.Publisher("~status", Status, queue_size=100)
+        self._procedure_pub = rospy.Publisher("~procedure/state", ProcedureState, queue_size=100, latch=True)
+        dispatcher.add_listener(self._publish_status)
+        self.core.procedures.add_listener(self._publish_procedure)
+        self._services = [
+            rospy.Service("~command", Command, self._on_command),
+            rospy.Service("~procedure/add", ProcedureAdd, self._on_procedure_add),
+            rospy.Service("~procedure/query_state", ProcedureControl,
+                          self._procedure_op(self.core.procedures.query_state)),
+            rospy.Service("~procedure/cancel", ProcedureControl, self._procedure_op(self.core.procedures.cancel)),
+            rospy.Service("~procedure/pause", ProcedureControl, self._procedure_op(self.core.procedures.pause)),
+            rospy.Service("~procedure/resume", ProcedureControl, self._procedure_op(self.core.procedures.resume)),
+        ]
+        self._subscriber = rospy.Subscriber("~command_in", CommandString, self._on_command_in, queue_size=100)
+        self._action = actionlib.ActionServer("~command_action", CommandAction, self._on_goal, self._on_cancel,
+                                              auto_start=False)
+        self._action.start()
+
+    def shutdown(self) -> None:
+        for service in self._services:
+            service.shutdown("LOCEM node shutting down")
+        self._subscriber.unregister()
+        self.core.close()
+
+    # -- service ------------------------------------------------------------------------------------------
+    def _on_command(self, request: Any) -> CommandResponse:
+        response = self.core.dispatcher.execute(request.command, Interface.SERVICE)
+        return CommandResponse(response.success, response.code.value, response.message, response.result_json)
+
+    # -- subscriber ---------------------------------------------------------------------------------------
+    def _on_command_in(self, message: Any) -> None:
+        try:
+            self.core.dispatcher.submit(message.command, Interface.SUBSCRIBER)
+        except LocemError:
+            pass  # the rejection is published on ~status by the dispatcher
+
+    # -- publisher ----------------------------------------------------------------------------------------
+    def _publish_status(self, event: CommandEvent) -> None:
+        message = Status()
+        message.header.stamp = rospy.Time.from_sec(event.stamp)
+        message.id = event.id
+        message.command = event.command
+        message.name = event.name
+        message.interface = event.interface
+        message.state = event.state.value
+        message.code = event.code
+        message.message = event.message
+        message.result = json.dumps(event.result, sort_keys=True, default=str)
+        message.progress = event.progress
+        self._status_pub.publish(message)
+
+    # -- action -------------------------------------------------------------------------------------------
+    def _on_goal(self, goal_handle: Any) -> None:
+        goal_id = goal_handle.get_goal_id().id
+        accepted = threading.Event()
+
+        def feedback(event: CommandEvent) -> None:
+            if accepted.is_set() and not event.state.terminal:
+                goal_handle.publish_feedback(CommandFeedback(event.state.value, event.progress, event.message))
+
+        try:
+            execution = self.core.dispatcher.submit(goal_handle.get_goal().command, Interface.ACTION,
+                                                    listener=feedback)
+        except LocemError as error:
+            goal_handle.set_rejected(_action_result(Response.from_error(error)), error.message)
+            return
+        with self._goals_lock:
+            self._goals[goal_id] = execution
+        goal_handle.set_accepted("running as command %d" % execution.id)
+        accepted.set()
+        threading.Thread(target=self._finish_goal, args=(goal_handle, goal_id, execution),
+                         name="locem-goal-%d" % execution.id, daemon=True).start()
+
+    def _finish_goal(self, goal_handle: Any, goal_id: str, execution: Execution) -> None:
+        response = execution.wait()
+        with self._goals_lock:
+            self._goals.pop(goal_id, None)
+        result = _action_result(response)
+        status = goal_handle.get_goal_status().status
+        if response.success:
+            goal_handle.set_succeeded(result, response.message)
+        elif response.code is Code.ABORTED and status in (GoalStatus.PREEMPTING, GoalStatus.RECALLING):
+            goal_handle.set_canceled(result, response.message)
+        else:
+            goal_handle.set_aborted(result, response.message)
+
+    def _on_cancel(self, goal_handle: Any) -> None:
+        with self._goals_lock:
+            execution = self._goals.get(goal_handle.get_goal_id().id)
+        if execution is not None:
+            execution.cancel("action goal canceled by its client")
+
+    # -- procedures ---------------------------------------------------------------------------------------
+    def _on_procedure_add(self, request: Any) -> ProcedureAddResponse:
+        try:
+            snapshot = self.core.procedures.add(request.command)
+        except LocemError as error:
+            return ProcedureAddResponse(False, error.code.value, error.message, 0, "")
+        return ProcedureAddResponse(True, Code.OK.value, "queued as procedure %d" % snapshot.id, snapshot.id,
+                                    snapshot.state.value)
+
+    def _procedure_op(self, operation: Callable[[int], ProcedureSnapshot]) -> Callable[[Any], Any]:
+        def serve(request: Any) -> ProcedureControlResponse:
+            try:
+                snapshot = operation(request.id)
+            except LocemError as error:
+                return ProcedureControlResponse(False, error.code.value, error.message, "", "", "{}", 0.0)
+            return ProcedureControlResponse(True, Code.OK.value, snapshot.message or snapshot.state.value,
+                                            snapshot.state.value, snapshot.code,
+                                            json.dumps(snapshot.result, sort_keys=True, default=str),
+                                            snapshot.progress)
+        return serve
+
+    def _publish_procedure(self, snapshot: ProcedureSnapshot) -> None:
+        message = ProcedureState()
+        message.header.stamp = rospy.Time.now()
+        message.id = snapshot.id
+        message.command = snapshot.command
+        message.state = snapshot.state.value
+        message.code = snapshot.code
+        message.message = snapshot.message
+        message.result = json.dumps(snapshot.result, sort_keys=True, default=str)
+        message.progress = snapshot.progress
+        self._procedure_pub.publish(message)
+
+
+def _action_result(response: Optional[Response]) -> CommandResult:
+    assert response is not None
+    return CommandResult(response.success, response.code.value, response.message, response.result_json)
+
+
+def main() -> None:
+    """Entry point of ``rosrun locem_bridge locem_node``."""
+    rospy.init_node("locem")
+    core = LocemCore(grace=float(rospy.get_param("~grace", 1.0)),
+                     stop_timeout=float(rospy.get_param("~stop_timeout", 2.0)))
+    node = LocemNode(core)
+    node.start()
+    rospy.on_shutdown(node.shutdown)
+    served = [s.name for s in core.registry.specs() if core.registry.handler(s.name)]
+    rospy.loginfo("LOCEM ready on %s: %d commands (%s)", rospy.resolve_name("~command"), len(served),
+                  ", ".join(served))
+    rospy.spin()
+
