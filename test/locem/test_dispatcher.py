@@ -130,3 +130,12 @@ def test_progress_feedback_reaches_the_command_listener_only(core):
 def test_status_reports_health_of_installed_backends(core):
     status = core.dispatcher.execute("STATUS")
     assert status.result["health"] == {"fake": {"link": "up", "device": "ok", "last_error": ""}}
+
+
+def test_read_only_queries_are_not_published_as_state_changes(core):
+    events = []
+    core.dispatcher.add_listener(events.append)
+    assert core.dispatcher.execute("STATUS").success and core.dispatcher.execute("HELP").success
+    assert events == []
+    core.dispatcher.execute("STATUS now")  # a rejected query is still published
+    assert [(e.name, e.state.value) for e in events] == [("STATUS", "rejected")]

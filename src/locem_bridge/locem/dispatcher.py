@@ -4,6 +4,8 @@ Policy, stated once:
 
 * **Validation first.** A command is parsed and bound to its declaration before anything else; a rejected
   command never reaches a handler, and the rejection is published like any other event.
+* **Events are state changes.** Every command's start, pause, resume and end is published to the listeners
+  (``/locem/status``), except runs of read-only ``query`` commands (``HELP``, ``STATUS``), which change nothing.
 * **One running command per resource.** Each command declares the resources it occupies (``base``, ``arm``,
   ``compressor``, ``tool``, ...). A command needing an occupied resource is answered ``BUSY`` at once; there is
   no hidden queue (the procedure interface is the queue).
@@ -92,8 +94,9 @@ class Dispatcher:
             raise
         if listener is not None:
             execution.add_listener(listener)
-        execution.add_listener(self._emit, feedback=False)
-        self._emit(execution._event())
+        if not bound.spec.query:
+            execution.add_listener(self._emit, feedback=False)
+            self._emit(execution._event())
         if bound.spec.inline:
             self._run(execution, handler)
         else:

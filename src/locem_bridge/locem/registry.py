@@ -178,8 +178,9 @@ class CommandSpec:
     second command needing one of them is answered ``BUSY``. ``claims`` may compute them from the argument
     values instead. ``timeout`` (s) is the deadline from start to result; ``deadline`` may compute it from
     the values (e.g. from path length and speed). ``preemptive`` commands (``STOP``) are never ``BUSY``.
-    ``inline`` commands are quick queries answered in the caller's thread. ``pausable`` commands honour
-    pause/resume through their context.
+    ``inline`` commands are quick queries answered in the caller's thread. ``query`` commands only read state:
+    they change nothing, so their (successful) runs are not published as state changes. ``pausable`` commands
+    honour pause/resume through their context.
     """
 
     name: str
@@ -193,6 +194,7 @@ class CommandSpec:
     pausable: bool = False
     preemptive: bool = False
     inline: bool = False
+    query: bool = False
     claims: Optional[Callable[[Mapping[str, Any]], FrozenSet[str]]] = field(default=None, compare=False)
     deadline: Optional[Callable[[Mapping[str, Any]], float]] = field(default=None, compare=False)
 
@@ -238,6 +240,7 @@ class CommandSpec:
             "result": [{"key": k, "doc": d} for k, d in self.result],
             "pausable": self.pausable,
             "preemptive": self.preemptive,
+            "query": self.query,
         }
 
 

@@ -20,13 +20,13 @@ MAX_WAIT_S = 3600.0
 HELP = CommandSpec(
     "HELP", "List every command, or show one command's signature, units and ranges.",
     args=(Arg.word("name", "command to describe; all commands when omitted", default=""),),
-    timeout=1.0, inline=True,
+    timeout=1.0, inline=True, query=True,
     result=(("commands", "all commands: name, usage, summary (without a name)"),
             ("command", "the described command: args with type, unit, range, default; interfaces; resources")),
 )
 STATUS = CommandSpec(
     "STATUS", "Report running commands, occupied resources and the health of every backend.",
-    timeout=1.0, inline=True,
+    timeout=1.0, inline=True, query=True,
     result=(("running", "commands running now: id, command, state, progress, elapsed_s, resources"),
             ("resources", "occupied resource -> command id"),
             ("health", "per backend: link state, device state, last error"),
