@@ -36,8 +36,11 @@ else
     rosout python3-actionlib python3-actionlib-msgs ros-actionlib-msgs libactionlib-msgs-dev ros-std-msgs
     python3-std-msgs libstd-msgs-dev python3-geometry-msgs libgeometry-msgs-dev python3-nav-msgs
     libnav-msgs-dev python3-diagnostic-msgs libdiagnostic-msgs-dev python3-sensor-msgs libsensor-msgs-dev
-    python3-tf2-msgs libtf2-msgs-dev python3-tf2-ros"
+    python3-tf2-msgs libtf2-msgs-dev python3-tf2-ros
+    chromium chromium-driver"
 fi
+# (chromium + chromium-driver: the operator HMI's real-browser test; on Ubuntu 20.04 Chromium is a snap, so
+#  that test is skipped there unless /usr/bin/chromium exists.)
 missing=""
 for p in $APT_PACKAGES; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
