@@ -1,0 +1,152 @@
+"""The run report of a job: ``results/<run>/report.json``, ``report.md`` and the wall pictures.
+
+``report.json`` keeps at least the keys DESIGN.md fixes:
+
+* ``processes``: list of ``{name, iri, status, duration_s}`` in the order they ran;
+* ``outcome.joints_total``, ``outcome.joints_taped``, ``outcome.tape_coverage``, ``outcome.spray_coverage``,
+  ``outcome.sand_coverage`` (fractions 0..1), ``outcome.operator_interventions``, ``outcome.collisions``.
+
+``tape_coverage`` is the mean covered fraction over the joints the robot was to tape (joints the operator sent to
+manual taping are reported as ``joints_manual`` and excluded); ``spray_coverage`` and ``sand_coverage`` are the
+covered fractions of all wall area. ``results/latest`` is a relative symlink to the newest run.
+"""
+
+import datetime
+import json
+import os
+import shutil
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional
+
+REQUIRED_OUTCOME_KEYS = ("joints_total", "joints_taped", "tape_coverage", "spray_coverage", "sand_coverage",
+                         "operator_interventions", "collisions")
+
+
+class ReportError(ValueError):
+    """The data handed to the report writer is incomplete or inconsistent."""
+
+
+@dataclass
+class ProcessRecord:
+    name: str
+    iri: str
+    status: str
+    duration_s: float
+    detail: str = ""
+
+
+@dataclass
+class RunRecord:
+    """Everything a finished (or aborted) job knows; ``outcome`` is the worksite's measurement summary."""
+
+    processes: List[ProcessRecord]
+    outcome: Dict[str, Any]
+    operator_interventions: int
+    collisions: int
+    settings: Dict[str, Any] = field(default_factory=dict)
+    kpis: List[Dict[str, Any]] = field(default_factory=list)
+    timing: Dict[str, float] = field(default_factory=dict)
+    pictures: List[str] = field(default_factory=list)
+    started: Optional[datetime.datetime] = None
+
+
+def run_name(now: Optional[datetime.datetime] = None) -> str:
+    now = now or datetime.datetime.now()
+    return now.strftime("%Y%m%d-%H%M%S")
+
+
+def build_report(record: RunRecord, run: str) -> Dict[str, Any]:
+    """The ``report.json`` document (pure function; raises :class:`ReportError` for unusable input)."""
+    joints = record.outcome.get("joints")
+    if not isinstance(joints, dict):
+        raise ReportError("outcome.joints must map joint id -> {coverage, taped, manual}")
+    robot_joints = {jid: j for jid, j in joints.items() if not j.get("manual")}
+    tape_coverage = (sum(float(j["coverage"]) for j in robot_joints.values()) / len(robot_joints)
+                     if robot_joints else 0.0)
+    walls = record.outcome.get("walls", {})
+    cvs = [float(w["thickness_cv"]) for w in walls.values() if "thickness_cv" in w]
+    outcome = {
+        "joints_total": len(joints),
+        "joints_taped": sum(1 for j in robot_joints.values() if j.get("taped")),
+        "joints_manual": len(joints) - len(robot_joints),
+        "tape_coverage": round(tape_coverage, 6),
+        "spray_coverage": round(float(record.outcome.get("spray_coverage", 0.0)), 6),
+        "spray_thickness_cv": round(max(cvs), 6) if cvs else 0.0,
+        "sand_coverage": round(float(record.outcome.get("sand_coverage", 0.0)), 6),
+        "operator_interventions": int(record.operator_interventions),
+        "collisions": int(record.collisions),
+        "joints": joints,
+        "walls": walls,
+    }
+    for key in ("tape_coverage", "spray_coverage", "sand_coverage"):
+        if not 0.0 <= outcome[key] <= 1.0:
+            raise ReportError("outcome.%s = %r is not a fraction in 0..1" % (key, outcome[key]))
+    started = record.started.isoformat(timespec="seconds") if record.started else None
+    return {
+        "run": run,
+        "started": started,
+        "settings": record.settings,
+        "processes": [{"name": p.name, "iri": p.iri, "status": p.status, "duration_s": round(p.duration_s, 3),
+                       "detail": p.detail} for p in record.processes],
+        "outcome": outcome,
+        "kpis": record.kpis,
+        "timing": {k: round(v, 3) for k, v in record.timing.items()},
+        "pictures": [os.path.basename(p) for p in record.pictures],
+    }
+
+
+def render_markdown(report: Dict[str, Any]) -> str:
+    o = report["outcome"]
+    lines = ["# Run %s" % report["run"], ""]
+    if report.get("settings"):
+        lines += ["Settings: " + ", ".join("%s=%s" % kv for kv in sorted(report["settings"].items())), ""]
+    lines += ["## Processes", "", "| process | status | duration |", "| --- | --- | --- |"]
+    lines += ["| %s | %s | %.1f s |" % (p["name"], p["status"], p["duration_s"]) for p in report["processes"]]
+    lines += ["", "## Outcome", "", "| measure | value |", "| --- | --- |",
+              "| joints taped by the robot | %d of %d (%d manual) |" % (o["joints_taped"], o["joints_total"] -
+                                                                      o["joints_manual"], o["joints_manual"]),
+              "| tape coverage | %.1f %% |" % (100 * o["tape_coverage"]),
+              "| spray coverage | %.1f %% (thickness CV %.3f) |" % (100 * o["spray_coverage"], o["spray_thickness_cv"]),
+              "| sand coverage | %.1f %% |" % (100 * o["sand_coverage"]),
+              "| operator interventions | %d |" % o["operator_interventions"],
+              "| collisions | %d |" % o["collisions"]]
+    if report.get("timing"):
+        lines += ["", "## Time", "", "| part | seconds |", "| --- | --- |"]
+        lines += ["| %s | %.2f |" % kv for kv in report["timing"].items()]
+    if report.get("kpis"):
+        keys = list(report["kpis"][0])
+        lines += ["", "## KPIs", "", "| " + " | ".join(keys) + " |", "|" + " --- |" * len(keys)]
+        lines += ["| " + " | ".join(str(row.get(k, "")) for k in keys) + " |" for row in report["kpis"]]
+    if report.get("pictures"):
+        lines += ["", "## Walls", ""] + ["![%s](%s)" % (p[:-4], p) for p in report["pictures"]]
+    return "\n".join(lines) + "\n"
+
+
+def write_report(record: RunRecord, results_dir: str, run: Optional[str] = None) -> str:
+    """Write the run folder and point ``results/latest`` at it; returns the folder path.
+
+    The folder is written under a temporary name and renamed into place, so a reader never sees half a report.
+    """
+    run = run or run_name(record.started)
+    report = build_report(record, run)
+    os.makedirs(results_dir, exist_ok=True)
+    final = os.path.join(results_dir, run)
+    staging = final + ".partial"
+    shutil.rmtree(staging, ignore_errors=True)
+    os.makedirs(staging)
+    for picture in record.pictures:
+        shutil.copy2(picture, os.path.join(staging, os.path.basename(picture)))
+    with open(os.path.join(staging, "report.json"), "w", encoding="utf-8") as handle:
+        json.dump(report, handle, indent=2, sort_keys=True)
+    with open(os.path.join(staging, "report.md"), "w", encoding="utf-8") as handle:
+        handle.write(render_markdown(report))
+    if os.path.exists(final):
+        shutil.rmtree(final)
+    os.rename(staging, final)
+    latest = os.path.join(results_dir, "latest")
+    tmp_link = latest + ".tmp"
+    if os.path.lexists(tmp_link):
+        os.remove(tmp_link)
+    os.symlink(run, tmp_link)
+    os.replace(tmp_link, latest)
+    return final
