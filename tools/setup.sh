@@ -80,15 +80,18 @@ if [ "$(readlink "$WS/src/locem_bridge" 2>/dev/null)" != "$REPO" ]; then
   rm -f "$WS/src/locem_bridge"
   ln -s "$REPO" "$WS/src/locem_bridge"
 fi
-BUILD_HASH=$( (cd "$REPO" && ls msg srv action scripts 2>/dev/null; cat CMakeLists.txt package.xml setup.py \
-  msg/* srv/* action/* 2>/dev/null) | sha256sum | cut -c1-16)
+# The venv's interpreter (made from /usr/bin/python3) builds the workspace, so the devel-space script wrappers
+# that rosrun/roslaunch execute start in the venv and see its packages.
+BUILD_HASH=$( (cd "$REPO" && echo "$VENV"; ls msg srv action scripts 2>/dev/null; cat CMakeLists.txt package.xml \
+  setup.py msg/* srv/* action/* 2>/dev/null) | sha256sum | cut -c1-16)
 if [ ! -f "$WS/devel/setup.bash" ] || [ "$(cat "$WS/.locem-build" 2>/dev/null)" != "$BUILD_HASH" ]; then
   say "building the catkin workspace $WS"
   (
     set +u
     [ -n "$ROS_SETUP" ] && . "$ROS_SETUP"
     cd "$WS"
-    catkin_make -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCATKIN_ENABLE_TESTING=OFF > "$WS/catkin_make.log" 2>&1 \
+    rm -rf "$WS/build" "$WS/devel"   # a clean configure: the interpreter or the message set may have changed
+    catkin_make -DPYTHON_EXECUTABLE="$VENV/bin/python" -DCATKIN_ENABLE_TESTING=OFF > "$WS/catkin_make.log" 2>&1 \
       || { tail -40 "$WS/catkin_make.log" >&2; exit 1; }
   )
   echo "$BUILD_HASH" > "$WS/.locem-build"

@@ -1,1 +1,18 @@
-"""The simulated worksite: a PyBullet plasterboard site and protocol-level device stand-ins (RTDE, Modbus, CANopen)."""
+"""The simulated worksite: a PyBullet plasterboard site and protocol-level device stand-ins (RTDE, Modbus, CANopen).
+
+Modules (ROS-free; the ROS node ``sim_worksite`` wraps :class:`locem_bridge.sim.worksite.Worksite`):
+
+* :mod:`.config`        load + validate ``config/sites/*.yaml`` and ``config/robots/*.yaml``
+* :mod:`.site`          ground-truth walls, joints, areas (SCAN contract shapes)
+* :mod:`.world`         the PyBullet world: room, robot (mecanum base, pedestal, UR arm), tools, collisions
+* :mod:`.outcome`       tape per joint, spray thickness map, sanded map, wall pictures
+* :mod:`.perception`    SCAN stand-in: visible features with configurable noise
+* :mod:`.compressor`    pressure model + Modbus register map (plain Python)
+* :mod:`.modbus_server` pymodbus 3.16 TCP server of the compressor, link-drop faults
+* :mod:`.drives`        four CiA 402 drives (canopen LocalNode) on a python-can bus, faults
+* :mod:`.mecanum`       mecanum kinematics
+* :mod:`.arm_source`    where the world gets the arm state (UR stand-in adapter, scripted arm)
+* :mod:`.clock`         sim time with a time scale
+* :mod:`.worksite`      composition of everything; ``python3 -m locem_bridge.sim`` runs it
+* :mod:`.ur`            UR controller stand-in (dashboard, script, RTDE)
+"""

@@ -1,0 +1,109 @@
+"""ROS node ``sim_worksite``: the simulated worksite (PyBullet world + RTDE, Modbus and CAN stand-ins).
+
+The stand-ins speak their device protocols on the addresses of the robot YAML, exactly as the real devices
+would; this node adds what only a simulator has, as ``locem_bridge/JsonCall`` services under ``~`` (``/sim/``
+with the default node name):
+
+==================  =====================================================  ======================================
+service             args (JSON object)                                     result
+==================  =====================================================  ======================================
+``~scan``           ``{}``                                                 SCAN result (docs/contracts.md)
+``~mount_tool``     ``{"name": "spray_gun"}`` (the operator mounts it)     ``{"tool": name}``
+``~remove_tool``    ``{}``                                                 ``{"tool": removed name or null}``
+``~manual_taping``  ``{"joint": "wall_1_joint_2"}`` (taped by hand)        ``{}``
+``~inject_fault``   ``{"kind": ..., ...}`` (see Worksite.inject_fault)     ``{}``
+``~clear_fault``    ``{"kind": ..., ...}``                                 ``{}``
+``~outcome``        ``{}``                                                 outcome numbers (+ collisions)
+``~save_outcome``   ``{"folder": "/abs/path"}``                            numbers + picture file names
+==================  =====================================================  ======================================
+
+Topic ``~ground_truth/base_pose`` (``geometry_msgs/Pose2D``, map frame, 20 Hz): the simulator's true base pose,
+for tests and for the HMI; nothing in the control path reads it.
+"""
+
+import json
+from typing import Any, Callable, Dict
+
+import rospy
+from geometry_msgs.msg import Pose2D
+
+from locem_bridge.sim.config import default_robot_path, default_site_path, load_robot, load_site
+from locem_bridge.sim.errors import SimError
+from locem_bridge.sim.worksite import Worksite
+from locem_bridge.srv import JsonCall, JsonCallResponse
+
+
+class SimNode:
+    def __init__(self, worksite: Worksite) -> None:
+        self.worksite = worksite
+        self._services = []
+
+    def start(self) -> None:
+        site = self.worksite
+        operations: Dict[str, Callable[[Dict[str, Any]], Dict[str, Any]]] = {
+            "scan": lambda a: site.scan(),
+            "mount_tool": lambda a: (site.mount_tool(_need(a, "name")), {"tool": a["name"]})[1],
+            "remove_tool": lambda a: {"tool": site.remove_tool()},
+            "manual_taping": lambda a: (site.mark_manual_taping(_need(a, "joint")), {})[1],
+            "inject_fault": lambda a: (site.inject_fault(_need(a, "kind"), **_rest(a, "kind")), {})[1],
+            "clear_fault": lambda a: (site.clear_fault(_need(a, "kind"), **_rest(a, "kind")), {})[1],
+            "outcome": lambda a: site.outcome(),
+            "save_outcome": lambda a: site.save_outcome(_need(a, "folder")),
+        }
+        for name, operation in operations.items():
+            self._services.append(rospy.Service("~" + name, JsonCall, _serve(name, operation)))
+        self._pose_pub = rospy.Publisher("~ground_truth/base_pose", Pose2D, queue_size=1)
+        self._timer = rospy.Timer(rospy.Duration(0.05), self._publish_pose)
+
+    def _publish_pose(self, _event: Any) -> None:
+        world = self.worksite.world
+        if world is None:
+            return
+        x, y, yaw = world.base_pose()
+        self._pose_pub.publish(Pose2D(x, y, yaw))
+
+    def shutdown(self) -> None:
+        self._timer.shutdown()
+        for service in self._services:
+            service.shutdown("sim_worksite shutting down")
+        self.worksite.stop()
+
+
+def _need(args: Dict[str, Any], key: str) -> Any:
+    if key not in args:
+        raise ValueError("missing argument '%s'" % key)
+    return args[key]
+
+
+def _rest(args: Dict[str, Any], *skip: str) -> Dict[str, Any]:
+    return {k: v for k, v in args.items() if k not in skip}
+
+
+def _serve(name: str, operation: Callable[[Dict[str, Any]], Dict[str, Any]]) -> Callable[[Any], Any]:
+    def handle(request: Any) -> JsonCallResponse:
+        try:
+            args = json.loads(request.args or "{}")
+            if not isinstance(args, dict):
+                raise ValueError("args must be a JSON object, got %s" % type(args).__name__)
+            result = operation(args)
+        except (SimError, ValueError, KeyError, TypeError) as error:
+            return JsonCallResponse(False, "%s refused: %s" % (name, error), "{}")
+        return JsonCallResponse(True, "%s done" % name, json.dumps(result or {}, sort_keys=True, default=str))
+    return handle
+
+
+def main() -> None:
+    """Entry point of ``rosrun locem_bridge sim_worksite``."""
+    rospy.init_node("sim")
+    overrides = {key: rospy.get_param("~" + key) for key in ("host", "modbus_port", "can_interface", "can_channel",
+                                                            "can_port", "time_scale", "gui")
+                 if rospy.has_param("~" + key)}
+    worksite = Worksite(load_site(rospy.get_param("~site", default_site_path())),
+                        load_robot(rospy.get_param("~robot", default_robot_path())), **overrides)
+    endpoints = worksite.start()
+    node = SimNode(worksite)
+    node.start()
+    rospy.on_shutdown(node.shutdown)
+    for what, where in sorted(endpoints.items()):
+        rospy.loginfo("sim_worksite: %s: %s", what, where)
+    rospy.spin()

@@ -1,0 +1,633 @@
+"""Base drive stand-ins: four CiA 402 servo drives (canopen ``LocalNode``) on a python-can bus.
+
+Lifecycle: ``DriveSet(drives_cfg, eds_path, clock)`` -> :meth:`DriveSet.start` (opens the bus, boots every node:
+boot-up message, PRE-OPERATIONAL, heartbeat from 0x1017) -> the world calls :meth:`DriveSet.wheel_angles` each
+step -> :meth:`DriveSet.stop`. The bus comes from configuration (``robot.base.drives.can``): ``virtual`` (one
+process), ``udp_multicast`` (across processes), ``socketcan`` (hardware / vcan); a test can inject its own
+``can.BusABC``.
+
+Each :class:`Cia402Drive` implements
+- NMT slave with heartbeat producer (canopen ``NmtSlave``); a reset command reboots it (boot-up, PRE-OP);
+- the CiA 402 state machine driven by the controlword 0x6040 (shutdown, switch on, enable operation, disable
+  voltage, quick stop, fault reset on the rising edge of bit 7) with the statusword 0x6041;
+- PROFILED VELOCITY mode (0x6060 = 3): target velocity 0x60FF, ramp 0x6083/0x6084 (velocity units per s),
+  feedback 0x6064 position (counts) and 0x606C velocity; units from configuration
+  (``velocity_units_per_rad_s``, ``counts_per_rad``; wheel shaft);
+- PDOs wired explicitly (a ``LocalNode`` does not apply RPDOs by itself): received RPDOs are decoded with the
+  current mapping (0x1600..) and written through the object dictionary, only in OPERATIONAL; TPDOs
+  (0x1800../0x1A00..) are sent cyclically with their event timer and at once when the statusword changes.
+- faults: :meth:`inject_fault` (FAULT state, 0x603F error code, EMCY), :meth:`inject_heartbeat_loss` (the node
+  drops off the bus: no heartbeat, TPDOs or SDO answers, motor stops) and :meth:`restore` (it reboots).
+Malformed frames addressed to a drive (wrong length NMT/SDO/RPDO) are ignored and logged; ``refused`` counts them.
+
+Motion physics is integrated exactly (piecewise constant acceleration) on sim time ``clock()``.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import struct
+import threading
+import time
+from typing import Any, Callable, Dict, List, Optional
+
+import can
+import canopen
+from canopen.sdo import SdoAbortedError
+
+from .errors import DeviceStandInError
+
+log = logging.getLogger(__name__)
+
+# CiA 402 states and their statusword bits (voltage enabled bit 4, remote bit 9 added separately)
+NOT_READY = "NOT READY TO SWITCH ON"
+SWITCH_ON_DISABLED = "SWITCH ON DISABLED"
+READY = "READY TO SWITCH ON"
+SWITCHED_ON = "SWITCHED ON"
+ENABLED = "OPERATION ENABLED"
+QUICK_STOP = "QUICK STOP ACTIVE"
+FAULT_REACTION = "FAULT REACTION ACTIVE"
+FAULT = "FAULT"
+_SW = {NOT_READY: 0x00, SWITCH_ON_DISABLED: 0x40, READY: 0x21 | 0x10, SWITCHED_ON: 0x23 | 0x10,
+       ENABLED: 0x27 | 0x10, QUICK_STOP: 0x07 | 0x10, FAULT_REACTION: 0x0F, FAULT: 0x08}
+SW_REMOTE = 0x0200
+SW_TARGET_REACHED = 0x0400
+MODE_PROFILED_VELOCITY = 3
+SUPPORTED_MODES = (MODE_PROFILED_VELOCITY,)
+NMT_OPERATIONAL = 5
+NMT_PRE_OPERATIONAL = 127
+
+FAULT_OVERCURRENT = 0x2310
+
+
+class Cia402Drive:
+    """One simulated wheel drive (see the module docstring)."""
+
+    def __init__(self, node_id: int, name: str, eds_path: str, cfg: Dict[str, Any], clock: Callable[[], float]) -> None:
+        self.node_id = int(node_id)
+        self.name = name
+        self.node = canopen.LocalNode(self.node_id, canopen.import_od(eds_path, self.node_id))
+        self.vel_scale = float(cfg["velocity_units_per_rad_s"])
+        self.pos_scale = float(cfg["counts_per_rad"])
+        self.max_speed = float(cfg.get("max_wheel_speed", 1e9))
+        self.heartbeat_ms = int(cfg["heartbeat_ms"])
+        self.tpdo_period_ms = int(cfg["tpdo_period_ms"])
+        accel_units = int(round(float(cfg["profile_acceleration"]) * self.vel_scale))
+        self._clock = clock
+        self._lock = threading.RLock()
+        self.state = NOT_READY
+        self.mode = 0
+        self.target_units = 0
+        self.accel_units = accel_units
+        self.decel_units = accel_units
+        self.error_code = 0
+        self.velocity = 0.0           # rad/s at the wheel shaft, drive sign
+        self.angle = 0.0              # rad, drive sign
+        self._t = clock()
+        self._last_cw = 0
+        self.online = False
+        self.refused = 0
+        self.network: Optional[canopen.Network] = None
+        self._rpdo_handlers: Dict[int, Any] = {}
+        self._rewire_rpdos_later = False
+        self._tpdo_last: Dict[int, float] = {}
+        self._tpdo_due: Dict[int, float] = {}
+        self._last_sw_sent: Optional[int] = None
+        od = self.node.data_store
+        od.setdefault(0x1017, {})[0] = struct.pack("<H", self.heartbeat_ms)
+        for n in (0, 1):
+            od.setdefault(0x1800 + n, {})[5] = struct.pack("<H", self.tpdo_period_ms)
+        od.setdefault(0x6083, {})[0] = struct.pack("<I", accel_units)
+        od.setdefault(0x6084, {})[0] = struct.pack("<I", accel_units)
+        self.node.add_read_callback(self._on_read)
+        self.node.add_write_callback(self._on_write)
+
+    # -- physics -------------------------------------------------------------------------------------------
+    def _target_rad_s(self) -> float:
+        if self.state != ENABLED or self.mode != MODE_PROFILED_VELOCITY:
+            return 0.0
+        return max(-self.max_speed, min(self.max_speed, self.target_units / self.vel_scale))
+
+    def update(self) -> None:
+        """Advance velocity and angle to ``clock()`` (exact for the piecewise constant acceleration)."""
+        with self._lock:
+            now = self._clock()
+            dt = now - self._t
+            self._t = now
+            if dt <= 0.0:
+                return
+            vt = self._target_rad_s()
+            speeding_up = abs(vt) > abs(self.velocity) and vt * self.velocity >= 0.0
+            a = (self.accel_units if speeding_up else self.decel_units) / self.vel_scale
+            dv = vt - self.velocity
+            if a <= 0.0:
+                self.velocity = vt
+                self.angle += vt * dt
+                return
+            tr = abs(dv) / a
+            if dt <= tr:
+                s = math.copysign(a, dv)
+                self.angle += self.velocity * dt + 0.5 * s * dt * dt
+                self.velocity += s * dt
+            else:
+                self.angle += 0.5 * (self.velocity + vt) * tr + vt * (dt - tr)
+                self.velocity = vt
+
+    # -- object dictionary hooks ---------------------------------------------------------------------------
+    def statusword(self) -> int:
+        with self._lock:
+            sw = _SW[self.state] | SW_REMOTE
+            if self.state == ENABLED and abs(self.velocity - self._target_rad_s()) < 1e-6:
+                sw |= SW_TARGET_REACHED
+            return sw
+
+    def _on_read(self, index: int, subindex: int, od: Any) -> Optional[int]:
+        if index == 0x6041:
+            return self.statusword()
+        if index == 0x6061:
+            return self.mode
+        if index in (0x6064, 0x606C):
+            self.update()
+            if index == 0x6064:
+                return _i32(self.angle * self.pos_scale)
+            return _i32(self.velocity * self.vel_scale)
+        if index == 0x603F:
+            return self.error_code
+        if index == 0x1001:
+            return 0x01 if self.state in (FAULT, FAULT_REACTION) else 0
+        return None
+
+    def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        if index == 0x6040:
+            self._controlword(struct.unpack_from("<H", data)[0])
+        elif index == 0x6060:
+            mode = struct.unpack_from("<b", data)[0]
+            if mode not in SUPPORTED_MODES:
+                log.warning("drive %d: mode of operation %d refused, supported: %s", self.node_id, mode,
+                            SUPPORTED_MODES)
+                raise SdoAbortedError(0x06090030)   # value range of parameter exceeded
+            with self._lock:
+                self.update()
+                self.mode = mode
+            self._send_status_tpdo()
+        elif index == 0x60FF:
+            with self._lock:
+                self.update()
+                self.target_units = struct.unpack_from("<i", data)[0]
+        elif index in (0x6083, 0x6084):
+            value = struct.unpack_from("<I", data)[0]
+            if value == 0:
+                raise SdoAbortedError(0x06090032)   # value too low
+            with self._lock:
+                self.update()
+                if index == 0x6083:
+                    self.accel_units = value
+                else:
+                    self.decel_units = value
+        elif 0x1400 <= index <= 0x1403 or 0x1600 <= index <= 0x1603:
+            self._rewire_rpdos_later = True
+
+    # -- CiA 402 state machine -----------------------------------------------------------------------------
+    def _controlword(self, cw: int) -> None:
+        with self._lock:
+            self.update()
+            prev = self.state
+            rising_reset = bool(cw & 0x80) and not (self._last_cw & 0x80)
+            self._last_cw = cw
+            s = self.state
+            if s == FAULT:
+                if rising_reset:
+                    self.state = SWITCH_ON_DISABLED
+                    self.error_code = 0
+            elif cw & 0x80:
+                pass                                             # fault reset bit outside FAULT: no command
+            elif cw & 0x02 == 0:                                 # disable voltage
+                if s in (READY, SWITCHED_ON, ENABLED, QUICK_STOP):
+                    self.state = SWITCH_ON_DISABLED
+            elif cw & 0x06 == 0x02:                              # quick stop
+                if s == ENABLED:
+                    self.state = QUICK_STOP
+                elif s in (READY, SWITCHED_ON):
+                    self.state = SWITCH_ON_DISABLED
+            elif cw & 0x0F == 0x06 or cw & 0x0F == 0x0E:         # shutdown
+                if s in (SWITCH_ON_DISABLED, SWITCHED_ON, ENABLED):
+                    self.state = READY
+            elif cw & 0x0F == 0x07:                              # switch on / disable operation
+                if s in (READY, ENABLED):
+                    self.state = SWITCHED_ON
+            elif cw & 0x0F == 0x0F:                              # enable operation (switch on + enable)
+                if s == SWITCHED_ON or s == QUICK_STOP:
+                    self.state = ENABLED
+                elif s == READY:
+                    self.state = ENABLED                         # transitions 3 + 4 at once
+            if prev == ENABLED and self.state != ENABLED:
+                self.target_units = 0                            # leaving OPERATION ENABLED drops the target
+            changed = self.state != prev
+        if changed:
+            log.info("drive %d (%s): %s -> %s", self.node_id, self.name, prev, self.state)
+            self._send_status_tpdo()
+
+    def inject_fault(self, error_code: int = FAULT_OVERCURRENT) -> None:
+        """Drive fault: FAULT state, 0x603F = ``error_code``, EMCY sent, motor stops at once."""
+        with self._lock:
+            self.update()
+            self.state = FAULT
+            self.error_code = int(error_code)
+            self.velocity = 0.0
+            self.target_units = 0
+        log.warning("drive %d (%s): fault 0x%04X injected", self.node_id, self.name, error_code)
+        if self.online and self.network is not None:
+            try:
+                self.node.emcy.send(self.error_code, 0x01)
+            except Exception as exc:  # the bus may be gone while shutting down
+                log.warning("drive %d: EMCY not sent: %s", self.node_id, exc)
+        self._send_status_tpdo()
+
+    # -- network -------------------------------------------------------------------------------------------
+    def attach(self, network: canopen.Network) -> None:
+        """Join ``network`` and boot (boot-up message, PRE-OPERATIONAL, heartbeat)."""
+        self.network = network
+        network.add_node(self.node)
+        self._guard_handlers()
+        self._rewire_rpdos()
+        self._boot()
+
+    def _guard_handlers(self) -> None:
+        """Put length checks in front of canopen's NMT and SDO handlers (malformed frames never reach them)."""
+        net = self.network
+        net.unsubscribe(0, self.node.nmt.on_command)
+        net.unsubscribe(0x600 + self.node_id, self.node.sdo.on_request)
+        net.subscribe(0, self._on_nmt)
+        net.subscribe(0x600 + self.node_id, self._on_sdo)
+
+    def _unguard_handlers(self) -> None:
+        for cob, cb in ((0, self._on_nmt), (0x600 + self.node_id, self._on_sdo)):
+            try:
+                self.network.unsubscribe(cob, cb)
+            except (KeyError, ValueError):
+                pass
+
+    def _boot(self) -> None:
+        with self._lock:
+            self.update()
+            self.state = SWITCH_ON_DISABLED        # NOT READY TO SWITCH ON passes on its own after the self test
+            self.mode = 0
+            self.target_units = 0
+            self.velocity = 0.0
+            self._last_cw = 0
+        self.node.nmt.send_command(0x81)           # INITIALISING: boot-up message
+        self.node.nmt.send_command(0x80)           # PRE-OPERATIONAL: starts the heartbeat from 0x1017
+        self.online = True
+        self._last_sw_sent = None
+
+    def detach(self) -> None:
+        if self.network is None:
+            return
+        self.node.nmt.stop_heartbeat()
+        self._unwire_rpdos()
+        self._unguard_handlers()
+        self.network.nodes.pop(self.node_id, None)
+        self.online = False
+        self.network = None
+
+    def inject_heartbeat_loss(self) -> None:
+        """The node drops off the bus: no heartbeat, TPDO, SDO or NMT handling; the motor stops."""
+        with self._lock:
+            self.update()
+            self.online = False
+            self.state = NOT_READY
+            self.target_units = 0
+            self.velocity = 0.0
+        self.node.nmt.stop_heartbeat()
+        self._unwire_rpdos()
+        self._unguard_handlers()
+        log.warning("drive %d (%s): heartbeat loss injected (node off the bus)", self.node_id, self.name)
+
+    def restore(self) -> None:
+        """Undo a heartbeat loss: the node reboots and must be enabled again by the master."""
+        net = self.network
+        if net is None:
+            raise DeviceStandInError("drive %d was never attached to a network" % self.node_id)
+        self._unguard_handlers()
+        self.network.subscribe(0, self._on_nmt)
+        self.network.subscribe(0x600 + self.node_id, self._on_sdo)
+        self._rewire_rpdos()
+        self._boot()
+        log.warning("drive %d (%s): back on the bus (rebooted)", self.node_id, self.name)
+
+    def _on_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if not self.online:
+            return
+        if len(data) != 2:
+            self._refuse("NMT frame with %d data bytes, allowed 2" % len(data))
+            return
+        cmd, nid = data[0], data[1]
+        if nid not in (0, self.node_id):
+            return
+        if cmd not in (0x01, 0x02, 0x80, 0x81, 0x82):
+            self._refuse("unknown NMT command 0x%02X, allowed 0x01 0x02 0x80 0x81 0x82" % cmd)
+            return
+        self.node.nmt.on_command(can_id, data, timestamp)
+        if cmd == 0x81:
+            self._boot()                                   # reset node: application and communication
+        elif cmd == 0x82:
+            self.node.nmt.send_command(0x81)               # reset communication: boot-up, then PRE-OPERATIONAL
+            self.node.nmt.send_command(0x80)
+
+    def _on_sdo(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if not self.online:
+            return
+        if len(data) != 8:
+            self._refuse("SDO request with %d data bytes, allowed 8" % len(data))
+            return
+        self.node.sdo.on_request(can_id, data, timestamp)
+        if self._rewire_rpdos_later:                   # an RPDO COB-ID or mapping was written: apply it now
+            self._rewire_rpdos()
+
+    def _refuse(self, why: str) -> None:
+        self.refused += 1
+        log.warning("drive %d (%s): ignored malformed frame: %s", self.node_id, self.name, why)
+
+    # -- PDO wiring ----------------------------------------------------------------------------------------
+    def _raw(self, index: int, sub: int) -> int:
+        obj = self.node.object_dictionary[index][sub]
+        return obj.decode_raw(self.node.get_data(index, sub))
+
+    def _mapping(self, map_index: int) -> List[Any]:
+        out = []
+        for sub in range(1, self._raw(map_index, 0) + 1):
+            value = self._raw(map_index, sub)
+            index, subindex, bits = value >> 16, (value >> 8) & 0xFF, value & 0xFF
+            if index:
+                out.append((index, subindex, bits))
+        return out
+
+    def _unwire_rpdos(self) -> None:
+        if self.network is None:
+            return
+        for cob, cb in list(self._rpdo_handlers.items()):
+            try:
+                self.network.unsubscribe(cob, cb)
+            except Exception:
+                pass
+        self._rpdo_handlers = {}
+
+    def _rewire_rpdos(self) -> None:
+        self._unwire_rpdos()
+        self._rewire_rpdos_later = False
+        for n in range(4):
+            comm = 0x1400 + n
+            if comm not in self.node.object_dictionary:
+                continue
+            cob = self._raw(comm, 1)
+            if cob & 0x80000000:
+                continue
+            cob &= 0x7FF
+
+            def handler(can_id: int, data: bytes, timestamp: float, _map: int = 0x1600 + n) -> None:
+                self._on_rpdo(_map, data)
+            self._rpdo_handlers[cob] = handler
+            self.network.subscribe(cob, handler)
+
+    def _on_rpdo(self, map_index: int, data: bytes) -> None:
+        if not self.online:
+            return
+        if self.node.nmt.state != "OPERATIONAL":
+            return                                            # PDOs are only processed in OPERATIONAL
+        mapping = self._mapping(map_index)
+        total = sum(bits for _, _, bits in mapping) // 8
+        if len(data) != total:
+            self._refuse("RPDO (map 0x%04X) with %d data bytes, mapping needs %d" % (map_index, len(data), total))
+            return
+        offset = 0
+        for index, subindex, bits in mapping:
+            n = bits // 8
+            try:
+                self.node.set_data(index, subindex, bytes(data[offset:offset + n]))
+            except SdoAbortedError as exc:
+                self._refuse("RPDO value for 0x%04X refused (abort 0x%08X)" % (index, exc.code))
+            offset += n
+        if self._rewire_rpdos_later:
+            self._rewire_rpdos()
+
+    def _tpdo_data(self, map_index: int) -> bytes:
+        return b"".join(self.node.get_data(index, sub) for index, sub, _ in self._mapping(map_index))
+
+    def _send_status_tpdo(self) -> None:
+        """Event-driven transmission of every TPDO that maps the statusword (on a state change)."""
+        if not self.online or self.network is None or self.node.nmt.state != "OPERATIONAL":
+            return
+        for n in range(4):
+            if 0x1A00 + n in self.node.object_dictionary and any(
+                    i == 0x6041 for i, _, _ in self._mapping(0x1A00 + n)):
+                self._send_tpdo(n, time.monotonic())
+
+    def _send_tpdo(self, n: int, now: float) -> None:
+        cob = self._raw(0x1800 + n, 1)
+        if cob & 0x80000000:
+            return
+        data = self._tpdo_data(0x1A00 + n)
+        try:
+            self.network.send_message(cob & 0x7FF, data)
+        except Exception as exc:
+            log.warning("drive %d: TPDO%d not sent: %s", self.node_id, n + 1, exc)
+        self._tpdo_last[n] = now
+
+    def send_cyclic_tpdos(self, now: float) -> None:
+        """Send every enabled TPDO whose event timer has expired (called by the DriveSet thread)."""
+        if not self.online or self.network is None or self.node.nmt.state != "OPERATIONAL":
+            return
+        self.update()
+        for n in range(4):
+            comm = 0x1800 + n
+            if comm not in self.node.object_dictionary:
+                continue
+            period = self._raw(comm, 5) / 1000.0
+            if period <= 0.0:
+                continue
+            due = self._tpdo_due.get(n, 0.0)
+            if now >= due - 0.002:                     # tolerate a loop that wakes up a little early
+                self._send_tpdo(n, now)
+                self._tpdo_due[n] = now + period if now - due > period else due + period
+
+    def snapshot(self) -> Dict[str, Any]:
+        with self._lock:
+            self.update()
+            return {"node_id": self.node_id, "name": self.name, "state": self.state, "mode": self.mode,
+                    "nmt": self.node.nmt.state, "online": self.online, "velocity": self.velocity,
+                    "angle": self.angle, "error_code": self.error_code, "refused": self.refused}
+
+
+def _i32(value: float) -> int:
+    v = int(round(value))
+    return max(-(2 ** 31), min(2 ** 31 - 1, v))
+
+
+class SelfEchoFilterBus(can.BusABC):
+    """Wrap a bus that hands a sender its own frames back (python-can's ``udp_multicast`` does: every socket in
+    the group gets every datagram) and drop those echoes, as a real CAN controller would.
+
+    Each sent frame is expected back once; a received frame equal (id, data, flags) to a pending sent one is
+    dropped and the pending entry consumed. Entries expire after ``window`` seconds (lost echo).
+    Without this, canopen's RemoteNode RPDO maps overwrite their data with the echo of an older command.
+    """
+
+    def __init__(self, inner: can.BusABC, window: float = 1.0) -> None:
+        self._inner = inner
+        self._window = float(window)
+        self._pending: List[Any] = []
+        self._plock = threading.Lock()
+        self.channel_info = "echo-filtered " + str(getattr(inner, "channel_info", ""))
+        super().__init__(channel=getattr(inner, "channel", None))
+
+    @staticmethod
+    def _key(msg: can.Message) -> Any:
+        return (msg.arbitration_id, bytes(msg.data), msg.is_extended_id, msg.is_remote_frame)
+
+    def send(self, msg: can.Message, timeout: Optional[float] = None) -> None:
+        now = time.monotonic()
+        with self._plock:
+            self._pending = [(t, k) for t, k in self._pending if now - t < self._window]
+            self._pending.append((now, self._key(msg)))
+        self._inner.send(msg, timeout)
+
+    def _recv_internal(self, timeout: Optional[float]) -> Any:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
+            msg = self._inner.recv(remaining)
+            if msg is None:
+                return None, False
+            key = self._key(msg)
+            with self._plock:
+                for i, (_, k) in enumerate(self._pending):
+                    if k == key:
+                        del self._pending[i]
+                        break
+                else:
+                    return msg, False
+            if deadline is not None and time.monotonic() >= deadline:
+                return None, False
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self._inner.shutdown()
+
+
+def open_bus(can_cfg: Dict[str, Any]) -> can.BusABC:
+    """Open the python-can bus named by ``robot.base.drives.can`` (interface, channel, bitrate, optional port).
+
+    ``udp_multicast`` buses are wrapped in :class:`SelfEchoFilterBus`.
+    """
+    interface = can_cfg["interface"]
+    kwargs: Dict[str, Any] = {"interface": interface, "channel": can_cfg["channel"]}
+    if interface == "socketcan":
+        pass
+    elif interface == "udp_multicast":
+        if "port" in can_cfg:
+            kwargs["port"] = int(can_cfg["port"])
+        kwargs["fd"] = False
+    else:
+        kwargs["receive_own_messages"] = False
+    try:
+        bus = can.Bus(**kwargs)
+    except Exception as exc:
+        raise DeviceStandInError("cannot open CAN bus %r: %s" % (kwargs, exc))
+    return SelfEchoFilterBus(bus) if interface == "udp_multicast" else bus
+
+
+class DriveSet:
+    """The four wheel drives of the base on one bus, plus the cyclic TPDO thread.
+
+    :param drives_cfg: ``robot.base.drives`` section (with ``max_wheel_speed`` from ``robot.base.limits``).
+    :param eds_path: object dictionary of the drives.
+    :param clock: sim time (``SimClock.now``).
+    :param bus: an open python-can bus to use instead of opening one from ``drives_cfg['can']``.
+    """
+
+    def __init__(self, drives_cfg: Dict[str, Any], eds_path: str, clock: Callable[[], float],
+                 bus: Optional[can.BusABC] = None, max_wheel_speed: float = 1e9) -> None:
+        self.cfg = drives_cfg
+        self.clock = clock
+        self._bus = bus
+        self._own_bus = bus is None
+        cfg = dict(drives_cfg)
+        cfg["max_wheel_speed"] = max_wheel_speed
+        self.drives = [Cia402Drive(w["node_id"], w["name"], eds_path, cfg, clock) for w in drives_cfg["wheels"]]
+        self.polarity = [int(w["polarity"]) for w in drives_cfg["wheels"]]
+        self.network: Optional[canopen.Network] = None
+        self._thread: Optional[threading.Thread] = None
+        self._stop = threading.Event()
+        self.period = max(0.001, min(d.tpdo_period_ms for d in self.drives) / 1000.0)
+
+    def start(self) -> None:
+        if self.network is not None:
+            raise DeviceStandInError("drive set already started")
+        if self._bus is None:
+            self._bus = open_bus(self.cfg["can"])
+        self.network = canopen.Network(self._bus)
+        self.network.NOTIFIER_CYCLE = 0.1      # short receive timeout: quick, clean shutdown
+        self.network.connect()                 # bus given: only starts the notifier
+        for d in self.drives:
+            d.attach(self.network)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="cia402-tpdo", daemon=True)
+        self._thread.start()
+        log.info("base drives (CiA 402, node ids %s) on CAN %s/%s", [d.node_id for d in self.drives],
+                 self.cfg["can"]["interface"], self.cfg["can"]["channel"])
+
+    def _run(self) -> None:
+        nxt = time.monotonic()
+        while not self._stop.is_set():
+            now = time.monotonic()
+            for d in self.drives:
+                try:
+                    d.send_cyclic_tpdos(now)
+                except Exception as exc:           # keep the loop alive, say what went wrong
+                    log.warning("drive %d: cyclic TPDO failed: %s", d.node_id, exc)
+            nxt += self.period
+            delay = nxt - time.monotonic()
+            if delay < -self.period:
+                nxt = time.monotonic()
+                delay = 0.0
+            self._stop.wait(max(0.0, delay))
+
+    def stop(self) -> None:
+        if self.network is None:
+            return
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+            self._thread = None
+        for d in self.drives:
+            d.detach()
+        if self.network.notifier is not None:
+            self.network.notifier.stop(2.0)
+            self.network.notifier = None
+        if self._own_bus and self._bus is not None:
+            self._bus.shutdown()
+        self._bus = None if self._own_bus else self._bus
+        self.network = None
+
+    def drive(self, node_id: int) -> Cia402Drive:
+        for d in self.drives:
+            if d.node_id == node_id:
+                return d
+        raise KeyError("no drive with node id %d, known: %s" % (node_id, [d.node_id for d in self.drives]))
+
+    def wheel_angles(self) -> List[float]:
+        """Wheel angles [fl, fr, rl, rr] in rad, positive = rolling forward (polarity applied)."""
+        out = []
+        for d, p in zip(self.drives, self.polarity):
+            with d._lock:
+                d.update()
+                out.append(p * d.angle)
+        return out
+
+    def wheel_speeds(self) -> List[float]:
+        out = []
+        for d, p in zip(self.drives, self.polarity):
+            with d._lock:
+                d.update()
+                out.append(p * d.velocity)
+        return out

@@ -1,0 +1,20 @@
+"""Exception hierarchy of the simulated worksite (one base class, specific subclasses)."""
+
+
+class SimError(Exception):
+    """Base class of every error raised by :mod:`locem_bridge.sim`."""
+
+
+class SimConfigError(SimError):
+    """A site or robot configuration file is missing, malformed or out of range.
+
+    The message names the key path (e.g. ``site.walls[1].height``), what was found and what is allowed.
+    """
+
+
+class SimStateError(SimError):
+    """An operation is not allowed in the current state (e.g. mounting a tool while one is mounted)."""
+
+
+class DeviceStandInError(SimError):
+    """A device stand-in (Modbus compressor, CAN drives) could not start or was used wrongly."""

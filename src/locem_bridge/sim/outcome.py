@@ -1,0 +1,249 @@
+"""Outcome measurement of the wall work: tape per joint, spray thickness map, sanded map, pictures.
+
+:class:`OutcomeRecorder` receives TCP path segments from the world (:meth:`OutcomeRecorder.record`: tool
+name, process on/off, segment start/end in map, tool z axis, sim duration) and keeps, per plasterboard wall,
+- per joint a 1 cm bin array of laid tape: a bin is taped when the taping tool is on and a TCP sample lies
+  on the wall surface (``|d| <= contact_tolerance``) within ``tape_lateral_tolerance`` of the joint line;
+- a thickness map (m, cells of ``grid``): while the spray gun sprays (valve open and pressure in range, decided
+  by the world) the nozzle's footprint where its z axis meets the wall gets a Gaussian deposit; the footprint
+  radius grows with distance (``standoff`` and ``spray_half_angle``), the deposit rate falls with the square of
+  the distance and the deposit per pass falls with speed (it is integrated over time);
+- a sanded map (bool): sander on and its pad on the surface (``|d| <= contact_tolerance``).
+Operator actions: :meth:`mark_manual_taping` records a joint taped by hand (reported separately).
+Numbers: :meth:`summary`; pictures: :meth:`save_pictures` (one PNG per wall: joints, thickness, sanded).
+"""
+from __future__ import annotations
+
+import math
+import os
+from typing import Any, Dict, List, Optional, Sequence
+
+import numpy as np
+
+from .site import Site, Wall
+
+TAPE_BIN = 0.01          # m, resolution of the tape record along a joint
+TAPED_FRACTION = 0.95    # a joint counts as taped from this covered fraction on
+
+
+class _WallMaps:
+    def __init__(self, wall: Wall, grid: float) -> None:
+        self.wall = wall
+        self.grid = grid
+        self.ns = max(1, int(math.ceil(wall.length / grid)))
+        self.nt = max(1, int(math.ceil(wall.height / grid)))
+        self.thickness = np.zeros((self.nt, self.ns))
+        self.sanded = np.zeros((self.nt, self.ns), dtype=bool)
+        # cell centres
+        self.sc = (np.arange(self.ns) + 0.5) * grid
+        self.tc = (np.arange(self.nt) + 0.5) * grid
+
+
+class OutcomeRecorder:
+    """Accumulates the outcome maps of one run (see the module docstring). Not thread-safe: the world's lock."""
+
+    def __init__(self, site: Site, tools_cfg: Dict[str, Any], outcome_cfg: Dict[str, Any]) -> None:
+        self.site = site
+        self.tools = tools_cfg
+        self.grid = float(outcome_cfg["grid"])
+        self.lateral_tol = float(outcome_cfg["tape_lateral_tolerance"])
+        self.contact_tol = float(outcome_cfg["contact_tolerance"])
+        self.spray_rate = float(outcome_cfg["spray_rate"])
+        self.target = float(outcome_cfg["spray_target_thickness"])
+        self.maps: Dict[str, _WallMaps] = {w.id: _WallMaps(w, self.grid) for w in site.work_walls}
+        self.tape: Dict[str, np.ndarray] = {j.id: np.zeros(max(1, int(math.ceil(j.length / TAPE_BIN))), dtype=bool)
+                                            for j in site.joints}
+        self.manual: set = set()
+        self.tape_off_joint = 0.0        # m of tape laid on a wall but not on any joint
+        self.spray_time = 0.0
+
+    # -- recording ---------------------------------------------------------------------------------------------
+    def record(self, tool: str, active: bool, p0: np.ndarray, p1: np.ndarray, z_axis: np.ndarray, dt: float) -> None:
+        """One TCP segment ``p0 -> p1`` (map) lasting ``dt`` sim seconds with the tool process ``active``."""
+        if not active:
+            return
+        if tool == "taping_tool":
+            self._tape(p0, p1)
+        elif tool == "spray_gun":
+            self._spray(p0, p1, np.asarray(z_axis, dtype=float), dt)
+        elif tool == "sander":
+            self._sand(p0, p1)
+
+    @staticmethod
+    def _samples(p0: np.ndarray, p1: np.ndarray, step: float) -> np.ndarray:
+        n = max(1, int(math.ceil(float(np.linalg.norm(p1 - p0)) / step)))
+        return p0[None, :] + (p1 - p0)[None, :] * (np.arange(1, n + 1) / n)[:, None]
+
+    def _tape(self, p0: np.ndarray, p1: np.ndarray) -> None:
+        pts = self._samples(p0, p1, TAPE_BIN / 2)
+        seg = float(np.linalg.norm(p1 - p0)) / len(pts)
+        for wall in self.site.work_walls:
+            for p in pts:
+                s, t, d = wall.to_wall_coords(p)
+                if abs(d) > self.contact_tol or not (0 <= s <= wall.length and 0 <= t <= wall.height):
+                    continue
+                hit = False
+                for j in wall.joints:
+                    if j.kind == "vertical":
+                        js = wall.to_wall_coords(j.start)[0]
+                        lateral, along = abs(s - js), t
+                    else:
+                        lateral, along = abs(t - float(j.start[2])), s - wall.to_wall_coords(j.start)[0]
+                    if lateral <= self.lateral_tol and 0 <= along <= j.length:
+                        bins = self.tape[j.id]
+                        bins[min(len(bins) - 1, int(along / TAPE_BIN))] = True
+                        hit = True
+                if not hit:
+                    self.tape_off_joint += seg
+
+    def _spray(self, p0: np.ndarray, p1: np.ndarray, z: np.ndarray, dt: float) -> None:
+        cfg = self.tools["spray_gun"]
+        half = float(cfg["spray_half_angle"])
+        standoff = float(cfg["standoff"])
+        self.spray_time += dt
+        for m in self.maps.values():
+            wall = m.wall
+            cos_in = -float(z @ wall.n)
+            if cos_in <= 0.05:
+                continue                                  # not pointing at this wall
+            r_nom = standoff * math.tan(half)
+            pts = self._samples(p0, p1, max(self.grid, r_nom / 4))
+            h = dt / len(pts)
+            for p in pts:
+                s, t, d = wall.to_wall_coords(p)
+                if d <= 0.0:
+                    continue
+                dist = d / cos_in                          # along the spray axis to the wall
+                hit = p + dist * z
+                hs, ht, _ = wall.to_wall_coords(hit)
+                radius = dist * math.tan(half)
+                if hs < -radius or hs > wall.length + radius or ht < -radius or ht > wall.height + radius:
+                    continue
+                sigma = radius / 2.0
+                rate = self.spray_rate * (standoff / max(dist, 0.02)) ** 2
+                i0, i1 = max(0, int((hs - radius) / m.grid)), min(m.ns, int((hs + radius) / m.grid) + 1)
+                k0, k1 = max(0, int((ht - radius) / m.grid)), min(m.nt, int((ht + radius) / m.grid) + 1)
+                if i0 >= i1 or k0 >= k1:
+                    continue
+                ds = m.sc[i0:i1][None, :] - hs
+                dtt = m.tc[k0:k1][:, None] - ht
+                r2 = ds * ds + dtt * dtt
+                dep = rate * h * np.exp(-r2 / (2 * sigma * sigma))
+                dep[r2 > radius * radius] = 0.0
+                m.thickness[k0:k1, i0:i1] += dep
+
+    def _sand(self, p0: np.ndarray, p1: np.ndarray) -> None:
+        rad = float(self.tools["sander"]["pad_radius"])
+        for m in self.maps.values():
+            wall = m.wall
+            for p in self._samples(p0, p1, max(self.grid, rad / 4)):
+                s, t, d = wall.to_wall_coords(p)
+                if abs(d) > self.contact_tol:
+                    continue
+                i0, i1 = max(0, int((s - rad) / m.grid)), min(m.ns, int((s + rad) / m.grid) + 1)
+                k0, k1 = max(0, int((t - rad) / m.grid)), min(m.nt, int((t + rad) / m.grid) + 1)
+                if i0 >= i1 or k0 >= k1:
+                    continue
+                r2 = (m.sc[i0:i1][None, :] - s) ** 2 + (m.tc[k0:k1][:, None] - t) ** 2
+                m.sanded[k0:k1, i0:i1] |= r2 <= rad * rad
+
+    def mark_manual_taping(self, joint_id: str) -> None:
+        """The operator taped ``joint_id`` by hand."""
+        if joint_id not in self.tape:
+            raise KeyError("unknown joint %r, known: %s" % (joint_id, ", ".join(sorted(self.tape))))
+        self.manual.add(joint_id)
+
+    # -- numbers -----------------------------------------------------------------------------------------------
+    def joint_coverage(self, joint_id: str) -> float:
+        bins = self.tape[joint_id]
+        return float(bins.mean())
+
+    def summary(self) -> Dict[str, Any]:
+        """Numbers of the run: per joint, per wall and totals (fractions 0..1, thickness in m)."""
+        joints = {}
+        for jid, bins in self.tape.items():
+            cov = float(bins.mean())
+            joints[jid] = {"coverage": cov, "taped": cov >= TAPED_FRACTION, "manual": jid in self.manual}
+        walls = {}
+        total_cells = covered_cells = sanded_cells = 0
+        for wid, m in self.maps.items():
+            covered = m.thickness >= self.target
+            vals = m.thickness[covered]
+            cv = float(vals.std() / vals.mean()) if vals.size > 1 and vals.mean() > 0 else 0.0
+            walls[wid] = {"spray_coverage": float(covered.mean()), "thickness_mean": float(vals.mean()) if vals.size else 0.0,
+                          "thickness_cv": cv, "thickness_max": float(m.thickness.max()),
+                          "sand_coverage": float(m.sanded.mean())}
+            total_cells += m.thickness.size
+            covered_cells += int(covered.sum())
+            sanded_cells += int(m.sanded.sum())
+        n = len(joints)
+        taped = sum(1 for j in joints.values() if j["taped"])
+        return {
+            "joints_total": n,
+            "joints_taped": taped,
+            "joints_manual": sum(1 for j in joints.values() if j["manual"] and not j["taped"]),
+            "tape_coverage": float(np.mean([j["coverage"] for j in joints.values()])) if n else 0.0,
+            "tape_off_joint_m": self.tape_off_joint,
+            "spray_coverage": covered_cells / total_cells if total_cells else 0.0,
+            "sand_coverage": sanded_cells / total_cells if total_cells else 0.0,
+            "joints": joints,
+            "walls": walls,
+        }
+
+    # -- pictures ----------------------------------------------------------------------------------------------
+    def save_pictures(self, folder: str, px_per_m: float = 100.0) -> List[str]:
+        """Write ``<wall>.png`` per plasterboard wall: joints (green taped, blue manual, red open), spray thickness
+        (white 0 -> dark blue at 2x target) and sanded area (brown); returns the file paths."""
+        from PIL import Image, ImageDraw
+
+        os.makedirs(folder, exist_ok=True)
+        out = []
+        for wid, m in self.maps.items():
+            wall = m.wall
+            w_px, h_px = max(1, int(wall.length * px_per_m)), max(1, int(wall.height * px_per_m))
+            pad, title = 10, 18
+            img = Image.new("RGB", (3 * w_px + 4 * pad, h_px + 2 * pad + title), (255, 255, 255))
+            dr = ImageDraw.Draw(img)
+
+            def panel(k: int) -> int:
+                return pad + k * (w_px + pad)
+            labels = ("joints: green taped, blue manual, red open",
+                      "spray: white 0 .. dark blue %.1f mm" % (2000.0 * self.target),
+                      "sanded: brown")
+            for k, label in enumerate(labels):
+                dr.text((panel(k), 2), "%s %s" % (wid, label), fill=(0, 0, 0))
+            # panel 1: joints
+            x0, y0 = panel(0), pad + title
+            dr.rectangle([x0, y0, x0 + w_px, y0 + h_px], fill=(235, 235, 225), outline=(0, 0, 0))
+            jw = max(2, int(0.05 * px_per_m))
+
+            def to_px(s: float, t: float, x_off: int) -> tuple:
+                return (x_off + s * px_per_m, y0 + h_px - t * px_per_m)
+            for j in wall.joints:
+                bins = self.tape[j.id]
+                s0 = wall.to_wall_coords(j.start)[0]
+                t0 = float(j.start[2])
+                for b, done in enumerate(bins):
+                    a, e = b * TAPE_BIN, min(j.length, (b + 1) * TAPE_BIN)
+                    color = (30, 160, 60) if done else ((40, 90, 220) if j.id in self.manual else (210, 40, 40))
+                    if j.kind == "vertical":
+                        p, q = to_px(s0, t0 + a, x0), to_px(s0, t0 + e, x0)
+                    else:
+                        p, q = to_px(s0 + a, t0, x0), to_px(s0 + e, t0, x0)
+                    dr.line([p, q], fill=color, width=jw)
+            # panel 2: thickness
+            norm = np.clip(m.thickness / (2.0 * self.target), 0.0, 1.0)
+            rgb = np.stack([255 * (1 - norm), 255 * (1 - 0.7 * norm), 255 - 90 * norm], axis=-1).astype(np.uint8)
+            timg = Image.fromarray(rgb[::-1]).resize((w_px, h_px), Image.NEAREST)
+            img.paste(timg, (panel(1), y0))
+            dr.rectangle([panel(1), y0, panel(1) + w_px, y0 + h_px], outline=(0, 0, 0))
+            # panel 3: sanded
+            srgb = np.where(m.sanded[..., None], np.array([150, 100, 50], dtype=np.uint8),
+                            np.array([235, 235, 225], dtype=np.uint8)).astype(np.uint8)
+            simg = Image.fromarray(srgb[::-1]).resize((w_px, h_px), Image.NEAREST)
+            img.paste(simg, (panel(2), y0))
+            dr.rectangle([panel(2), y0, panel(2) + w_px, y0 + h_px], outline=(0, 0, 0))
+            path = os.path.join(folder, "%s.png" % wid)
+            img.save(path)
+            out.append(path)
+        return out

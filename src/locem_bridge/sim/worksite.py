@@ -1,0 +1,261 @@
+"""The whole simulated worksite: PyBullet world plus every device stand-in, composed from configuration.
+
+ROS-free on purpose: ``python3 -m locem_bridge.sim`` runs it directly, and the ROS node ``sim_worksite`` wraps
+the same class. Lifecycle: ``Worksite(site_cfg, robot_cfg, **overrides)`` (nothing started) -> :meth:`start`
+(clock, compressor model + Modbus TCP server, CAN drives, UR controller stand-in, world loop; returns the
+endpoints) -> :meth:`stop` (reverse order, idempotent). Overrides change addresses without editing files:
+``host`` (one loopback address for the UR stand-in and the Modbus server, e.g. ``127.0.0.2`` for a second
+robot), ``modbus_port``, ``can_interface``, ``can_channel``, ``can_port``, ``time_scale``, ``gui``, ``with_ur``.
+
+Operator calls (tools are changed by a person on the real site): :meth:`mount_tool`, :meth:`remove_tool`,
+:meth:`mark_manual_taping`. Perception: :meth:`scan`. Results: :meth:`outcome` (numbers) and
+:meth:`save_outcome` (``outcome.json`` + one PNG per wall).
+"""
+from __future__ import annotations
+
+import copy
+import json
+import logging
+import os
+from typing import Any, Dict, List, Optional
+
+from .arm_source import KinematicArm, UrArmSource
+from .clock import SimClock
+from .compressor import CompressorModel
+from .config import load_robot, load_site, resolve_relative
+from .drives import DriveSet
+from .errors import DeviceStandInError, SimStateError
+from .modbus_server import CompressorServer
+from .world import World, resolve_arm_urdf
+
+log = logging.getLogger(__name__)
+
+
+class Worksite:
+    """World + stand-ins of one robot (see the module docstring)."""
+
+    def __init__(self, site_cfg: Optional[Dict[str, Any]] = None, robot_cfg: Optional[Dict[str, Any]] = None,
+                 host: Optional[str] = None, modbus_port: Optional[int] = None, can_interface: Optional[str] = None,
+                 can_channel: Optional[str] = None, can_port: Optional[int] = None,
+                 time_scale: Optional[float] = None, gui: Optional[bool] = None, with_ur: bool = True,
+                 ur_ports: Optional[Dict[str, int]] = None, protective_stop_on_collision: bool = True) -> None:
+        self.site_cfg = copy.deepcopy(site_cfg if site_cfg is not None else load_site())
+        self.robot_cfg = copy.deepcopy(robot_cfg if robot_cfg is not None else load_robot())
+        robot = self.robot_cfg["robot"]
+        sim = self.site_cfg["simulation"]
+        if time_scale is not None:
+            sim["time_scale"] = float(time_scale)
+        if gui is not None:
+            sim["gui"] = bool(gui)
+        if host is not None:
+            robot["arm"]["controller"]["host"] = host
+            robot["compressor"]["host"] = host
+        if modbus_port is not None:
+            robot["compressor"]["port"] = int(modbus_port)
+        can_cfg = robot["base"]["drives"]["can"]
+        if can_interface is not None:
+            can_cfg["interface"] = can_interface
+        if can_channel is not None:
+            can_cfg["channel"] = can_channel
+        if can_port is not None:
+            can_cfg["port"] = int(can_port)
+        self.with_ur = with_ur
+        self.ur_ports = ur_ports
+        self.protective_stop_on_collision = protective_stop_on_collision
+        self.clock: Optional[SimClock] = None
+        self.compressor: Optional[CompressorModel] = None
+        self.modbus: Optional[CompressorServer] = None
+        self.drives: Optional[DriveSet] = None
+        self.ur: Any = None
+        self.arm: Any = None
+        self.world: Optional[World] = None
+
+    # -- lifecycle ---------------------------------------------------------------------------------------------
+    def start(self) -> Dict[str, Any]:
+        """Start everything; returns :meth:`endpoints`. On failure everything started so far is stopped."""
+        if self.world is not None:
+            raise SimStateError("worksite already started")
+        robot = self.robot_cfg["robot"]
+        sim = self.site_cfg["simulation"]
+        try:
+            self.clock = SimClock(sim["time_scale"])
+            comp = robot["compressor"]
+            self.compressor = CompressorModel(comp, self.clock.now)
+            self.modbus = CompressorServer(self.compressor, comp["host"], comp["port"], comp["device_id"])
+            self.modbus.start()
+            dcfg = robot["base"]["drives"]
+            eds = resolve_relative(self.robot_cfg, robot["base"]["eds"])
+            self.drives = DriveSet(dcfg, eds, self.clock.now, max_wheel_speed=robot["base"]["limits"]["max_wheel_speed"])
+            self.drives.start()
+            arm_cfg = robot["arm"]
+            q0 = arm_cfg["named_poses"].get("home", [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
+            if self.with_ur:
+                self.ur = self._make_ur(arm_cfg, q0, sim["time_scale"])
+                self.ur.start()
+                self.arm = UrArmSource(self.ur)
+            else:
+                self.arm = KinematicArm(q0)
+            self.world = World(self.site_cfg, self.robot_cfg, self.clock, arm=self.arm, drives=self.drives,
+                               compressor=self.compressor)
+            if self.ur is not None and self.protective_stop_on_collision:
+                self.world.on_collision.append(self._protective_stop)
+            self.world.start()
+        except Exception:
+            self.stop()
+            raise
+        eps = self.endpoints()
+        log.info("worksite started: %s", json.dumps(eps))
+        return eps
+
+    def _make_ur(self, arm_cfg: Dict[str, Any], q0: List[float], time_scale: float) -> Any:
+        try:
+            from .ur import UrControllerStandIn
+        except ImportError as exc:  # the UR stand-in is optional for the rest of the site
+            raise DeviceStandInError("UR controller stand-in not available (%s); run with with_ur=False" % exc)
+        ctl = arm_cfg["controller"]
+        ports = {"dashboard": int(ctl.get("dashboard_port", 29999)), "script": int(ctl.get("script_port", 30003)),
+                 "rtde": int(ctl.get("rtde_port", 30004))}
+        if self.ur_ports:
+            ports.update(self.ur_ports)
+        urdf, _ = resolve_arm_urdf(arm_cfg)
+        return UrControllerStandIn(address=ctl["host"], time_scale=time_scale, model=urdf, q0=q0, ports=ports)
+
+    def _protective_stop(self, event: Dict[str, Any]) -> None:
+        if event["part"].startswith("arm"):
+            self.ur.inject_protective_stop("collision: %s with %s" % (event["part"], event["wall"]))
+
+    def stop(self) -> None:
+        """Stop every part (reverse order of start; idempotent)."""
+        if self.world is not None:
+            self.world.close()
+            self.world = None
+        if self.ur is not None:
+            try:
+                self.ur.stop()
+            finally:
+                self.ur = None
+        if self.drives is not None:
+            self.drives.stop()
+            self.drives = None
+        if self.modbus is not None:
+            self.modbus.stop()
+            self.modbus = None
+
+    def __enter__(self) -> "Worksite":
+        self.start()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()
+
+    # -- information -------------------------------------------------------------------------------------------
+    def endpoints(self) -> Dict[str, Any]:
+        """Where each stand-in listens (for the operator and for the bridges' configuration)."""
+        robot = self.robot_cfg["robot"]
+        out: Dict[str, Any] = {}
+        if self.modbus is not None:
+            out["compressor_modbus_tcp"] = "%s:%d (device id %d)" % (self.modbus.host, self.modbus.port,
+                                                                      self.modbus.device_id)
+        if self.drives is not None:
+            can_cfg = robot["base"]["drives"]["can"]
+            out["base_drives_can"] = "%s channel %s%s, node ids %s" % (
+                can_cfg["interface"], can_cfg["channel"], (" port %d" % can_cfg["port"]) if "port" in can_cfg else "",
+                [d.node_id for d in self.drives.drives])
+        if self.ur is not None:
+            out["ur_controller"] = "%s dashboard %d, script %d, RTDE %d" % (
+                self.ur.address, self.ur.ports["dashboard"], self.ur.ports["script"], self.ur.ports["rtde"])
+        if self.clock is not None:
+            out["time_scale"] = self.clock.time_scale
+        return out
+
+    def _need_world(self) -> World:
+        if self.world is None:
+            raise SimStateError("worksite is not running; call start() first")
+        return self.world
+
+    # -- operator and perception -------------------------------------------------------------------------------
+    def mount_tool(self, name: str) -> None:
+        self._need_world().mount_tool(name)
+
+    def remove_tool(self) -> Optional[str]:
+        return self._need_world().remove_tool()
+
+    def mark_manual_taping(self, joint_id: str) -> None:
+        w = self._need_world()
+        with w._lock:
+            w.outcome.mark_manual_taping(joint_id)
+
+    def scan(self) -> Dict[str, Any]:
+        return self._need_world().scan()
+
+    # -- fault injection --------------------------------------------------------------------------------------
+    FAULTS = ("compressor_overpressure", "compressor_motor", "compressor_link_drop", "drive_fault",
+              "drive_heartbeat_loss", "arm_protective_stop", "arm_emergency_stop")
+
+    def inject_fault(self, kind: str, **kw: Any) -> None:
+        """Inject a fault. ``kind`` is one of :attr:`FAULTS`; keyword arguments:
+        ``compressor_link_drop``: ``duration`` (wall s, None = until :meth:`clear_fault`), ``mode`` close|silent;
+        ``drive_fault``: ``node_id``, ``error_code`` (default 0x2310); ``drive_heartbeat_loss``: ``node_id``;
+        ``arm_*``: ``reason``."""
+        self._need_world()
+        if kind == "compressor_overpressure":
+            self.compressor.inject_overpressure()
+        elif kind == "compressor_motor":
+            self.compressor.inject_motor_fault()
+        elif kind == "compressor_link_drop":
+            self.modbus.drop_link(duration=kw.get("duration"), mode=kw.get("mode", "close"))
+        elif kind == "drive_fault":
+            self.drives.drive(int(kw["node_id"])).inject_fault(int(kw.get("error_code", 0x2310)))
+        elif kind == "drive_heartbeat_loss":
+            self.drives.drive(int(kw["node_id"])).inject_heartbeat_loss()
+        elif kind in ("arm_protective_stop", "arm_emergency_stop"):
+            if self.ur is None:
+                raise SimStateError("no UR controller stand-in is running")
+            reason = str(kw.get("reason", "injected"))
+            if kind == "arm_protective_stop":
+                self.ur.inject_protective_stop(reason)
+            else:
+                self.ur.inject_emergency_stop(reason)
+        else:
+            raise SimStateError("unknown fault %r, allowed: %s" % (kind, ", ".join(self.FAULTS)))
+        log.warning("fault injected: %s %s", kind, kw or "")
+
+    def clear_fault(self, kind: str, **kw: Any) -> None:
+        """Undo what a fault changed where the device itself cannot: ``compressor_link_drop`` (link back now),
+        ``drive_heartbeat_loss`` (``node_id``: the node reboots), ``arm_emergency_stop`` (button released).
+        Latched device faults are cleared through the device protocol, as on the real robot (Modbus fault_reset
+        coil, CiA 402 fault reset, dashboard unlock / power on / brake release)."""
+        self._need_world()
+        if kind == "compressor_link_drop":
+            self.modbus.restore_link()
+        elif kind == "drive_heartbeat_loss":
+            self.drives.drive(int(kw["node_id"])).restore()
+        elif kind == "arm_emergency_stop":
+            if self.ur is None:
+                raise SimStateError("no UR controller stand-in is running")
+            self.ur.release_emergency_stop()
+        else:
+            raise SimStateError("fault %r is cleared through the device protocol or cannot be cleared here; "
+                                "clearable here: compressor_link_drop, drive_heartbeat_loss, arm_emergency_stop"
+                                % kind)
+
+    # -- results -----------------------------------------------------------------------------------------------
+    def outcome(self) -> Dict[str, Any]:
+        """Outcome numbers (see :meth:`OutcomeRecorder.summary`) plus ``collisions``."""
+        w = self._need_world()
+        with w._lock:
+            out = w.outcome.summary()
+            out["collisions"] = w.collisions
+        return out
+
+    def save_outcome(self, folder: str) -> Dict[str, Any]:
+        """Write ``outcome.json`` and one PNG per wall into ``folder``; returns the numbers and file names."""
+        w = self._need_world()
+        os.makedirs(folder, exist_ok=True)
+        out = self.outcome()
+        with w._lock:
+            out["pictures"] = [os.path.basename(p) for p in w.outcome.save_pictures(folder)]
+            out["collision_log"] = list(w.collision_log)
+        with open(os.path.join(folder, "outcome.json"), "w") as fh:
+            json.dump(out, fh, indent=2, sort_keys=True)
+        return out

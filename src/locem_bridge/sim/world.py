@@ -1,0 +1,584 @@
+"""The PyBullet worksite: room, plasterboard walls, the mobile manipulator and its tools.
+
+Lifecycle: ``World(site_cfg, robot_cfg, clock, arm=..., drives=..., compressor=...)`` builds the scene
+(``gui=False`` -> DIRECT) -> :meth:`step` advances it to ``clock()`` (called by :meth:`start`'s loop at
+``simulation.world_rate`` wall Hz, or by hand in tests) -> :meth:`close`. All PyBullet calls happen under one
+lock, so public methods are safe from any thread.
+
+What one step does:
+1. base: wheel angle increments of the CAN drives (:class:`~locem_bridge.sim.drives.DriveSet`) through the
+   mecanum kinematics move ``base_footprint`` in the map frame (kinematic body, no slip);
+2. arm: joint positions mirrored from the arm source (:mod:`.arm_source`; the UR stand-in when running),
+   including every intermediate controller step delivered to the step listener since the last step;
+3. tool: the mounted tool follows ``tool0``; its process state comes from the configured switch (UR standard
+   digital output, or the compressor's spray valve + pressure in range);
+4. outcome: TCP samples go to :class:`~locem_bridge.sim.outcome.OutcomeRecorder` (tape, spray, sand maps);
+5. collisions: base/pedestal and arm links against walls (tools may touch walls: that is their job); a new
+   contact increments ``collisions`` and is logged; ``on_collision`` callbacks run (e.g. protective stop).
+
+Arm geometry: the URDF of the ``example-robot-data`` package (UR description meshes), placed at
+``robot.arm.mount`` on the base. The UR controller ``base`` frame (RTDE poses) is ``base_link`` turned by pi
+about z; :meth:`arm_base_pose` returns it.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import os
+import shutil
+import sys
+import tempfile
+import threading
+import time
+from collections import deque
+from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import pybullet as pb
+
+from .clock import SimClock
+from .config import TOOL_NAMES
+from .errors import SimConfigError, SimStateError
+from .mecanum import MecanumKinematics
+from .outcome import OutcomeRecorder
+from .perception import WallScanner
+from .site import Site
+
+log = logging.getLogger(__name__)
+
+
+def find_example_robot_data() -> List[str]:
+    """Candidate ``share/example-robot-data`` folders (env override, pip/cmeel wheels, system installs)."""
+    dirs = []
+    env = os.environ.get("EXAMPLE_ROBOT_DATA_DIR")
+    if env:
+        dirs.append(env)
+    for entry in sys.path:
+        cand = os.path.join(entry, "cmeel.prefix", "share", "example-robot-data")
+        if os.path.isdir(cand):
+            dirs.append(cand)
+    dirs += ["/opt/openrobots/share/example-robot-data", "/usr/share/example-robot-data",
+             "/opt/ros/noetic/share/example-robot-data"]
+    return [d for d in dirs if os.path.isdir(d)]
+
+
+def resolve_arm_urdf(arm_cfg: Dict[str, Any]) -> Tuple[str, str]:
+    """Return (urdf path, package share dir) for ``robot.arm.description``."""
+    desc = arm_cfg.get("description", {})
+    rel = desc.get("urdf", "robots/ur_description/urdf/ur10_robot.urdf")
+    if os.path.isabs(rel):
+        if not os.path.isfile(rel):
+            raise SimConfigError("robot.arm.description.urdf = %r does not exist" % rel)
+        return rel, os.path.dirname(rel)
+    for share in find_example_robot_data():
+        path = os.path.join(share, rel)
+        if os.path.isfile(path):
+            return path, share
+    raise SimConfigError("robot.arm.description.urdf = %r not found in any example-robot-data install (%s); "
+                         "install example-robot-data or set EXAMPLE_ROBOT_DATA_DIR" % (rel, find_example_robot_data()))
+
+
+def rotvec_to_quat(rv: Sequence[float]) -> Tuple[float, float, float, float]:
+    rv = np.asarray(rv, dtype=float)
+    angle = float(np.linalg.norm(rv))
+    if angle < 1e-12:
+        return (0.0, 0.0, 0.0, 1.0)
+    axis = rv / angle
+    s = math.sin(angle / 2.0)
+    return (axis[0] * s, axis[1] * s, axis[2] * s, math.cos(angle / 2.0))
+
+
+def quat_to_rotvec(q: Sequence[float]) -> List[float]:
+    x, y, z, w = q
+    if w < 0:
+        x, y, z, w = -x, -y, -z, -w
+    s = math.sqrt(max(0.0, 1.0 - w * w))
+    angle = 2.0 * math.atan2(s, w)
+    if s < 1e-12:
+        return [0.0, 0.0, 0.0]
+    return [x / s * angle, y / s * angle, z / s * angle]
+
+
+def _quat_from_matrix(m: np.ndarray) -> Tuple[float, float, float, float]:
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr > 0:
+        s = math.sqrt(tr + 1.0) * 2
+        return ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s)
+    i = int(np.argmax([m[0, 0], m[1, 1], m[2, 2]]))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    s = math.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k]) * 2
+    q = [0.0, 0.0, 0.0, 0.0]
+    q[i] = 0.25 * s
+    q[j] = (m[j, i] + m[i, j]) / s
+    q[k] = (m[k, i] + m[i, k]) / s
+    q[3] = (m[k, j] - m[j, k]) / s
+    return tuple(q)  # type: ignore
+
+
+class World:
+    """The simulated worksite in PyBullet (see the module docstring)."""
+
+    def __init__(self, site_cfg: Dict[str, Any], robot_cfg: Dict[str, Any], clock: Optional[SimClock] = None,
+                 arm: Any = None, drives: Any = None, compressor: Any = None, gui: Optional[bool] = None) -> None:
+        self.site_cfg, self.robot_cfg = site_cfg, robot_cfg
+        sim = site_cfg["simulation"]
+        robot = robot_cfg["robot"]
+        self.clock = clock or SimClock(sim["time_scale"])
+        self.site = Site(site_cfg)
+        self.arm_source = arm
+        self.drives = drives
+        self.compressor = compressor
+        self.rate = float(sim["world_rate"])
+        self.robot = robot
+        self.tools_cfg = robot["tools"]
+        w = robot["base"]["wheel"]
+        self.mecanum = MecanumKinematics(w["radius"], w["half_wheelbase"], w["half_track"])
+        self.scanner = WallScanner(self.site, robot["scanner"], sim["perception"]["position_noise"], sim["seed"])
+        self.outcome = OutcomeRecorder(self.site, self.tools_cfg, sim["outcome"])
+        self._lock = threading.RLock()
+        self._gui = sim["gui"] if gui is None else bool(gui)
+        self._cid = pb.connect(pb.GUI if self._gui else pb.DIRECT)
+        self._tmp = tempfile.mkdtemp(prefix="locem_world_")
+        self._thread: Optional[threading.Thread] = None
+        self._stop = threading.Event()
+        self.collisions = 0
+        self.collision_log: List[Dict[str, Any]] = []
+        self._contacts: set = set()
+        self.on_collision: List[Callable[[Dict[str, Any]], None]] = []
+        self.mounted_tool: Optional[str] = None
+        self.steps = 0
+        self._samples: Deque[List[float]] = deque(maxlen=2000)
+        self._last_sample: Optional[List[float]] = None
+        self._t = self.clock.now()
+        x, y, yaw = self.site.robot_start
+        self._pose = [float(x), float(y), float(yaw)]
+        self._q = list(arm.joint_positions()) if arm is not None else list(
+            robot["arm"]["named_poses"].get("home", [0.0] * 6))
+        self._wheel_prev = list(drives.wheel_angles()) if drives is not None else None
+        self._tcp_prev: Optional[np.ndarray] = None
+        self._dirty = True
+        try:
+            self._build()
+        except Exception:
+            self.close()
+            raise
+        if arm is not None and hasattr(arm, "add_step_listener"):
+            arm.add_step_listener(self._on_arm_step)
+
+    # -- scene -----------------------------------------------------------------------------------------------
+    def _build(self) -> None:
+        c = self._cid
+        pb.setGravity(0, 0, -9.81, physicsClientId=c)
+        fx, fy = self.site.floor_size
+        floor = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[fx / 2, fy / 2, 0.01], physicsClientId=c)
+        fvis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=[fx / 2, fy / 2, 0.01], rgbaColor=[0.6, 0.6, 0.6, 1],
+                                    physicsClientId=c)
+        inside = np.mean([(w.p0 + w.p1) / 2 for w in self.site.walls], axis=0)
+        self.floor = pb.createMultiBody(0, floor, fvis, [inside[0], inside[1], -0.01], physicsClientId=c)
+        self.wall_bodies: Dict[int, str] = {}
+        for wall in self.site.walls:
+            half = [wall.length / 2, wall.thickness / 2, wall.height / 2]
+            col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=c)
+            color = [0.93, 0.93, 0.88, 1] if wall.material == "plasterboard" else [0.55, 0.55, 0.55, 1]
+            vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=color, physicsClientId=c)
+            mid = (wall.p0 + wall.p1) / 2 - wall.n[:2] * wall.thickness / 2   # board behind the surface line
+            yaw = math.atan2(wall.u[1], wall.u[0])
+            body = pb.createMultiBody(0, col, vis, [mid[0], mid[1], wall.height / 2],
+                                      pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=c)
+            self.wall_bodies[body] = wall.id
+        # mobile base: chassis + 4 wheels + pedestal, one kinematic multibody
+        base = self.robot["base"]
+        ch, wh, ped = base["chassis"], base["wheel"], self.robot["pedestal"]
+        body_h = ch["height"] - ch["clearance"]
+        chassis_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[ch["length"] / 2, ch["width"] / 2, body_h / 2],
+                                              physicsClientId=c)
+        chassis_vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=[ch["length"] / 2, ch["width"] / 2, body_h / 2],
+                                           rgbaColor=[0.85, 0.2, 0.1, 1], physicsClientId=c)
+        link_masses, link_cols, link_vis, link_pos, link_orn = [], [], [], [], []
+        wheel_col = pb.createCollisionShape(pb.GEOM_CYLINDER, radius=wh["radius"], height=wh["width"],
+                                            physicsClientId=c)
+        wheel_vis = pb.createVisualShape(pb.GEOM_CYLINDER, radius=wh["radius"], length=wh["width"],
+                                         rgbaColor=[0.1, 0.1, 0.1, 1], physicsClientId=c)
+        zc = ch["clearance"] + body_h / 2
+        for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            link_masses.append(1.0)
+            link_cols.append(wheel_col)
+            link_vis.append(wheel_vis)
+            link_pos.append([sx * wh["half_wheelbase"], sy * wh["half_track"], wh["radius"] - zc])
+            link_orn.append(pb.getQuaternionFromEuler([math.pi / 2, 0, 0]))
+        ph = max(ped["height"], 0.001)
+        ped_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[ped["size"][0] / 2, ped["size"][1] / 2, ph / 2],
+                                          physicsClientId=c)
+        ped_vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=[ped["size"][0] / 2, ped["size"][1] / 2, ph / 2],
+                                       rgbaColor=[0.3, 0.3, 0.35, 1], physicsClientId=c)
+        link_masses.append(5.0)
+        link_cols.append(ped_col)
+        link_vis.append(ped_vis)
+        link_pos.append([ped["xy"][0], ped["xy"][1], ch["height"] + ph / 2 - zc])
+        link_orn.append([0, 0, 0, 1])
+        n = len(link_masses)
+        self._base_z = zc
+        self.base_body = pb.createMultiBody(
+            ch["mass"], chassis_col, chassis_vis, [0, 0, zc], [0, 0, 0, 1],
+            linkMasses=link_masses, linkCollisionShapeIndices=link_cols, linkVisualShapeIndices=link_vis,
+            linkPositions=link_pos, linkOrientations=link_orn, linkInertialFramePositions=[[0, 0, 0]] * n,
+            linkInertialFrameOrientations=[[0, 0, 0, 1]] * n, linkParentIndices=[0] * n,
+            linkJointTypes=[pb.JOINT_FIXED] * n, linkJointAxis=[[0, 0, 1]] * n, physicsClientId=c)
+        # arm
+        urdf, share = resolve_arm_urdf(self.robot["arm"])
+        with open(urdf) as fh:
+            text = fh.read().replace("package://example-robot-data/", share.rstrip("/") + "/")
+        patched = os.path.join(self._tmp, "arm.urdf")
+        with open(patched, "w") as fh:
+            fh.write(text)
+        self.arm_body = pb.loadURDF(patched, useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE,
+                                    physicsClientId=c)
+        names = self.robot["arm"]["joint_names"]
+        self.arm_joints: List[int] = []
+        self.tool0_link = -1
+        by_name = {}
+        for j in range(pb.getNumJoints(self.arm_body, physicsClientId=c)):
+            info = pb.getJointInfo(self.arm_body, j, physicsClientId=c)
+            by_name[info[1].decode()] = j
+            if info[12].decode() == "tool0":
+                self.tool0_link = j
+        missing = [nm for nm in names if nm not in by_name]
+        if missing or self.tool0_link < 0:
+            raise SimConfigError("arm URDF %s lacks joints %s or the tool0 link" % (urdf, missing))
+        self.arm_joints = [by_name[nm] for nm in names]
+        for j in range(-1, pb.getNumJoints(self.arm_body, physicsClientId=c)):
+            pb.setCollisionFilterGroupMask(self.arm_body, j, 1, 1, physicsClientId=c)
+        # tools (one body each, parked out of the room until mounted)
+        self.tool_bodies: Dict[str, int] = {}
+        colors = {"taping_tool": [0.1, 0.5, 0.9, 1], "spray_gun": [0.9, 0.8, 0.1, 1], "sander": [0.2, 0.8, 0.3, 1]}
+        for i, name in enumerate(TOOL_NAMES):
+            b = self.tools_cfg[name]["body"]
+            col = pb.createCollisionShape(pb.GEOM_CYLINDER, radius=b["radius"], height=b["length"], physicsClientId=c)
+            vis = pb.createVisualShape(pb.GEOM_CYLINDER, radius=b["radius"], length=b["length"],
+                                       rgbaColor=colors[name], physicsClientId=c)
+            self.tool_bodies[name] = pb.createMultiBody(0, col, vis, self._parking(i), physicsClientId=c)
+        self._place_robot()
+
+    def _parking(self, i: int) -> List[float]:
+        return [-50.0 - 2.0 * i, -50.0, 0.5]
+
+    # -- kinematic placement -----------------------------------------------------------------------------------
+    def _base_tf(self) -> Tuple[List[float], Tuple[float, ...]]:
+        x, y, yaw = self._pose
+        return [x, y, 0.0], pb.getQuaternionFromEuler([0, 0, yaw])
+
+    def _place_robot(self) -> None:
+        c = self._cid
+        pos, orn = self._base_tf()
+        pb.resetBasePositionAndOrientation(self.base_body, [pos[0], pos[1], self._base_z], orn, physicsClientId=c)
+        mount = self.robot["arm"]["mount"]
+        mpos, morn = pb.multiplyTransforms(pos, orn, mount["xyz"], pb.getQuaternionFromEuler(mount["rpy"]))
+        pb.resetBasePositionAndOrientation(self.arm_body, mpos, morn, physicsClientId=c)
+        for j, qv in zip(self.arm_joints, self._q):
+            pb.resetJointState(self.arm_body, j, qv, physicsClientId=c)
+        if self.mounted_tool is not None:
+            self._place_tool()
+
+    def _tool_frame(self) -> Tuple[Tuple[float, ...], Tuple[float, ...]]:
+        st = pb.getLinkState(self.arm_body, self.tool0_link, computeForwardKinematics=True, physicsClientId=self._cid)
+        return st[4], st[5]
+
+    def _place_tool(self) -> None:
+        fpos, forn = self._tool_frame()
+        length = self.tools_cfg[self.mounted_tool]["body"]["length"]
+        pos, orn = pb.multiplyTransforms(fpos, forn, [0, 0, length / 2], [0, 0, 0, 1])
+        pb.resetBasePositionAndOrientation(self.tool_bodies[self.mounted_tool], pos, orn, physicsClientId=self._cid)
+
+    def _tcp(self) -> Tuple[np.ndarray, np.ndarray]:
+        """TCP position and its z axis (unit) in map, for the mounted tool (flange when none)."""
+        fpos, forn = self._tool_frame()
+        if self.mounted_tool is None:
+            off, orn = [0, 0, 0], (0, 0, 0, 1)
+        else:
+            tcp = self.tools_cfg[self.mounted_tool]["tcp"]
+            off, orn = tcp[:3], rotvec_to_quat(tcp[3:])
+        pos, q = pb.multiplyTransforms(fpos, forn, off, orn)
+        m = np.array(pb.getMatrixFromQuaternion(q)).reshape(3, 3)
+        return np.array(pos), m[:, 2]
+
+    # -- public state ------------------------------------------------------------------------------------------
+    def base_pose(self) -> List[float]:
+        """``[x, y, yaw]`` of base_footprint in map (ground truth)."""
+        with self._lock:
+            return list(self._pose)
+
+    def set_base_pose(self, x: float, y: float, yaw: float) -> None:
+        """Teleport the base (scene setup, operator pushing the robot)."""
+        with self._lock:
+            self._pose = [float(x), float(y), float(yaw)]
+            self._place_robot()
+            self._tcp_prev = None
+            self._dirty = True
+
+    def arm_base_pose(self) -> Tuple[List[float], List[float]]:
+        """Position and quaternion (x, y, z, w) of the UR controller ``base`` frame in map."""
+        with self._lock:
+            pos, orn = pb.getBasePositionAndOrientation(self.arm_body, physicsClientId=self._cid)
+            p, q = pb.multiplyTransforms(pos, orn, [0, 0, 0], pb.getQuaternionFromEuler([0, 0, math.pi]))
+            return list(p), list(q)
+
+    def tcp_pose(self) -> Tuple[List[float], List[float]]:
+        """TCP position and its z axis in map (mounted tool's TCP offset applied)."""
+        with self._lock:
+            pos, z = self._tcp()
+            return list(pos), list(z)
+
+    def joint_positions(self) -> List[float]:
+        with self._lock:
+            return list(self._q)
+
+    def tcp_target_in_arm_base(self, position: Sequence[float], z_axis: Sequence[float]) -> List[float]:
+        """UR pose ``[x, y, z, rx, ry, rz]`` (arm ``base`` frame) that puts the TCP at ``position`` (map) with its
+        z axis along ``z_axis`` (map) and its x axis horizontal; for scripted passes through the UR stand-in."""
+        z = np.asarray(z_axis, dtype=float)
+        z = z / np.linalg.norm(z)
+        x = np.cross([0.0, 0.0, 1.0], z)
+        if np.linalg.norm(x) < 1e-6:
+            x = np.array([1.0, 0.0, 0.0])
+        x = x / np.linalg.norm(x)
+        rot = np.column_stack([x, np.cross(z, x), z])
+        p, q = self.arm_base_pose()
+        ip, iq = pb.invertTransform(p, q)
+        out_p, out_q = pb.multiplyTransforms(ip, iq, list(position), _quat_from_matrix(rot))
+        return list(out_p) + quat_to_rotvec(out_q)
+
+    def map_to_arm_base(self, point: Sequence[float]) -> List[float]:
+        """A map-frame point expressed in the UR ``base`` frame."""
+        p, q = self.arm_base_pose()
+        ip, iq = pb.invertTransform(p, q)
+        out, _ = pb.multiplyTransforms(ip, iq, list(point), [0, 0, 0, 1])
+        return list(out)
+
+    def ik_tcp(self, position: Sequence[float], z_axis: Sequence[float], seed: Optional[Sequence[float]] = None,
+               iterations: int = 8, tol: float = 1e-4) -> List[float]:
+        """Joint positions that put the TCP (mounted tool) at ``position`` (map) with its z axis along ``z_axis``
+        (x axis kept horizontal). For scripted passes and tests; the arm source still decides what happens."""
+        z = np.asarray(z_axis, dtype=float)
+        z = z / np.linalg.norm(z)
+        x = np.cross([0.0, 0.0, 1.0], z)
+        if np.linalg.norm(x) < 1e-6:
+            x = np.array([1.0, 0.0, 0.0])
+        x = x / np.linalg.norm(x)
+        y = np.cross(z, x)
+        rot = np.column_stack([x, y, z])
+        if self.mounted_tool is None:
+            off, oq = [0.0, 0.0, 0.0], (0, 0, 0, 1)
+        else:
+            tcp = self.tools_cfg[self.mounted_tool]["tcp"]
+            off, oq = tcp[:3], rotvec_to_quat(tcp[3:])
+        tq = _quat_from_matrix(rot)
+        ioff, ioq = pb.invertTransform(off, oq)
+        fpos, forn = pb.multiplyTransforms(list(position), tq, ioff, ioq)
+        c = self._cid
+        with self._lock:
+            keep = list(self._q)
+            q = list(seed) if seed is not None else list(self._q)
+            try:
+                for _ in range(iterations):
+                    for j, qv in zip(self.arm_joints, q):
+                        pb.resetJointState(self.arm_body, j, qv, physicsClientId=c)
+                    sol = pb.calculateInverseKinematics(self.arm_body, self.tool0_link, fpos, forn,
+                                                        maxNumIterations=200, residualThreshold=1e-7,
+                                                        physicsClientId=c)
+                    q = list(sol[:6])
+                    for j, qv in zip(self.arm_joints, q):
+                        pb.resetJointState(self.arm_body, j, qv, physicsClientId=c)
+                    p, _ = self._tool_frame()
+                    if np.linalg.norm(np.array(p) - np.array(fpos)) < tol:
+                        break
+            finally:
+                for j, qv in zip(self.arm_joints, keep):
+                    pb.resetJointState(self.arm_body, j, qv, physicsClientId=c)
+        return q
+
+    # -- tools (operator) --------------------------------------------------------------------------------------
+    def mount_tool(self, name: str) -> None:
+        """The operator mounts ``name`` on the flange (exactly one tool at a time)."""
+        if name not in TOOL_NAMES:
+            raise SimStateError("unknown tool %r, allowed: %s" % (name, ", ".join(TOOL_NAMES)))
+        with self._lock:
+            if self.mounted_tool is not None:
+                raise SimStateError("tool %r is mounted; remove it before mounting %r" % (self.mounted_tool, name))
+            self.mounted_tool = name
+            self._place_tool()
+            self._tcp_prev = None
+            self._dirty = True
+        log.info("operator mounted %s", name)
+
+    def remove_tool(self) -> Optional[str]:
+        """The operator removes the mounted tool; returns its name (None when nothing was mounted)."""
+        with self._lock:
+            name = self.mounted_tool
+            if name is None:
+                return None
+            pb.resetBasePositionAndOrientation(self.tool_bodies[name], self._parking(TOOL_NAMES.index(name)),
+                                               [0, 0, 0, 1], physicsClientId=self._cid)
+            self.mounted_tool = None
+            self._tcp_prev = None
+        log.info("operator removed %s", name)
+        return name
+
+    def tool_active(self) -> bool:
+        """Whether the mounted tool's process is on (digital output / valve + pressure in range)."""
+        name = self.mounted_tool
+        if name is None:
+            return False
+        sw = self.tools_cfg[name]["switch"]
+        if sw["source"] == "ur_digital_out":
+            return bool(self.arm_source is not None and self.arm_source.digital_output(sw["index"]))
+        return bool(self.compressor is not None and self.compressor.spraying())
+
+    # -- perception --------------------------------------------------------------------------------------------
+    def scan(self) -> Dict[str, Any]:
+        """SCAN result (contract JSON shape) from the current base pose."""
+        return self.scanner.scan(self.base_pose(), stamp=self.clock.now())
+
+    # -- stepping ----------------------------------------------------------------------------------------------
+    def _on_arm_step(self, q: Sequence[float]) -> None:
+        q = [float(x) for x in q]
+        last = self._samples[-1] if self._samples else self._last_sample
+        if last is not None and max(abs(a - b) for a, b in zip(last, q)) <= 1e-9:
+            return                                       # controller idling: nothing new
+        self._last_sample = q
+        self._samples.append(q)
+
+    def step(self) -> None:
+        """Advance the world to ``clock()`` (see the module docstring)."""
+        with self._lock:
+            now = self.clock.now()
+            dt = max(0.0, now - self._t)
+            self._t = now
+            self.steps += 1
+            moved = False
+            if self.drives is not None:
+                ang = self.drives.wheel_angles()
+                d = [a - b for a, b in zip(ang, self._wheel_prev)]
+                self._wheel_prev = ang
+                if any(abs(x) > 1e-12 for x in d):
+                    dx, dy, dth = self.mecanum.twist(d)
+                    x, y, yaw = self._pose
+                    ym = yaw + dth / 2.0
+                    self._pose = [x + math.cos(ym) * dx - math.sin(ym) * dy,
+                                  y + math.sin(ym) * dx + math.cos(ym) * dy, yaw + dth]
+                    moved = True
+            qs: List[List[float]] = []
+            while self._samples:
+                qs.append(self._samples.popleft())
+            if self.arm_source is not None:
+                q_now = [float(x) for x in self.arm_source.joint_positions()]
+                if not qs or max(abs(a - b) for a, b in zip(qs[-1], q_now)) > 1e-9:
+                    qs.append(q_now)
+            if qs and max(abs(a - b) for a, b in zip(qs[-1], self._q)) <= 1e-9 and len(qs) == 1:
+                qs = []
+            active = self.tool_active() if self.mounted_tool is not None else False
+            if not (moved or qs or self._dirty or active):
+                return                                   # idle: nothing changed, nothing to measure
+            self._dirty = False
+            if moved:
+                self._place_robot()
+            if not qs:
+                qs = [self._q]
+            elif self.mounted_tool is None:
+                qs = [qs[-1]]                            # nothing to measure along the way
+            # thin out dense controller steps: keep every sample that moved the TCP >= 2 mm
+            n = len(qs)
+            pending_dt = 0.0                             # time of thinned-out samples goes to the next segment
+            for i, q in enumerate(qs):
+                self._q = q
+                for j, qv in zip(self.arm_joints, q):
+                    pb.resetJointState(self.arm_body, j, qv, physicsClientId=self._cid)
+                if self.mounted_tool is not None:
+                    pending_dt += dt / n
+                    pos, z = self._tcp()
+                    if i < n - 1 and self._tcp_prev is not None and np.linalg.norm(pos - self._tcp_prev) < 0.002:
+                        continue
+                    if self._tcp_prev is not None:
+                        self.outcome.record(self.mounted_tool, active, self._tcp_prev, pos, z, pending_dt)
+                    pending_dt = 0.0
+                    self._tcp_prev = pos
+            if self.mounted_tool is not None:
+                self._place_tool()
+            self._check_collisions()
+
+    def _check_collisions(self) -> None:
+        c = self._cid
+        current = set()
+        for body, part in ((self.base_body, "base"), (self.arm_body, "arm")):
+            for wb, wid in self.wall_bodies.items():
+                pts = pb.getClosestPoints(body, wb, 0.0, physicsClientId=c)
+                for p in pts:
+                    link = p[3]
+                    if part == "arm":
+                        name = "arm:" + (pb.getJointInfo(body, link, physicsClientId=c)[12].decode()
+                                         if link >= 0 else "root")
+                    else:
+                        name = "base" if link < 0 else ("base:wheel_%d" % link if link < 4 else "base:pedestal")
+                    current.add((name, wid))
+        new = current - self._contacts
+        self._contacts = current
+        for name, wid in sorted(new):
+            self.collisions += 1
+            event = {"stamp": self.clock.now(), "part": name, "wall": wid, "base_pose": list(self._pose)}
+            self.collision_log.append(event)
+            log.warning("collision: %s touches %s", name, wid)
+            for fn in list(self.on_collision):
+                try:
+                    fn(event)
+                except Exception as exc:
+                    log.warning("collision callback failed: %s", exc)
+
+    @property
+    def in_contact(self) -> List[Tuple[str, str]]:
+        return sorted(self._contacts)
+
+    # -- loop --------------------------------------------------------------------------------------------------
+    def start(self) -> None:
+        """Run :meth:`step` at ``world_rate`` (wall clock) in a thread."""
+        if self._thread is not None:
+            raise SimStateError("world loop already running")
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="world", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        period = 1.0 / self.rate
+        nxt = time.monotonic()
+        while not self._stop.is_set():
+            try:
+                self.step()
+            except Exception:
+                log.exception("world step failed")
+            nxt += period
+            delay = nxt - time.monotonic()
+            if delay < -period:
+                nxt = time.monotonic()
+                delay = 0.0
+            self._stop.wait(max(0.0, delay))
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+            self._thread = None
+
+    def close(self) -> None:
+        """Stop the loop and disconnect PyBullet (idempotent)."""
+        self.stop()
+        if self.arm_source is not None and hasattr(self.arm_source, "remove_step_listener"):
+            try:
+                self.arm_source.remove_step_listener(self._on_arm_step)
+            except Exception:
+                pass
+        with self._lock:
+            if self._cid is not None and self._cid >= 0:
+                try:
+                    pb.disconnect(physicsClientId=self._cid)
+                except pb.error:
+                    pass
+                self._cid = -1
+        shutil.rmtree(self._tmp, ignore_errors=True)

@@ -1,0 +1,98 @@
+"""Configuration validation (clear errors naming key, value and what is allowed), clock, mecanum kinematics,
+and the command-line entry point refusing a bad file."""
+import copy
+import os
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+from locem_bridge.sim.clock import SimClock
+from locem_bridge.sim.config import load_robot, load_site, validate_robot, validate_site
+from locem_bridge.sim.errors import SimConfigError
+from locem_bridge.sim.mecanum import MecanumKinematics
+from locem_bridge.sim.site import Site
+
+SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "src")
+
+
+def _raw(path):
+    with open(path) as fh:
+        return yaml.safe_load(fh)
+
+
+def test_default_site_has_joints_from_panel_width_and_horizontal_joints(site_cfg):
+    site = Site(site_cfg)
+    w1 = site.wall("wall_1")
+    vertical = [j for j in w1.joints if j.kind == "vertical"]
+    assert [round(j.start[0], 6) for j in vertical] == [1.2, 2.4, 3.6]      # 4.8 m wall, 1.2 m panels
+    assert [j.kind for j in w1.joints].count("horizontal") == 1
+    assert len(site.work_walls) >= 2 and all(w.n[1] <= 0 for w in [w1])
+    assert [a.id for a in w1.areas] == ["wall_1_area_1", "wall_1_area_2"]
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda d: d["site"]["walls"][0].pop("height"), "missing key site.walls[0].height"),
+    (lambda d: d["site"]["walls"][0].update(height=-1), "site.walls[0].height = -1"),
+    (lambda d: d["site"]["walls"][0].update(id="1wall"), "not a valid feature id"),
+    (lambda d: d["site"]["walls"][1].update(id="wall_1"), "used twice"),
+    (lambda d: d["site"]["walls"][0].update(horizontal_joints=[3.0]), "horizontal_joints[0] = 3.0"),
+    (lambda d: d["simulation"].update(time_scale="fast"), "simulation.time_scale must be a finite number"),
+    (lambda d: d["site"]["walls"][0].update(p1=[0.0, 3.6]), "apart, allowed >= 0.1 m"),
+])
+def test_bad_site_files_are_refused_with_a_clear_message(mutate, message):
+    from locem_bridge.sim.config import default_site_path
+    data = _raw(default_site_path())
+    mutate(data)
+    with pytest.raises(SimConfigError) as exc:
+        validate_site(data)
+    assert message in str(exc.value)
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda d: d["robot"]["base"]["drives"]["wheels"][1].update(node_id=1), "node_id = 1 is used twice"),
+    (lambda d: d["robot"]["base"]["drives"]["can"].update(interface="pcan"), "allowed: virtual, udp_multicast"),
+    (lambda d: d["robot"]["base"]["drives"]["wheels"].pop(), "must list 4 wheels"),
+    (lambda d: d["robot"]["tools"]["sander"]["switch"].update(index=9), "index = 9 is out of range"),
+    (lambda d: d["robot"]["tools"].pop("spray_gun"), "missing key robot.tools.spray_gun"),
+    (lambda d: d["robot"]["tools"]["taping_tool"].update(tcp=[0, 0, 0.2]), "list of 6 finite numbers"),
+])
+def test_bad_robot_files_are_refused_with_a_clear_message(mutate, message):
+    from locem_bridge.sim.config import default_robot_path
+    data = _raw(default_robot_path())
+    mutate(data)
+    with pytest.raises(SimConfigError) as exc:
+        validate_robot(data)
+    assert message in str(exc.value)
+
+
+def test_command_line_refuses_a_bad_site_file_and_exits_2(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("site: {name: x, walls: []}\n")
+    env = dict(os.environ, PYTHONPATH=SRC)
+    res = subprocess.run([sys.executable, "-m", "locem_bridge.sim", "--site", str(bad), "--no-ur"],
+                         capture_output=True, text=True, timeout=60, env=env)
+    assert res.returncode == 2
+    assert "site.walls must list at least one wall" in res.stderr
+
+
+def test_clock_scales_sim_time_and_keeps_it_continuous_when_the_scale_changes():
+    wall = [100.0]
+    clock = SimClock(4.0, wall=lambda: wall[0])
+    wall[0] += 2.0
+    assert clock.now() == pytest.approx(8.0)
+    clock.time_scale = 0.5
+    wall[0] += 2.0
+    assert clock.now() == pytest.approx(9.0)
+    with pytest.raises(SimConfigError, match="time_scale"):
+        clock.time_scale = 0.0
+
+
+def test_mecanum_forward_and_inverse_kinematics_agree():
+    kin = MecanumKinematics(0.1275, 0.236, 0.2605)
+    for twist in ((0.3, 0.0, 0.0), (0.0, -0.2, 0.0), (0.0, 0.0, 0.7), (0.1, 0.2, -0.3)):
+        w = kin.wheel_speeds(*twist)
+        assert kin.twist(w) == pytest.approx(twist)
+    fl, fr, rl, rr = kin.wheel_speeds(0.0, 0.2, 0.0)       # sideways left: front-left and rear-right run back
+    assert fl < 0 and rr < 0 and fr > 0 and rl > 0

@@ -1,0 +1,75 @@
+"""SCAN stand-in: visible features from the base pose, contract shape, configured noise."""
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from locem_bridge.sim.config import load_site
+from locem_bridge.sim.perception import WallScanner
+from locem_bridge.sim.site import Site
+
+
+def test_scan_facing_wall_1_returns_its_joints_exactly_without_noise(site_cfg, robot_cfg):
+    site = Site(site_cfg)
+    sc = WallScanner(site, robot_cfg["robot"]["scanner"], position_noise=0.0)
+    out = sc.scan([2.4, 1.6, math.pi / 2], stamp=3.0)
+    assert out["stamp"] == 3.0
+    assert set(out) == {"stamp", "walls", "joints", "areas"}
+    ids = {j["id"] for j in out["joints"]}
+    assert {"wall_1_joint_1", "wall_1_joint_2", "wall_1_joint_3", "wall_1_joint_4"} <= ids
+    truth = {j.id: j for j in site.joints}
+    j2 = next(j for j in out["joints"] if j["id"] == "wall_1_joint_2")
+    assert j2 == {"id": "wall_1_joint_2", "wall": "wall_1", "kind": "vertical", "start": [2.4, 3.6, 0.0],
+                  "end": [2.4, 3.6, 2.5], "width": 0.05}
+    for j in out["joints"]:
+        if j["kind"] == "vertical":
+            assert np.allclose(j["start"], truth[j["id"]].start) and np.allclose(j["end"], truth[j["id"]].end)
+    w1 = next(w for w in out["walls"] if w["id"] == "wall_1")
+    assert w1["normal"] == [0.0, -1.0, 0.0] and w1["p0"] == [0.0, 3.6]
+    assert {a["id"] for a in out["areas"]} >= {"wall_1_area_1", "wall_1_area_2"}
+    assert all(w["id"] in ("wall_1", "wall_2") for w in out["walls"])     # concrete walls are no work surface
+
+
+def test_scan_sees_only_what_is_in_range_and_field_of_view(site_cfg, robot_cfg):
+    site = Site(site_cfg)
+    cfg = copy.deepcopy(robot_cfg["robot"]["scanner"])
+    cfg["fov"] = math.radians(60)
+    cfg["range"] = 2.5
+    sc = WallScanner(site, cfg)
+    out = sc.scan([2.4, 1.6, math.pi / 2])               # looking at wall_1 centre, narrow cone
+    vert = {j["id"] for j in out["joints"] if j["kind"] == "vertical"}
+    assert vert == {"wall_1_joint_2"}                     # x = 1.2 and 3.6 are outside +-30 deg
+    horiz = next(j for j in out["joints"] if j["kind"] == "horizontal")
+    assert 1.0 < horiz["start"][0] < 2.4 < horiz["end"][0] < 3.8      # clipped to the visible part
+    assert [w["id"] for w in out["walls"]] == ["wall_1"]
+    away = sc.scan([2.4, 1.6, -math.pi / 2])              # back to wall_1: nothing plasterboard in view
+    assert away["joints"] == [] and away["walls"] == []
+
+
+def test_scan_noise_stays_within_configured_sigma(site_cfg, robot_cfg):
+    site = Site(site_cfg)
+    sigma = 0.005
+    sc = WallScanner(site, robot_cfg["robot"]["scanner"], position_noise=sigma, seed=7)
+    truth = {j.id: j for j in site.joints}
+    errs = []
+    for _ in range(50):
+        out = sc.scan([2.4, 1.6, math.pi / 2])
+        for j in out["joints"]:
+            if j["kind"] == "vertical" and j["wall"] == "wall_1":
+                errs.append(np.subtract(j["start"], truth[j["id"]].start))
+    errs = np.array(errs)
+    assert np.abs(errs).max() <= 5 * sigma
+    along = errs[:, [0, 2]]                              # wall_1: along the wall (x) and in height (z)
+    assert 0.7 * sigma < along.std() < 1.3 * sigma       # the configured sigma, not more, not less
+    assert np.abs(errs[:, 1]).max() == pytest.approx(0.0, abs=1e-9)   # joints stay on the wall plane
+
+
+def test_site_without_joints_scans_walls_and_areas_only(robot_cfg):
+    from locem_bridge.sim.config import repo_root
+    import os
+    site = Site(load_site(os.path.join(repo_root(), "config", "sites", "no_joints.yaml")))
+    out = WallScanner(site, robot_cfg["robot"]["scanner"]).scan(site.robot_start)
+    assert out["joints"] == []
+    assert [w["id"] for w in out["walls"]] == ["wall_1"]
+    assert out["areas"][0]["width"] == pytest.approx(3.0) and out["areas"][0]["height"] == pytest.approx(2.5)

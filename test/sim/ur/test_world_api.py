@@ -1,0 +1,57 @@
+"""The Python API the PyBullet world uses: step listener, fault injection, IO, restart (in-process)."""
+import time
+
+import numpy as np
+
+from locem_bridge.sim.ur import ArmSnapshot, UrControllerStandIn
+
+
+def test_step_listener_sees_every_cycle_and_can_trigger_a_protective_stop(ur_address):
+    ctl = UrControllerStandIn(ur_address, time_scale=4.0)
+    seen = []
+
+    def on_step(snap: ArmSnapshot) -> None:
+        seen.append(snap)
+        if len(seen) == 50:                       # e.g. the world detected a collision
+            ctl.inject_protective_stop("collision with wall_1")
+
+    ctl.add_step_listener(on_step)
+    ctl.start()
+    try:
+        t_end = time.time() + 2.0
+        while len(seen) < 100 and time.time() < t_end:
+            time.sleep(0.01)
+        assert len(seen) >= 100
+        first, last = seen[0], seen[-1]
+        assert len(first.q) == 6 and len(first.tcp_pose) == 6
+        assert np.allclose(first.tcp_pose, ctl.get_tcp_pose(), atol=1e-12)
+        # motion time runs 4x faster than the 500 Hz wall clock
+        dt = (last.motion_time - first.motion_time) / (len(seen) - 1)
+        assert 0.004 < dt < 0.016
+        assert last.safety_mode == 3
+        state = ctl.get_state()
+        assert state["safety_mode_name"] == "PROTECTIVE_STOP"
+        assert "collision with wall_1" in state["last_error"]
+        ctl.remove_step_listener(on_step)
+        n = len(seen)
+        time.sleep(0.05)
+        assert len(seen) == n
+    finally:
+        ctl.stop()
+
+
+def test_stop_start_keeps_arm_state_and_joins_threads(ur_address):
+    import threading
+    before = {t.name for t in threading.enumerate()}
+    ctl = UrControllerStandIn(ur_address, q0=[0.1, -1.2, 1.3, -1.5, -1.6, 0.2])
+    ctl.start()
+    ctl.set_standard_digital_input(3, True)
+    ctl.stop()
+    assert {t.name for t in threading.enumerate()} - before == set()
+    ctl.start()
+    try:
+        assert np.allclose(ctl.get_joint_positions(), [0.1, -1.2, 1.3, -1.5, -1.6, 0.2])
+        assert ctl.arm.values["actual_digital_input_bits"] == (1 << 3,)
+        assert ctl.get_state()["runtime_state_name"] == "STOPPED"
+    finally:
+        ctl.stop()
