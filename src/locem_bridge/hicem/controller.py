@@ -1,0 +1,462 @@
+"""HHLC: the high-level controller loop of HICEM (ROS-free core; ``ros/hicem_node`` adapts it).
+
+Lifecycle of one process (:meth:`HighLevelController.start_process`, worker thread, or :meth:`run_process`,
+blocking): PEMKRE ``start_process`` → loop { ``next_action`` → pick the tree whose BehaviorTree ID is the
+action type → HDICT record ``phase=running`` → ``set_task_status(in_progress)`` → tick the tree every ``hhlc.tick_period_s`` until SUCCESS/FAILURE → ``phase=finished`` (outcome stored) →
+``set_task_status(succeeded|failed, detail)`` → ``phase=reported`` } until PEMKRE answers ``ended``/``failed``.
+
+- The tree gets a fresh blackboard: ``cfg.*`` (HICEM parameters), ``param_<name>`` (PEMKRE parameters),
+  ``task`` and ``action_type``. ``task_detail`` written by the tree becomes the status detail; on failure the
+  detail is the reason recorded by the failing node.
+- :meth:`stop`: the running tree is halted (its LOCEM commands are cancelled, its prompts withdrawn), the
+  safe commands (``locem.safe_commands``) are sent, the task is reported failed ``stopped: <reason>``, the
+  process state becomes ``stopped``. A crucial-module fault from the HEM halts the tree the same way at once
+  (reported failed with the fault), then the loop waits for health to return before asking PEMKRE again.
+- An action type without a tree, a malformed PEMKRE answer or an exception from PEMKRE ends the process as
+  ``failed`` with the reason (PEMKRE told when possible); nothing is left running.
+- :meth:`resume`: after a crash the HDICT says which process and action were interrupted. A finished but
+  unreported outcome is reported; a running action is halted on the devices (safe commands) and then handled
+  by ``hhlc.resume_policy``: ``rerun`` its tree, ``fail`` it ("interrupted ..."), or run a recovery tree (e.g.
+  RESUME_TAPE_LINE: the operator finishes the joint by hand). Completed tasks are never run again (a task
+  already reported is re-reported from the HDICT, not executed).
+- :meth:`state` / state listeners: process, action type, task, tree, running node, phase.
+Threads: one worker runs the loop and ticks trees; stop/abort/operator replies come from other threads and
+only set flags or touch the thread-safe OperatorDesk.
+"""
+import logging
+import threading
+import time
+from typing import Any, Callable, Dict, List, Optional
+
+from py_trees.common import Status
+
+from .blackboard import Blackboard
+from .config import HicemParams
+from .datastore import DataManager
+from .errors import ControllerError, HicemError, LocemError, PemkreError
+from .interfaces import NextAction, check_reply, parse_next_action
+from .node_base import NodeContext
+from .operator import OperatorDesk
+from .xml_loader import BuiltTree, TreeLibrary
+
+LOG = logging.getLogger("locem_bridge.hicem.controller")
+HHLC = "hhlc"
+TASKS = "tasks"
+
+
+class ActionStats:
+    """Timing of one high-level action: wall time and the parts spent in PEMKRE calls and idle waits."""
+
+    def __init__(self, action_type: str) -> None:
+        self.action_type = action_type
+        self.wall_s = 0.0
+        self.pemkre_s = 0.0
+        self.wait_s = 0.0
+        self.locem_s = 0.0
+        self.ticks = 0
+
+    @property
+    def overhead_s(self) -> float:
+        """HICEM's own time: everything except PEMKRE calls, LOCEM calls and waiting between ticks."""
+        return self.wall_s - self.pemkre_s - self.wait_s - self.locem_s
+
+
+class _TimedLocem:
+    """Wraps the LOCEM client to account time spent inside it (send/poll) for the overhead figure."""
+
+    def __init__(self, inner: Any, stats_ref: Callable[[], Optional[ActionStats]]) -> None:
+        self.inner = inner
+        self._stats = stats_ref
+
+    def send(self, command: str) -> Any:
+        t = time.perf_counter()
+        try:
+            return _TimedHandle(self.inner.send(command), self._stats)
+        finally:
+            s = self._stats()
+            if s is not None:
+                s.locem_s += time.perf_counter() - t
+
+
+class _TimedHandle:
+    def __init__(self, inner: Any, stats_ref: Callable[[], Optional[ActionStats]]) -> None:
+        self.inner = inner
+        self.command = getattr(inner, "command", "")
+        self._stats = stats_ref
+
+    def _timed(self, fn: Callable[[], Any]) -> Any:
+        t = time.perf_counter()
+        try:
+            return fn()
+        finally:
+            s = self._stats()
+            if s is not None:
+                s.locem_s += time.perf_counter() - t
+
+    def done(self) -> bool:
+        return self._timed(self.inner.done)
+
+    def reply(self) -> Any:
+        return self._timed(self.inner.reply)
+
+    def cancel(self) -> None:
+        self._timed(self.inner.cancel)
+
+
+class HighLevelController:
+    def __init__(self, pemkre: Any, locem: Any, library: TreeLibrary, store: DataManager, params: HicemParams,
+                 health: Any = None, operator: Optional[OperatorDesk] = None, data_handler: Any = None,
+                 clock: Callable[[], float] = time.monotonic, log: Optional[logging.Logger] = None) -> None:
+        self.pemkre = pemkre
+        self.locem = locem
+        self.library = library
+        self.store = store
+        self.params = params
+        self.health = health
+        self.operator = operator or OperatorDesk()
+        self.data_handler = data_handler
+        self.clock = clock
+        self.log = log or LOG
+        self._wake = threading.Event()
+        self._lock = threading.Lock()
+        self._stop_reason: Optional[str] = None
+        self._abort_reason: Optional[str] = None
+        self._thread: Optional[threading.Thread] = None
+        self._listeners: List[Callable[[Dict[str, Any]], None]] = []
+        self._state: Dict[str, Any] = {"process": "", "specific_process": "", "action_type": "", "task": "",
+                                       "tree": "", "node": "", "path": "", "phase": "idle", "detail": ""}
+        self._tree: Optional[BuiltTree] = None
+        self._current_stats: Optional[ActionStats] = None
+        self.stats: List[ActionStats] = []
+        self._timed_locem = _TimedLocem(locem, lambda: self._current_stats) if locem is not None else None
+        if health is not None:
+            health.add_fault_listener(self._on_fault)
+
+    # -- observation ----------------------------------------------------------------------------------------
+    def add_state_listener(self, cb: Callable[[Dict[str, Any]], None]) -> None:
+        self._listeners.append(cb)
+
+    def state(self) -> Dict[str, Any]:
+        with self._lock:
+            return dict(self._state)
+
+    def _set_state(self, **kw: Any) -> None:
+        with self._lock:
+            changed = any(self._state.get(k) != v for k, v in kw.items())
+            self._state.update(kw)
+            snap = dict(self._state)
+        if changed:
+            for cb in list(self._listeners):
+                try:
+                    cb(snap)
+                except Exception:  # a broken listener must not stop the robot's executive
+                    self.log.exception("state listener failed")
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    # -- commands from outside ------------------------------------------------------------------------------
+    def start_process(self, process_iri: str, options: Optional[Dict[str, Any]] = None) -> None:
+        """Start a process in the worker thread; ControllerError if one is already running."""
+        if not isinstance(process_iri, str) or not process_iri.strip():
+            raise ControllerError("process IRI must be a non-empty string")
+        if options is not None and not isinstance(options, dict):
+            raise ControllerError("process options must be a mapping, got %s" % type(options).__name__)
+        if self.running:
+            raise ControllerError("process %s is still running; stop it first" % self._state["process"])
+        self._thread = threading.Thread(target=self._guarded, args=(self.run_process, process_iri, options),
+                                        name="hicem-hhlc", daemon=True)
+        self._thread.start()
+
+    def resume_in_background(self) -> bool:
+        """Resume an interrupted process (see :meth:`resume`) in the worker thread; False if none."""
+        rec = self.store.value(HHLC, "process")
+        if not rec or rec.get("state") != "running":
+            return False
+        if self.running:
+            raise ControllerError("a process is already running")
+        self._thread = threading.Thread(target=self._guarded, args=(self.resume,), name="hicem-hhlc", daemon=True)
+        self._thread.start()
+        return True
+
+    def _guarded(self, fn: Callable[..., Any], *args: Any) -> None:
+        try:
+            fn(*args)
+        except Exception:
+            self.log.exception("HHLC worker crashed")
+
+    def stop(self, reason: str = "stop requested") -> None:
+        """Halt the running action and end the process (state 'stopped'). Safe to call at any time."""
+        self._stop_reason = reason or "stop requested"
+        self._wake.set()
+
+    def join(self, timeout: Optional[float] = None) -> bool:
+        if self._thread is not None:
+            self._thread.join(timeout)
+            return not self._thread.is_alive()
+        return True
+
+    def operator_reply(self, prompt_id: str, answer: str) -> None:
+        """Answer an open prompt; OperatorError (with the open prompts) if it is not open."""
+        self.operator.reply(prompt_id, answer)
+        self._wake.set()
+
+    def _on_fault(self, module: str, reason: str) -> None:
+        if self._tree is not None:
+            self._abort_reason = "health fault: %s" % reason
+            self._wake.set()
+
+    # -- the loop -------------------------------------------------------------------------------------------
+    def run_process(self, process_iri: str, options: Optional[Dict[str, Any]] = None) -> str:
+        """Run a process to its end in the calling thread; returns the final phase (ended/failed/stopped)."""
+        self._stop_reason = None
+        self._set_state(process=process_iri, phase="starting", detail="", action_type="", task="", tree="",
+                        node="")
+        try:
+            specific = self._pemkre_call(self.pemkre.start_process, process_iri, options)
+        except Exception as exc:  # nothing started yet: just report
+            return self._finish_process("failed", "PEMKRE start_process failed: %s" % exc)
+        self.store.put(HHLC, "process", {"iri": process_iri, "specific": specific, "state": "running"},
+                       source="HHLC")
+        self.store.delete(HHLC, "action")
+        self._set_state(specific_process=specific or "")
+        return self._loop()
+
+    def resume(self) -> str:
+        """Continue the process the HDICT says was running when HICEM died (see module doc)."""
+        rec = self.store.value(HHLC, "process")
+        if not rec or rec.get("state") != "running":
+            raise ControllerError("no interrupted process in the HDICT")
+        self._stop_reason = None
+        self._set_state(process=rec["iri"], specific_process=rec.get("specific") or "", phase="resuming")
+        try:
+            phase = self._resume_action()
+        except Exception as exc:
+            self.log.exception("resume failed")
+            return self._finish_process("failed", "resume failed: %s: %s" % (type(exc).__name__, exc))
+        return phase if phase is not None else self._loop()
+
+    def _resume_action(self) -> Optional[str]:
+        """Bring devices safe and settle the interrupted action; a final phase if the process must end."""
+        act = self.store.value(HHLC, "action")
+        self._send_safe_commands()
+        if act is not None and act.get("phase") != "reported":
+            na = NextAction("action", act["action_type"], act["task"], act.get("parameters", {}),
+                            act.get("raw_parameters", ""))
+            policy = self.params.resume_policy.get(act["action_type"], "fail")
+            if act.get("phase") == "finished":
+                self._report_on_resume(na, act["outcome"], act["detail"])
+            elif policy == "fail" or (policy != "rerun" and not self.library.has_tree(policy)):
+                self._report_on_resume(na, "failed", "interrupted: HICEM restarted during %s; not repeated "
+                                                     "(resume policy %s)" % (act["action_type"], policy))
+            else:
+                tree = act["action_type"] if policy == "rerun" else policy
+                self.log.info("resume: running %s for the interrupted %s %s", tree, act["action_type"], act["task"])
+                return self._execute(na, resumed=True, tree_id=tree)
+        return None
+
+    def _report_on_resume(self, na: NextAction, outcome: str, detail: str) -> None:
+        """Report an outcome found in the HDICT. PEMKRE may already have it (the crash came after its answer
+        and before the HDICT update): a refusal is logged and the loop asks PEMKRE what comes next."""
+        try:
+            self._report(na, outcome, detail)
+        except PemkreError as exc:
+            self.log.warning("resume: PEMKRE did not take the %s outcome of %s (%s); asking it what is next",
+                             outcome, na.task, exc)
+            with self.store.transaction():
+                self.store.put(TASKS, na.task, {"action_type": na.action_type, "outcome": outcome,
+                                                "detail": detail}, source="HHLC")
+                self.store.put(HHLC, "action", {"task": na.task, "action_type": na.action_type,
+                                                "phase": "reported", "outcome": outcome, "detail": detail},
+                               source="HHLC")
+
+    def _loop(self) -> str:
+        repeats: Dict[str, int] = {}
+        while True:
+            if self._stop_reason is not None:
+                return self._finish_process("stopped", self._stop_reason)
+            if not self._wait_for_health():
+                return self._finish_process("stopped", self._stop_reason or "stop requested")
+            self._set_state(phase="asking", action_type="", task="", tree="", node="", path="")
+            try:
+                self.store.prune()  # outdated entries go between actions, never under a running tree
+            except HicemError:
+                self.log.exception("pruning the data store failed")
+            try:
+                na = parse_next_action(self._pemkre_call(self.pemkre.next_action))
+            except Exception as exc:
+                return self._finish_process("failed", "PEMKRE next_action: %s" % exc)
+            if na.status == "ended":
+                return self._finish_process("ended", na.detail)
+            if na.status == "failed":
+                return self._finish_process("failed", "PEMKRE reports the process failed: %s" % na.detail)
+            done = self.store.value(TASKS, na.task)
+            if done is not None:
+                # PEMKRE offers a task HICEM already completed (its status update was lost): re-report, don't redo.
+                repeats[na.task] = repeats.get(na.task, 0) + 1
+                if repeats[na.task] > 1:
+                    return self._finish_process("failed", "PEMKRE keeps offering the completed task %s" % na.task)
+                try:
+                    self._report(na, done["outcome"], done["detail"])
+                except PemkreError as exc:
+                    return self._finish_process("failed", "PEMKRE refused the stored outcome of %s: %s" % (
+                        na.task, exc))
+                continue
+            phase = self._execute(na)
+            if phase is not None:
+                return phase
+
+    def _execute(self, na: NextAction, resumed: bool = False, tree_id: Optional[str] = None) -> Optional[str]:
+        """Run one action; returns a final process phase if the process must end, else None."""
+        stats = ActionStats(na.action_type)
+        self._current_stats = stats
+        t0 = time.perf_counter()
+        try:
+            # one durable record before PEMKRE hears of it: a crash from here on is found by resume()
+            rec = {"task": na.task, "action_type": na.action_type, "parameters": na.parameters,
+                   "raw_parameters": na.raw_parameters, "phase": "running"}
+            self.store.put(HHLC, "action", rec, source="HHLC")
+            self._set_state(action_type=na.action_type, task=na.task, tree="", node="", phase="starting")
+            try:
+                self._pemkre_call(self.pemkre.set_task_status, na.task, "in_progress", "")
+            except PemkreError as exc:
+                if not resumed:
+                    raise
+                self.log.warning("resume: PEMKRE refused in_progress again (%s); continuing", exc)
+            tree_id = tree_id or na.action_type
+            if not self.library.has_tree(tree_id):
+                # PEMKRE only accepts an outcome for a running task: in_progress first, then failed.
+                reason = "no behavior tree for action type '%s'; trees: %s" % (
+                    na.action_type, ", ".join(self.library.tree_ids()))
+                self._report(na, "failed", reason)
+                return self._finish_process("failed", reason)
+            outcome, detail = self._run_tree(na, stats, tree_id)
+            rec.update(phase="finished", outcome=outcome, detail=detail)
+            self.store.put(HHLC, "action", rec, source="HHLC")
+            self._report(na, outcome, detail)
+            if self._stop_reason is not None:
+                return self._finish_process("stopped", self._stop_reason)
+            return None
+        except Exception as exc:
+            self.log.exception("action %s failed in the controller", na.action_type)
+            return self._finish_process("failed", "%s during %s: %s" % (type(exc).__name__, na.action_type, exc))
+        finally:
+            stats.wall_s = time.perf_counter() - t0
+            self.stats.append(stats)
+            self._current_stats = None
+
+    def _run_tree(self, na: NextAction, stats: ActionStats, tree_id: str) -> "tuple":
+        ctx = NodeContext(locem=self._timed_locem, store=self.store, health=self.health, operator=self.operator,
+                          data_handler=self.data_handler, clock=self.clock, log=self.log)
+        bb = Blackboard()
+        bb.update(self.params.blackboard_entries())
+        bb.update(na.blackboard_entries())
+        bb.set("task", na.task)
+        bb.set("action_type", na.action_type)
+        tree = self.library.build(tree_id, ctx, bb)
+        self._abort_reason = None
+        self._tree = tree
+        self._set_state(tree=tree_id, phase="running")
+        period = self.params.tick_period_s
+        try:
+            while True:
+                halt_reason = self._stop_reason and ("stopped: %s" % self._stop_reason) or self._abort_reason
+                if halt_reason:
+                    self._halt(tree, ctx)
+                    return "failed", halt_reason
+                try:
+                    status = tree.tick()
+                except Exception as exc:
+                    self.log.exception("tick of %s raised", na.action_type)
+                    self._halt(tree, ctx)
+                    return "failed", "internal error while ticking %s: %s" % (na.action_type, exc)
+                stats.ticks += 1
+                self._set_state(node=tree.tip_name() or tree.root.name, path="/".join(tree.running_path()))
+                if status == Status.SUCCESS:
+                    detail = bb.get_default("task_detail", "")
+                    return "succeeded", str(detail)
+                if status == Status.FAILURE:
+                    last = ctx.last_failure()
+                    self._cancel_outstanding(ctx)
+                    return "failed", ("%s: %s" % last) if last else "tree %s failed" % tree_id
+                tw = time.perf_counter()
+                self._wake.wait(period)
+                self._wake.clear()
+                stats.wait_s += time.perf_counter() - tw
+        finally:
+            self._tree = None
+
+    def _halt(self, tree: BuiltTree, ctx: NodeContext) -> None:
+        tree.halt()
+        self._cancel_outstanding(ctx)
+
+    def _cancel_outstanding(self, ctx: NodeContext) -> None:
+        for h in ctx.outstanding():  # belt and braces: nothing may stay running on a device
+            try:
+                h.cancel()
+            except Exception:
+                self.log.exception("cancel failed")
+            ctx.untrack(h)
+
+    def _report(self, na: NextAction, outcome: str, detail: str) -> None:
+        self._set_state(phase="reporting", detail=detail)
+        self._pemkre_call(self.pemkre.set_task_status, na.task, outcome, detail)
+        with self.store.transaction():
+            self.store.put(TASKS, na.task, {"action_type": na.action_type, "outcome": outcome, "detail": detail},
+                           source="HHLC")
+            rec = self.store.value(HHLC, "action") or {"task": na.task, "action_type": na.action_type}
+            rec.update(phase="reported", outcome=outcome, detail=detail)
+            self.store.put(HHLC, "action", rec, source="HHLC")
+
+    def _finish_process(self, phase: str, detail: str) -> str:
+        if phase == "stopped":
+            self._send_safe_commands()
+        rec = self.store.value(HHLC, "process") or {}
+        rec["state"] = phase
+        rec["detail"] = detail
+        try:
+            self.store.put(HHLC, "process", rec, source="HHLC")
+        except HicemError:
+            self.log.exception("cannot record the process end")
+        self.operator.cancel_all()
+        self._set_state(phase=phase, detail=detail, tree="", node="", path="")
+        self.log.info("process %s: %s (%s)", self._state["process"], phase, detail)
+        return phase
+
+    def _wait_for_health(self) -> bool:
+        """Block while a crucial module is faulty; False if a stop arrived meanwhile."""
+        if self.health is None:
+            return True
+        while self.health.faults():
+            if self._stop_reason is not None:
+                return False
+            self._set_state(phase="waiting_for_health", detail="; ".join(r for _m, r in self.health.faults()))
+            self._wake.wait(self.params.idle_poll_s)
+            self._wake.clear()
+        return self._stop_reason is None
+
+    def _send_safe_commands(self) -> None:
+        if self.locem is None:
+            return
+        for cmd in self.params.safe_commands:
+            try:
+                h = self.locem.send(cmd)
+                t_end = self.clock() + self.params.safe_timeout_s
+                while not h.done() and self.clock() < t_end:
+                    time.sleep(0.005)
+                if h.done():
+                    check_reply(h.reply(), cmd)
+                else:
+                    h.cancel()
+                    self.log.warning("safe command %s: no reply within %.1f s", cmd, self.params.safe_timeout_s)
+            except (LocemError, HicemError) as exc:
+                self.log.warning("safe command %s failed: %s", cmd, exc)
+
+    def _pemkre_call(self, fn: Callable[..., Any], *args: Any) -> Any:
+        t = time.perf_counter()
+        try:
+            return fn(*args)
+        finally:
+            if self._current_stats is not None:
+                self._current_stats.pemkre_s += time.perf_counter() - t

@@ -1,0 +1,71 @@
+"""Exception hierarchy of the HICEM executive.
+
+Every error raised by :mod:`locem_bridge.hicem` derives from :class:`HicemError`, so an adapter can catch the
+whole family in one place. Each subclass names one kind of failure; messages always say what was wrong and,
+where there is a closed set, what is allowed.
+"""
+from typing import Optional
+
+
+class HicemError(Exception):
+    """Base class of every HICEM error."""
+
+
+class TreeLoadError(HicemError):
+    """A behavior-tree XML file cannot be turned into a tree (raised at load time, never while ticking).
+
+    Carries ``file``, ``line`` (1-based, 0 when unknown) and ``name`` (the node, port or tree at fault) so an
+    integrator can jump straight to the spot in Groot2 or an editor.
+    """
+
+    def __init__(self, message: str, file: str = "<string>", line: int = 0, name: str = "") -> None:
+        self.file = file
+        self.line = line
+        self.name = name
+        self.reason = message
+        where = "%s:%d" % (file, line)
+        super().__init__("%s: %s%s" % (where, ("'%s': " % name) if name else "", message))
+
+
+class PortError(HicemError):
+    """A port value is missing or of the wrong type while a node runs (blackboard-fed ports)."""
+
+
+class NodeDeclarationError(HicemError):
+    """A node class declares itself wrongly (duplicate name, bad port spec). A programming error."""
+
+
+class DataStoreError(HicemError):
+    """The data store (HDM/HDICT) rejected an operation: bad collection, non-JSON value, closed database."""
+
+
+class ScanFormatError(DataStoreError):
+    """A SCAN result does not follow docs/contracts.md; the message names the offending field."""
+
+
+class HealthError(HicemError):
+    """Bad input to the health monitor (unknown module, unknown level)."""
+
+
+class OperatorError(HicemError):
+    """Operator interaction failed: reply to a prompt that is not open, or an answer that is not allowed."""
+
+
+class LocemError(HicemError):
+    """A LOCEM command could not be sent or its reply was not understood."""
+
+    def __init__(self, message: str, code: Optional[str] = None) -> None:
+        self.code = code
+        super().__init__(message)
+
+
+class PemkreError(HicemError):
+    """PEMKRE answered something HICEM cannot use (bad next-action shape, unknown status)."""
+
+
+class ControllerError(HicemError):
+    """The high-level controller was asked to do something its state does not allow."""
+
+
+class ConfigError(HicemError):
+    """The HICEM parameter file is missing a key or has a value of the wrong type."""

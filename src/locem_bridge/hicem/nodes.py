@@ -1,0 +1,418 @@
+"""The HICEM node library: generic nodes and plasterboard use-case nodes.
+
+Generic: CheckHealth, SendLocemCommand, ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual,
+SelectEntry, IngestScan, MarkFeature. Use case: TagIdNameToObjectId (PEMKRE symbol → stored object id), GetTapingPosition
+(approach pose for a joint line), GetTapePath (line endpoints and wall normal), GetAreaRaster (base stations and
+raster rectangles for an area).
+
+No node holds a number of its own: distances, speeds, offsets and timeouts arrive through ports, fed from the
+blackboard (``{@cfg....}`` = the robot/site parameters the controller loads, ``param_*`` = PEMKRE parameters) or
+from the data store. Command templates (``SendLocemCommand.command``, ``WaitForOperator.text``, ``Log.message``)
+fill ``{key}`` / ``{key.field}`` from the blackboard; numbers are written in plain decimal, lists as
+space-separated numbers, and a substituted text containing whitespace is refused (it would smuggle extra
+command arguments).
+"""
+import math
+import re
+from typing import Any, List, Optional, Tuple
+
+from py_trees.common import Status
+
+from .errors import HicemError, LocemError, PortError
+from .interfaces import check_reply, local_name
+from .node_base import ConditionLeaf, Leaf
+from .ports import TEMPLATE_FIELD, ANY, FLOAT, FLOAT_LIST, INT, JSON, STRING, STRING_LIST, input_port, output_port
+
+_FIELD = TEMPLATE_FIELD
+
+
+def lookup(blackboard: Any, path: str) -> Any:
+    """Blackboard value for ``path`` (``a.b`` = field ``b`` of entry ``a`` if ``a.b`` is not an entry)."""
+    try:
+        return blackboard.get(path)
+    except KeyError:
+        raise HicemError("blackboard key '%s' is not set (or has no such field)" % path)
+
+
+def format_number(v: float) -> str:
+    s = ("%.6f" % v).rstrip("0").rstrip(".")
+    return "0" if s in ("-0", "") else s
+
+
+def format_value(v: Any, key: str) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        if not math.isfinite(v):
+            raise HicemError("'%s' is %r, not a finite number" % (key, v))
+        return str(v) if isinstance(v, int) else format_number(v)
+    if isinstance(v, (list, tuple)):
+        return " ".join(format_value(x, key) for x in v)
+    if isinstance(v, str):
+        if not v or any(c.isspace() for c in v):
+            raise HicemError("'%s' = %r is empty or contains whitespace; a command argument must be one word"
+                             % (key, v))
+        return v
+    raise HicemError("'%s' is a %s, which cannot be written into a command" % (key, type(v).__name__))
+
+
+def render(template: str, blackboard: Any, words: bool = True) -> str:
+    """Fill ``{key}`` fields. ``words=False`` (operator texts, log lines) allows whitespace in values."""
+    def sub(m: "re.Match[str]") -> str:
+        v = lookup(blackboard, m.group(1))
+        if not words and isinstance(v, str):
+            return v
+        return format_value(v, m.group(1))
+    return _FIELD.sub(sub, template)
+
+
+def _norm_angle(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+# ------------------------------------------------------------------------------------------------- generic --
+class CheckHealth(ConditionLeaf):
+    DESCRIPTION = ("SUCCESS while the modules (default: all crucial ones) are healthy in the HEM; FAILURE "
+                   "with the reason otherwise. Put it first in a ReactiveSequence to guard a running action.")
+    PORTS = (input_port("modules", STRING_LIST, "", "", "modules to check; empty = every crucial module"),)
+
+    def on_tick(self) -> Status:
+        hem = self.ctx.require("health", self.name)
+        faults = hem.faults(self.get("modules") or None)
+        if faults:
+            return self.fail("unhealthy: " + "; ".join(r for _m, r in faults))
+        return Status.SUCCESS
+
+
+class SendLocemCommand(Leaf):
+    DESCRIPTION = ("Sends one LOCEM command (template filled from the blackboard) through the action interface "
+                   "and waits for its reply without blocking the tree; cancels it when halted. FAILURE on any "
+                   "code other than OK, on an unexpected code, or when no reply came within timeout.")
+    PORTS = (
+        input_port("command", STRING, None, "", "command template, e.g. 'GOTO {approach_pose}'"),
+        input_port("timeout", FLOAT, "{@cfg.locem.command_timeout_s}", "s", "give up (and cancel) after this"),
+        output_port("result", JSON, None, "", "the reply's result object"),
+        output_port("code", STRING, None, "", "the reply's code"),
+    )
+
+    def on_start(self) -> Optional[Status]:
+        locem = self.ctx.require("locem", self.name)
+        self._cmd = render(self.get("command"), self.ports.blackboard)
+        self._limit = self.get("timeout")
+        self._t0 = self.ctx.clock()
+        try:
+            self._handle = locem.send(self._cmd)
+        except LocemError as exc:
+            self._handle = None
+            return self.fail("cannot send %r: %s" % (self._cmd, exc))
+        self.ctx.track(self._handle)
+        self.ctx.commands_sent.append(self._cmd)
+        self.feedback_message = "sent %s" % self._cmd
+        return None
+
+    def on_tick(self) -> Status:
+        h = self._handle
+        if not h.done():
+            if self.ctx.clock() - self._t0 > self._limit:
+                h.cancel()
+                self.ctx.untrack(h)
+                return self.fail("no reply to %r within %.3f s; cancelled" % (self._cmd, self._limit))
+            return Status.RUNNING
+        self.ctx.untrack(h)
+        try:
+            reply = check_reply(h.reply(), self._cmd)
+        except LocemError as exc:
+            return self.fail(str(exc))
+        self.set("code", reply.code)
+        if not reply.success:
+            return self.fail("LOCEM %s for %r: %s" % (reply.code, self._cmd, reply.message))
+        self.set("result", reply.result)
+        return Status.SUCCESS
+
+    def on_halt(self) -> None:
+        h = getattr(self, "_handle", None)
+        if h is not None:
+            h.cancel()
+            self.ctx.untrack(h)
+
+
+class ReadDataStore(Leaf):
+    DESCRIPTION = "Copies collection/key (optionally one field of it) from the data store to value; FAILURE if absent."
+    PORTS = (
+        input_port("collection", STRING, None, "", "data store collection"),
+        input_port("key", STRING, None, "", "entry key"),
+        input_port("field", STRING, "", "", "dotted field inside the value; empty = whole value"),
+        output_port("value", ANY, None, "", "the value read"),
+    )
+
+    def on_tick(self) -> Status:
+        store = self.ctx.require("store", self.name)
+        coll, key = self.get("collection"), self.get("key")
+        e = store.get(coll, key)
+        if e is None:
+            return self.fail("data store has no entry %s/%s" % (coll, key))
+        v = e.value
+        for f in [f for f in self.get("field").split(".") if f]:
+            if not isinstance(v, dict) or f not in v:
+                return self.fail("entry %s/%s has no field '%s'" % (coll, key, f))
+            v = v[f]
+        self.set("value", v)
+        return Status.SUCCESS
+
+
+class WriteDataStore(Leaf):
+    DESCRIPTION = "Writes value to collection/key in the data store (HDICT if the collection is persistent)."
+    PORTS = (
+        input_port("collection", STRING, None, "", "data store collection"),
+        input_port("key", STRING, None, "", "entry key"),
+        input_port("value", ANY, None, "", "value to store (JSON-compatible)"),
+    )
+
+    def on_tick(self) -> Status:
+        store = self.ctx.require("store", self.name)
+        store.put(self.get("collection"), self.get("key"), self.get("value"), source="tree")
+        return Status.SUCCESS
+
+
+class WaitForOperator(Leaf):
+    DESCRIPTION = ("Opens an operator prompt (text template filled from the blackboard) and stays RUNNING until "
+                   "it is answered; writes the answer. Halting it withdraws the prompt.")
+    PORTS = (
+        input_port("kind", STRING, None, "", "prompt kind shown to the HMI, e.g. mount_tool, validate_line"),
+        input_port("text", STRING, None, "", "question template, e.g. 'Mount the {param_tool}'"),
+        input_port("choices", STRING_LIST, None, "", "allowed answers, e.g. 'valid;invalid'"),
+        input_port("timeout", FLOAT, "-1", "s", "FAILURE if unanswered this long; -1 = wait forever"),
+        output_port("answer", STRING, None, "", "the operator's answer"),
+    )
+
+    def on_start(self) -> Optional[Status]:
+        desk = self.ctx.require("operator", self.name)
+        text = render(self.get("text"), self.ports.blackboard, words=False)
+        self._prompt = desk.open(self.get("kind"), text, self.get("choices"), {"node": self.name})
+        self._t0 = self.ctx.clock()
+        self.feedback_message = "waiting for operator: %s" % text
+        return None
+
+    def on_tick(self) -> Status:
+        p = self._prompt
+        if p.state == "answered":
+            self.set("answer", p.answer)
+            return Status.SUCCESS
+        if p.state == "cancelled":
+            return self.fail("prompt %s was withdrawn" % p.id)
+        limit = self.get("timeout")
+        if limit >= 0 and self.ctx.clock() - self._t0 > limit:
+            self.ctx.operator.cancel(p.id)
+            return self.fail("operator did not answer within %.1f s" % limit)
+        return Status.RUNNING
+
+    def on_halt(self) -> None:
+        p = getattr(self, "_prompt", None)
+        if p is not None:
+            self.ctx.operator.cancel(p.id)
+
+
+class Log(Leaf):
+    DESCRIPTION = "Writes a log line (template filled from the blackboard)."
+    PORTS = (
+        input_port("message", STRING, None, "", "text template"),
+        input_port("level", STRING, "info", "", "log level", choices=("debug", "info", "warning", "error")),
+    )
+
+    def on_tick(self) -> Status:
+        getattr(self.ctx.log, self.get("level"))("%s", render(self.get("message"), self.ports.blackboard, False))
+        return Status.SUCCESS
+
+
+class CheckEqual(ConditionLeaf):
+    DESCRIPTION = "SUCCESS if a and b are equal (compared as text), FAILURE otherwise."
+    PORTS = (input_port("a", STRING, None, "", "first value"), input_port("b", STRING, None, "", "second value"))
+
+    def on_tick(self) -> Status:
+        return Status.SUCCESS if self.get("a") == self.get("b") else Status.FAILURE
+
+
+class SelectEntry(Leaf):
+    DESCRIPTION = ("Looks key up in a table (a JSON object, e.g. {@cfg.site.locations}) and writes the entry to "
+                   "value. If key points to a blackboard entry that is not set, fallback_key is used; a key "
+                   "that is not in the table fails naming the keys that are.")
+    PORTS = (
+        input_port("table", JSON, None, "", "object to look in"),
+        input_port("key", STRING, None, "", "entry name, e.g. {param_location}"),
+        input_port("fallback_key", STRING, "", "", "used when key's blackboard entry is unset; empty = fail"),
+        output_port("value", ANY, None, "", "the entry"),
+    )
+
+    def on_tick(self) -> Status:
+        table = self.get("table")
+        if not isinstance(table, dict):
+            return self.fail("table is a %s, not an object" % type(table).__name__)
+        ref = self.ports.key("key")
+        if ref is not None and not self.ports.blackboard.has(ref) and self.get("fallback_key"):
+            key = self.get("fallback_key")
+        else:
+            key = self.get("key")
+        if key not in table:
+            return self.fail("no entry '%s'; the table has: %s" % (key, ", ".join(sorted(table)) or "nothing"))
+        self.set("value", table[key])
+        return Status.SUCCESS
+
+
+class IngestScan(Leaf):
+    DESCRIPTION = ("Stores a SCAN result (walls, joints, areas) through the HDH and forwards new features to "
+                   "PEMKRE; FAILURE naming the bad field if the result breaks the contract.")
+    PORTS = (
+        input_port("scan", JSON, None, "", "the SCAN command's result object"),
+        output_port("new_features", INT, None, "", "number of new or changed features"),
+    )
+
+    def on_tick(self) -> Status:
+        hdh = self.ctx.require("data_handler", self.name)
+        res = hdh.ingest_scan(self.get("scan"))
+        self.set("new_features", len(res.new) + len(res.changed))
+        return Status.SUCCESS
+
+
+class MarkFeature(Leaf):
+    DESCRIPTION = "Records a processing status (taped, manual, sprayed, sanded ...) for a stored feature."
+    PORTS = (input_port("feature_id", STRING, None, "", "feature id"),
+             input_port("status", STRING, None, "", "new status word"))
+
+    def on_tick(self) -> Status:
+        self.ctx.require("data_handler", self.name).mark_feature(self.get("feature_id"), self.get("status"))
+        return Status.SUCCESS
+
+
+# ------------------------------------------------------------------------------------------------ use case --
+class TagIdNameToObjectId(Leaf):
+    DESCRIPTION = ("Maps a PEMKRE symbol (IRI or local name) to the id of an object stored in HICEM and checks "
+                   "it exists with the expected kind (joint, area, wall: features from the scan; tool: the "
+                   "configured tools).")
+    PORTS = (
+        input_port("symbol", STRING, None, "", "PEMKRE parameter, e.g. {param_line}"),
+        input_port("kind", STRING, None, "", "expected object kind", choices=("joint", "area", "wall", "tool")),
+        input_port("tools", STRING_LIST, "{@cfg.tools}", "", "tool names known to this robot"),
+        output_port("object_id", STRING, None, "", "stored object id"),
+    )
+
+    def on_tick(self) -> Status:
+        sym = local_name(self.get("symbol").strip())
+        kind = self.get("kind")
+        if kind == "tool":
+            tools = self.get("tools")
+            if sym not in tools:
+                return self.fail("unknown tool '%s'; this robot has: %s" % (sym, ", ".join(tools)))
+        else:
+            self.ctx.require("data_handler", self.name).feature(sym, kind)
+        self.set("object_id", sym)
+        return Status.SUCCESS
+
+
+def _wall_frame(hdh: Any, wall_id: str) -> Tuple[List[float], List[float]]:
+    """(unit tangent p0→p1 in xy, inward normal (3D)) of a stored wall."""
+    w = hdh.feature(wall_id, "wall")
+    dx, dy = w["p1"][0] - w["p0"][0], w["p1"][1] - w["p0"][1]
+    n = math.hypot(dx, dy)
+    if n < 1e-9:
+        raise HicemError("wall '%s' has zero length" % wall_id)
+    return [dx / n, dy / n], list(w["normal"])
+
+
+def _facing(normal: List[float], yaw_offset: float) -> float:
+    """Base heading that faces the wall (base x axis against the inward normal) plus an offset."""
+    return _norm_angle(math.atan2(-normal[1], -normal[0]) + yaw_offset)
+
+
+class GetTapingPosition(Leaf):
+    DESCRIPTION = ("Approach pose [x, y, theta] (map frame) of the base for taping a joint line: in front of the "
+                   "line's foot (vertical) or middle (horizontal), standoff from the wall along its normal, "
+                   "shifted along the wall by lateral_offset, facing the wall plus yaw_offset.")
+    PORTS = (
+        input_port("line_id", STRING, None, "", "stored joint id"),
+        input_port("standoff", FLOAT, "{@cfg.taping.base_standoff}", "m", "base centre distance from the wall"),
+        input_port("lateral_offset", FLOAT, "{@cfg.taping.lateral_offset}", "m", "shift along the wall"),
+        input_port("yaw_offset", FLOAT, "{@cfg.taping.yaw_offset}", "rad", "added to the wall-facing heading"),
+        output_port("approach_pose", FLOAT_LIST, None, "m, m, rad", "x y theta for GOTO"),
+    )
+
+    def on_tick(self) -> Status:
+        hdh = self.ctx.require("data_handler", self.name)
+        j = hdh.feature(self.get("line_id"), "joint")
+        t, nrm = _wall_frame(hdh, j["wall"])
+        if j["kind"] == "vertical":
+            fx, fy = j["start"][0], j["start"][1]
+        else:
+            fx, fy = (j["start"][0] + j["end"][0]) / 2.0, (j["start"][1] + j["end"][1]) / 2.0
+        nxy = math.hypot(nrm[0], nrm[1])
+        if nxy < 1e-9:
+            return self.fail("wall '%s' normal has no horizontal part" % j["wall"])
+        nx, ny = nrm[0] / nxy, nrm[1] / nxy
+        d, lat = self.get("standoff"), self.get("lateral_offset")
+        pose = [fx + nx * d + t[0] * lat, fy + ny * d + t[1] * lat, _facing([nx, ny], self.get("yaw_offset"))]
+        self.set("approach_pose", pose)
+        return Status.SUCCESS
+
+
+class GetTapePath(Leaf):
+    DESCRIPTION = ("Tape path of a joint line in the map frame: start and end points moved off the wall by "
+                   "surface_offset along the wall normal, the normal itself and the length.")
+    PORTS = (
+        input_port("line_id", STRING, None, "", "stored joint id"),
+        input_port("surface_offset", FLOAT, "{@cfg.taping.surface_offset}", "m", "tool point off the wall"),
+        output_port("path_start", FLOAT_LIST, None, "m", "x y z"),
+        output_port("path_end", FLOAT_LIST, None, "m", "x y z"),
+        output_port("normal", FLOAT_LIST, None, "", "inward wall normal nx ny nz"),
+        output_port("length", FLOAT, None, "m", "path length"),
+    )
+
+    def on_tick(self) -> Status:
+        hdh = self.ctx.require("data_handler", self.name)
+        j = hdh.feature(self.get("line_id"), "joint")
+        _t, n = _wall_frame(hdh, j["wall"])
+        off = self.get("surface_offset")
+        s = [j["start"][i] + n[i] * off for i in range(3)]
+        e = [j["end"][i] + n[i] * off for i in range(3)]
+        self.set("path_start", s)
+        self.set("path_end", e)
+        self.set("normal", n)
+        self.set("length", math.dist(s, e))
+        return Status.SUCCESS
+
+
+class GetAreaRaster(Leaf):
+    DESCRIPTION = ("Splits a wall area into sections no wider than section_width; for each: a base approach pose "
+                   "facing the section's middle at base_standoff, and the raster rectangle (origin, u, width, "
+                   "height, wall normal) in the map frame.")
+    PORTS = (
+        input_port("area_id", STRING, None, "", "stored area id"),
+        input_port("section_width", FLOAT, None, "m", "widest strip covered from one base pose"),
+        input_port("base_standoff", FLOAT, None, "m", "base centre distance from the wall"),
+        input_port("yaw_offset", FLOAT, None, "rad", "added to the wall-facing heading"),
+        output_port("sections", JSON, None, "", "list of {approach, origin, u, width, height, normal}"),
+        output_port("count", INT, None, "", "number of sections"),
+    )
+
+    def on_tick(self) -> Status:
+        hdh = self.ctx.require("data_handler", self.name)
+        a = hdh.feature(self.get("area_id"), "area")
+        _t, n = _wall_frame(hdh, a["wall"])
+        sw, bs = self.get("section_width"), self.get("base_standoff")
+        if sw <= 0:
+            raise PortError("%s: section_width must be > 0 m, got %g" % (self.name, sw))
+        count = max(1, int(math.ceil(a["width"] / sw - 1e-9)))
+        w = a["width"] / count
+        nxy = math.hypot(n[0], n[1]) or 1.0
+        heading = _facing([n[0] / nxy, n[1] / nxy], self.get("yaw_offset"))
+        sections = []
+        for i in range(count):
+            o = [a["origin"][k] + a["u"][k] * w * i for k in range(3)]
+            mx, my = o[0] + a["u"][0] * w / 2.0, o[1] + a["u"][1] * w / 2.0
+            sections.append({"approach": [mx + n[0] / nxy * bs, my + n[1] / nxy * bs, heading], "origin": o,
+                             "u": list(a["u"]), "width": w, "height": a["height"], "normal": n, "index": i})
+        self.set("sections", sections)
+        self.set("count", count)
+        return Status.SUCCESS
+
+
+LIBRARY = (CheckHealth, SendLocemCommand, ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual,
+           SelectEntry, IngestScan, MarkFeature, TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetAreaRaster)

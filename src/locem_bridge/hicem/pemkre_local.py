@@ -1,0 +1,36 @@
+"""In-process PEMKRE client: drives a PEMKRE process engine object directly (no ROS), e.g. for a single-process
+run or integration tests. Duck-typed on the engine's methods (``start_process(iri, options)``,
+``next_action()`` returning an object with status/action_type/task/parameters/message, ``set_task_status``,
+``update_world``), so HICEM does not import the semantic layer; any engine error becomes :class:`PemkreError`.
+"""
+from typing import Any, Dict, Optional
+
+from .errors import PemkreError
+from .interfaces import PemkreClient
+
+
+class EngineClient(PemkreClient):
+    def __init__(self, engine: Any) -> None:
+        self.engine = engine
+
+    def _call(self, what: str, fn: Any, *args: Any) -> Any:
+        try:
+            return fn(*args)
+        except PemkreError:
+            raise
+        except Exception as exc:  # the engine's own error hierarchy, whatever it is
+            raise PemkreError("PEMKRE %s: %s: %s" % (what, type(exc).__name__, exc))
+
+    def start_process(self, process_iri: str, options: Optional[Dict[str, Any]] = None) -> str:
+        return str(self._call("start_process", self.engine.start_process, process_iri, options or {}))
+
+    def next_action(self) -> Dict[str, Any]:
+        a = self._call("next_action", self.engine.next_action)
+        return {"status": a.status, "action_type": a.action_type, "task": a.task, "parameters": a.parameters,
+                "detail": getattr(a, "message", "")}
+
+    def set_task_status(self, task: str, status: str, detail: str = "") -> None:
+        self._call("set_task_status", self.engine.set_task_status, task, status, detail)
+
+    def report_world(self, update: Dict[str, Any]) -> None:
+        self._call("update_world", self.engine.update_world, update)

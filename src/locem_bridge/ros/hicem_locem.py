@@ -1,0 +1,120 @@
+"""LOCEM side of the HICEM node: the action client behind HICEM's ``LocemClient`` interface, and the health feed.
+
+- :class:`RosLocemClient`: one ``actionlib.ActionClient`` on ``<locem>/command_action``; every ``send`` is a goal
+  of its own (several may run at once, e.g. under a Parallel node); ``cancel`` cancels that goal, which LOCEM
+  turns into a device stop.
+- :class:`LocemHealthFeed`: polls ``STATUS`` through the ``<locem>/command`` service every ``period`` seconds —
+  an answer is LOCEM's heartbeat, each backend's ``health`` entry becomes module ``locem/<backend>`` — and
+  forwards ``diagnostics`` (``diagnostic_msgs/DiagnosticArray``) and ``<locem>/status`` (any message is a sign of life) to the HDH.
+"""
+import json
+import threading
+from typing import Any, Optional
+
+import actionlib
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray
+
+from locem_bridge.hicem.errors import HicemError, LocemError
+from locem_bridge.hicem.interfaces import CommandHandle, LocemClient, LocemReply
+from locem_bridge.msg import CommandAction, CommandGoal, Status
+from locem_bridge.srv import Command
+
+_OK_LINKS = ("up", "ok", "connected", "ready", "simulated")
+
+
+class _Goal(CommandHandle):
+    def __init__(self, handle: Any, command: str) -> None:
+        self._gh = handle
+        self.command = command
+        self._lock = threading.Lock()
+
+    def done(self) -> bool:
+        with self._lock:
+            return self._gh.get_comm_state() == actionlib.CommState.DONE
+
+    def reply(self) -> Optional[LocemReply]:
+        if not self.done():
+            return None
+        res = self._gh.get_result()
+        if res is None:
+            return LocemReply(False, "ABORTED", "LOCEM goal ended (status %d) without a result"
+                              % self._gh.get_goal_status())
+        try:
+            result = json.loads(res.result) if res.result else {}
+        except ValueError:
+            return LocemReply(res.success, res.code, "%s [result is not JSON: %r]" % (res.message, res.result[:80]),
+                              None)
+        return LocemReply(res.success, res.code, res.message, result if isinstance(result, dict) else None)
+
+    def cancel(self) -> None:
+        with self._lock:
+            if self._gh.get_comm_state() != actionlib.CommState.DONE:
+                self._gh.cancel()
+
+
+class RosLocemClient(LocemClient):
+    def __init__(self, locem_ns: str, wait_s: float = 10.0) -> None:
+        self.name = locem_ns.rstrip("/") + "/command_action"
+        self._client = actionlib.ActionClient(self.name, CommandAction)
+        if not self._client.wait_for_server(rospy.Duration(wait_s)):
+            rospy.logwarn("hicem: LOCEM action server %s not up yet; commands fail until it is", self.name)
+
+    def send(self, command: str) -> CommandHandle:
+        if not self._client.wait_for_server(rospy.Duration(0.05)):
+            raise LocemError("LOCEM action server %s is not available" % self.name, "NOT_READY")
+        return _Goal(self._client.send_goal(CommandGoal(command=command)), command)
+
+
+class LocemHealthFeed:
+    def __init__(self, data_handler: Any, locem_ns: str, period_s: float, diagnostics_topic: str) -> None:
+        self.hdh = data_handler
+        self.locem_ns = locem_ns.rstrip("/")
+        self._status = rospy.ServiceProxy(self.locem_ns + "/command", Command, persistent=False)
+        self._subs = [rospy.Subscriber(diagnostics_topic, DiagnosticArray, self._on_diagnostics, queue_size=20),
+                      rospy.Subscriber(self.locem_ns + "/status", Status, self._on_status, queue_size=50)]
+        self._timer = rospy.Timer(rospy.Duration(period_s), self._poll)
+
+    def _poll(self, _event: Any) -> None:
+        try:
+            resp = self._status("STATUS")
+        except (rospy.ServiceException, rospy.ROSException):
+            return  # no answer, no heartbeat: the HEM's timeout decides
+        if not resp.success:
+            return
+        self.hdh.heartbeat("locem")
+        try:
+            health = json.loads(resp.result).get("health", {})
+        except ValueError:
+            return
+        for name, h in sorted(health.items()):
+            if not isinstance(h, dict):
+                continue
+            link = str(h.get("link", "unknown")).lower()
+            level = "OK" if link in _OK_LINKS else ("WARN" if link == "unknown" else "ERROR")
+            self._ingest({"module": "locem/%s" % name, "level": level,
+                          "message": "link %s%s" % (link, ("; " + str(h["last_error"])) if h.get("last_error") else "")})
+
+    def _on_status(self, _msg: Any) -> None:
+        self.hdh.heartbeat("locem")
+
+    def _on_diagnostics(self, msg: Any) -> None:
+        entries = []
+        for s in msg.status:
+            level = s.level if isinstance(s.level, int) else ord(s.level)
+            entries.append({"name": s.name, "level": level, "message": s.message})
+        try:
+            self.hdh.ingest_diagnostics(entries)
+        except HicemError as exc:
+            rospy.logwarn_throttle(5.0, "hicem: bad /diagnostics entry: %s" % exc)
+
+    def _ingest(self, status: Any) -> None:
+        try:
+            self.hdh.ingest_status(status)
+        except HicemError as exc:
+            rospy.logwarn_throttle(5.0, "hicem: bad LOCEM health entry: %s" % exc)
+
+    def shutdown(self) -> None:
+        self._timer.shutdown()
+        for s in self._subs:
+            s.unregister()

@@ -1,0 +1,145 @@
+"""HICEM ROS node: adapts the ROS-free HICEM core (:mod:`locem_bridge.hicem`) to ROS.
+
+Interfaces (relative to the node, ``/hicem/...`` when the node is named ``hicem`` in the root namespace):
+
+- services ``~start_process`` (``HicemStartProcess``: process IRI + JSON options), ``~stop`` (``HicemStop``),
+  ``~operator_reply`` (``HicemOperatorReply``);
+- topics ``~state`` (``HicemState``, latched, on every change) and ``~prompts`` (``HicemPrompt`` events);
+- it uses LOCEM's action ``<locem>/command_action`` for every command and its ``<locem>/command`` service for a
+  periodic ``STATUS`` (LOCEM's heartbeat), listens to ``diagnostics`` and ``<locem>/status``, and talks to
+  PEMKRE through ``<pemkre>/*`` services (``~pemkre: ros``) or an engine embedded in this process
+  (``~pemkre: embedded``, store at ``~pemkre_store``; for single-process runs and tests).
+
+Parameters: ``~params_file`` (HICEM parameters YAML; default ``trees/hicem_params.yaml`` of the package),
+``~trees_dir``, ``~hdict_path`` (HDICT SQLite file; default ``$ROS_HOME/hicem_hdict.sqlite``), ``~locem_ns``
+(default ``locem``, resolved in the node's namespace), ``~pemkre``, ``~pemkre_ns``, ``~pemkre_store``,
+``~status_period`` (s between STATUS polls), ``~diagnostics_topic`` (default ``diagnostics``: ``/diagnostics``
+in the root namespace, the robot's own in a robot namespace), ``~resume`` (``auto``: continue an interrupted process found in
+the HDICT at start-up; ``never``).
+Lifecycle: start → (resume) → serve until shutdown → the running tree is halted, the HDICT closed.
+"""
+import json
+import os
+from typing import Any, Dict
+
+import rospkg
+import rospy
+
+from locem_bridge.hicem.errors import ControllerError, HicemError, OperatorError
+from locem_bridge.hicem.executive import create_executive
+from locem_bridge.msg import HicemPrompt, HicemState
+from locem_bridge.srv import (HicemOperatorReply, HicemOperatorReplyResponse, HicemStartProcess,
+                              HicemStartProcessResponse, HicemStop, HicemStopResponse)
+
+from .hicem_locem import LocemHealthFeed, RosLocemClient
+from .hicem_pemkre import RosPemkreClient
+
+
+def _share_dir() -> str:
+    try:
+        return rospkg.RosPack().get_path("locem_bridge")
+    except rospkg.ResourceNotFound:
+        return os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+
+
+def _param(name: str, default: Any) -> Any:
+    """Private parameter; an empty string (launch-file default) means the built-in default."""
+    v = rospy.get_param("~" + name, default)
+    return default if v == "" else v
+
+
+def _pemkre_client(kind: str) -> Any:
+    if kind == "ros":
+        return RosPemkreClient(rospy.resolve_name(_param("pemkre_ns", "pemkre")))
+    if kind == "embedded":
+        from locem_bridge.hicem.pemkre_local import EngineClient
+        from locem_bridge.pemkre import OxigraphStore, ProcessEngine
+        store_path = os.path.expanduser(_param("pemkre_store", os.path.join(rospkg.get_ros_home(),
+                                                                            "hicem_pemkre_store")))
+        return EngineClient(ProcessEngine(OxigraphStore(store_path)))
+    raise HicemError("~pemkre must be 'ros' or 'embedded', got %r" % kind)
+
+
+class HicemNode:
+    def __init__(self) -> None:
+        share = _share_dir()
+        trees_dir = _param("trees_dir", os.path.join(share, "trees"))
+        params_file = _param("params_file", os.path.join(trees_dir, "hicem_params.yaml"))
+        hdict = os.path.expanduser(_param("hdict_path", os.path.join(rospkg.get_ros_home(), "hicem_hdict.sqlite")))
+        locem_ns = rospy.resolve_name(_param("locem_ns", "locem"))
+        self.locem = RosLocemClient(locem_ns)
+        self.pemkre = _pemkre_client(_param("pemkre", "ros"))
+        self.ex = create_executive(self.pemkre, self.locem, hdict,
+                                   params_file=params_file, trees_dir=trees_dir)
+        self.ctrl = self.ex.controller
+        self.state_pub = rospy.Publisher("~state", HicemState, queue_size=20, latch=True)
+        self.prompt_pub = rospy.Publisher("~prompts", HicemPrompt, queue_size=50)
+        self.ctrl.add_state_listener(self._publish_state)
+        self.ex.operator.add_listener(self._on_prompt)
+        self.feed = LocemHealthFeed(self.ex.data_handler, locem_ns, float(_param("status_period", 0.25)),
+                                    rospy.resolve_name(_param("diagnostics_topic", "diagnostics")))
+        self.services = [rospy.Service("~start_process", HicemStartProcess, self._start),
+                         rospy.Service("~stop", HicemStop, self._stop),
+                         rospy.Service("~operator_reply", HicemOperatorReply, self._reply)]
+        self._publish_state(self.ctrl.state())
+        if _param("resume", "auto") == "auto" and self.ctrl.resume_in_background():
+            rospy.logwarn("hicem: resuming the process interrupted in the previous run (HDICT %s)", hdict)
+        rospy.loginfo("hicem: %d trees from %s, HDICT %s, LOCEM %s", len(self.ex.library.tree_ids()), trees_dir,
+                      hdict, locem_ns)
+
+    # -- topics ---------------------------------------------------------------------------------------------
+    def _publish_state(self, st: Dict[str, Any]) -> None:
+        msg = HicemState()
+        msg.header.stamp = rospy.Time.now()
+        for f in ("process", "specific_process", "phase", "action_type", "task", "tree", "node", "path", "detail"):
+            setattr(msg, f, str(st.get(f, "")))
+        msg.prompts = json.dumps([{"id": p.id, "kind": p.kind, "text": p.text, "choices": list(p.choices)}
+                                  for p in self.ex.operator.open_prompts()])
+        self.state_pub.publish(msg)
+
+    def _on_prompt(self, event: str, prompt: Any) -> None:
+        self.prompt_pub.publish(HicemPrompt(id=prompt.id, event=event, kind=prompt.kind, text=prompt.text,
+                                            choices=list(prompt.choices), answer=prompt.answer or ""))
+        self._publish_state(self.ctrl.state())
+
+    # -- services -------------------------------------------------------------------------------------------
+    def _start(self, req: Any) -> Any:
+        try:
+            options = json.loads(req.options) if req.options.strip() else None
+            if options is not None and not isinstance(options, dict):
+                raise ValueError("options must be a JSON object")
+        except ValueError as exc:
+            return HicemStartProcessResponse(False, "options are not a JSON object: %s" % exc)
+        try:
+            self.ctrl.start_process(req.process, options)
+        except ControllerError as exc:
+            return HicemStartProcessResponse(False, str(exc))
+        return HicemStartProcessResponse(True, "process %s started" % req.process)
+
+    def _stop(self, req: Any) -> Any:
+        if not self.ctrl.running:
+            return HicemStopResponse(True, "no process running")
+        self.ctrl.stop(req.reason or "stop requested")
+        done = self.ctrl.join(10.0)
+        return HicemStopResponse(done, "stopped" if done else "stop requested; the tree is still halting")
+
+    def _reply(self, req: Any) -> Any:
+        try:
+            self.ctrl.operator_reply(req.prompt_id, req.answer)
+        except OperatorError as exc:
+            return HicemOperatorReplyResponse(False, str(exc))
+        return HicemOperatorReplyResponse(True, "answer '%s' given to prompt %s" % (req.answer, req.prompt_id))
+
+    def shutdown(self) -> None:
+        self.feed.shutdown()
+        self.ex.close()
+        engine = getattr(self.pemkre, "engine", None)  # embedded PEMKRE: close its store cleanly
+        if engine is not None and hasattr(engine.store, "close"):
+            engine.store.close()
+
+
+def main() -> None:
+    rospy.init_node("hicem")
+    node = HicemNode()
+    rospy.on_shutdown(node.shutdown)
+    rospy.spin()

@@ -1,0 +1,50 @@
+"""HICEM parameters: the shipped file loads; missing or wrong values are named by their dotted key."""
+import copy
+
+import pytest
+
+from hicem_rig import TREES
+from locem_bridge.hicem.config import HicemParams, flatten, load_params
+from locem_bridge.hicem.errors import ConfigError
+
+RAW = load_params(TREES + "/hicem_params.yaml").raw
+
+
+def test_shipped_parameters_and_blackboard_entries():
+    p = HicemParams(copy.deepcopy(RAW))
+    assert p.resume_policy["TAPE_LINE"] == "RESUME_TAPE_LINE" and p.hdict_synchronous == "FULL"
+    bb = p.blackboard_entries()
+    assert bb["cfg.taping.base_standoff"] == RAW["taping"]["base_standoff"]
+    assert bb["cfg.site.locations"]["home"] == bb["cfg.site.locations.home"]
+    assert flatten({"a": {"b": 1}}) == {"cfg.a": {"b": 1}, "cfg.a.b": 1}
+
+
+@pytest.mark.parametrize("path,value,msg", [
+    (("hhlc", "tick_period_s"), "fast", "'hhlc.tick_period_s' must be a finite number"),
+    (("hhlc", "tick_period_s"), -0.1, "tick_period_s must be > 0"),
+    (("datastore", "hdict_synchronous"), "OFF", "FULL or NORMAL"),
+    (("hhlc", "resume_policy"), {"TAPE_LINE": ""}, "resume_policy.TAPE_LINE"),
+    (("health", "modules"), [{"name": "x", "timeout": 1}], "unknown keys"),
+    (("datastore", "prune"), [{"collection": "x", "age": 1}], "allowed keys"),
+])
+def test_bad_values_are_named(path, value, msg):
+    raw = copy.deepcopy(RAW)
+    raw[path[0]][path[1]] = value
+    with pytest.raises(Exception) as ei:
+        HicemParams(raw)
+    assert msg in str(ei.value)
+
+
+def test_missing_key_and_unreadable_file(tmp_path):
+    raw = copy.deepcopy(RAW)
+    del raw["locem"]["safe_commands"]
+    with pytest.raises(ConfigError) as ei:
+        HicemParams(raw)
+    assert "missing key 'locem.safe_commands'" in str(ei.value)
+    bad = tmp_path / "p.yaml"
+    bad.write_text("hhlc: [unclosed")
+    with pytest.raises(ConfigError) as ei:
+        load_params(str(bad))
+    assert "not valid YAML" in str(ei.value)
+    with pytest.raises(ConfigError):
+        load_params(str(tmp_path / "none.yaml"))

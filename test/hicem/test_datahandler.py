@@ -1,0 +1,105 @@
+"""HDH: SCAN results into wall features with geometry, forwarding to PEMKRE, outbox, pruning, bad scans."""
+import copy
+
+import pytest
+
+from hicem_doubles import SITE
+from locem_bridge.hicem.datahandler import DataHandler
+from locem_bridge.hicem.datastore import DataManager, MemoryStore, PruneRule, SqliteStore
+from locem_bridge.hicem.errors import PemkreError, ScanFormatError
+from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
+
+
+class WorldSink:
+    """Records report_world calls; can be told to fail like an unreachable PEMKRE."""
+
+    def __init__(self):
+        self.updates = []
+        self.down = False
+
+    def report_world(self, update):
+        if self.down:
+            raise PemkreError("PEMKRE unreachable")
+        self.updates.append(update)
+
+
+def make(tmp_path):
+    store = DataManager(MemoryStore(), SqliteStore(str(tmp_path / "h.sqlite")),
+                        ["features", "scan", "outbox"], [PruneRule("features", below=("scan_seq", "scan", "latest_seq"))])
+    sink = WorldSink()
+    return DataHandler(store, sink), sink, store
+
+
+def test_scan_becomes_features_with_geometry_and_is_forwarded(tmp_path):
+    hdh, sink, store = make(tmp_path)
+    res = hdh.ingest_scan(SITE)
+    assert sorted(res.new) == sorted(["wall_1", "wall_2", "wall_1_joint_1", "wall_1_joint_2", "wall_2_joint_1",
+                                      "wall_1_area_1"])
+    j = hdh.feature("wall_1_joint_1", "joint")
+    assert j["start"] == [1.2, 3.0, 0.0] and j["type"] == "joint" and j["status"] == "detected"
+    assert store.persistent.value("features", "wall_1")["normal"] == [0.0, -1.0, 0.0]
+    assert len(sink.updates) == 1 and len(sink.updates[0]["joints"]) == 3
+    assert store.entries("outbox") == []
+
+
+def test_rescan_forwards_only_changes_keeps_status_and_prunes_vanished(tmp_path):
+    hdh, sink, store = make(tmp_path)
+    hdh.ingest_scan(SITE)
+    hdh.mark_feature("wall_1_joint_1", "taped")
+    scan2 = copy.deepcopy(SITE)
+    scan2["joints"] = [j for j in scan2["joints"] if j["id"] != "wall_1_joint_2"]
+    scan2["joints"][0]["width"] = 0.06  # wall_1_joint_1 changed
+    res = hdh.ingest_scan(scan2)
+    assert res.new == [] and res.changed == ["wall_1_joint_1"] and res.removed == ["wall_1_joint_2"]
+    assert [j["id"] for j in sink.updates[-1]["joints"]] == ["wall_1_joint_1"]
+    assert hdh.feature("wall_1_joint_1")["status"] == "taped"
+    n = len(sink.updates)
+    hdh.ingest_scan(scan2)
+    assert len(sink.updates) == n  # nothing new: nothing forwarded
+
+
+def test_unreachable_pemkre_keeps_update_in_outbox_until_flushed(tmp_path):
+    hdh, sink, store = make(tmp_path)
+    sink.down = True
+    res = hdh.ingest_scan(SITE)
+    assert not res.forwarded and len(store.entries("outbox")) == 1
+    assert hdh.feature("wall_1_joint_1")  # stored anyway
+    sink.down = False
+    assert hdh.flush_outbox() and len(sink.updates) == 1 and store.entries("outbox") == []
+
+
+@pytest.mark.parametrize("mutate,msg", [
+    (lambda s: s.update(joints="x"), "'joints' must be a list"),
+    (lambda s: s["joints"][0].update(id="1bad"), "joints[0].id must match"),
+    (lambda s: s["joints"][0].update(kind="diagonal"), "joints[0].kind must be vertical or horizontal"),
+    (lambda s: s["joints"][0].update(wall="wall_9"), "joints[0].wall 'wall_9' is not a known wall"),
+    (lambda s: s["joints"][0].update(start=[1, 2]), "joints[0].start must be a list of 3 numbers"),
+    (lambda s: s["joints"][0].update(end=[1.2, 3.0, float("inf")]), "joints[0].end[2] must be a finite number"),
+    (lambda s: s["walls"][0].update(height=-1), "walls[0].height must be > 0"),
+    (lambda s: s["walls"][0].update(normal=[0, 0, 0]), "walls[0].normal must not be the zero vector"),
+    (lambda s: s["areas"][0].update(width="wide"), "areas[0].width must be a finite number"),
+    (lambda s: s.update(robots=[]), "unknown keys ['robots']"),
+    (lambda s: s["joints"].append(dict(s["joints"][0])), "appears twice"),
+])
+def test_bad_scan_is_rejected_naming_the_field_and_nothing_is_stored(tmp_path, mutate, msg):
+    hdh, sink, store = make(tmp_path)
+    scan = copy.deepcopy(SITE)
+    mutate(scan)
+    with pytest.raises(ScanFormatError) as ei:
+        hdh.ingest_scan(scan)
+    assert msg in str(ei.value)
+    assert store.entries("features") == [] and sink.updates == []
+
+
+def test_status_and_diagnostics_feed_the_health_monitor(tmp_path):
+    store = DataManager()
+    hem = HealthMonitor([ModuleSpec("arm", crucial=True)], store=store)
+    hdh = DataHandler(store, None, hem)
+    hdh.ingest_diagnostics([{"name": "arm", "level": 2, "message": "protective stop"}])
+    assert hem.faults() == [("arm", "arm reports ERROR: protective stop")]
+    assert store.value("modules", "arm") == {"level": "ERROR", "message": "protective stop"}
+    hdh.ingest_status({"module": "arm", "level": "OK", "message": ""})
+    assert hem.faults() == []
+    with pytest.raises(Exception) as ei:
+        hdh.ingest_status({"level": 0})
+    assert "'module'" in str(ei.value)

@@ -1,0 +1,201 @@
+"""The node library against the data store, the HEM, the operator desk and the LOCEM test double."""
+import math
+
+import pytest
+from py_trees.common import Status
+
+from hicem_doubles import SITE, LocemDouble
+from locem_bridge.hicem.blackboard import Blackboard
+from locem_bridge.hicem.datahandler import DataHandler
+from locem_bridge.hicem.datastore import DataManager
+from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
+from locem_bridge.hicem.interfaces import LocemReply
+from locem_bridge.hicem.node_base import NodeContext
+from locem_bridge.hicem.nodes import format_number, render
+from locem_bridge.hicem.operator import OperatorDesk
+from locem_bridge.hicem.xml_loader import TreeLibrary
+
+S, F, R = Status.SUCCESS, Status.FAILURE, Status.RUNNING
+
+
+class Rig:
+    def __init__(self, body, cfg=None, clock=None, durations=None):
+        self.now = [0.0]
+        self.clock = clock or (lambda: self.now[0])
+        self.locem = LocemDouble(durations=durations)
+        self.store = DataManager()
+        self.health = HealthMonitor([ModuleSpec("locem", crucial=True)], clock=self.clock)
+        self.operator = OperatorDesk()
+        self.hdh = DataHandler(self.store, None, self.health)
+        self.hdh.ingest_scan(SITE)
+        lib = TreeLibrary()
+        lib.load_string('<root BTCPP_format="4"><BehaviorTree ID="T">%s</BehaviorTree></root>' % body)
+        self.ctx = NodeContext(locem=self.locem, store=self.store, health=self.health, operator=self.operator,
+                               data_handler=self.hdh, clock=self.clock)
+        bb = Blackboard()
+        bb.update({"cfg.locem.command_timeout_s": 10.0, "cfg.tools": ["taping_tool", "spray_gun"],
+                   "cfg.taping.base_standoff": 0.8, "cfg.taping.lateral_offset": 0.1,
+                   "cfg.taping.yaw_offset": 0.0, "cfg.taping.surface_offset": 0.01})
+        bb.update(cfg or {})
+        self.tree = lib.build("T", self.ctx, bb)
+        self.bb = bb
+
+    def reason(self):
+        return self.ctx.last_failure()[1]
+
+
+def test_send_locem_command_fills_template_and_returns_result():
+    rig = Rig('<SendLocemCommand command="GOTO {pose} " result="{r}" code="{c}"/>', cfg={"pose": [1.2, -0.5, math.pi / 2]})
+    assert rig.tree.tick() == S
+    assert rig.locem.sent == ["GOTO 1.2 -0.5 1.570796 "]
+    assert rig.bb.get("c") == "OK" and rig.bb.get("r") == {}
+
+
+def test_send_locem_command_runs_until_reply_and_cancels_on_halt():
+    rig = Rig('<SendLocemCommand command="HOME"/>', durations={"HOME": 5.0})
+    assert rig.tree.tick() == R
+    assert rig.tree.tick() == R
+    h = rig.locem.handles[0]
+    rig.tree.halt()
+    assert h.cancelled and rig.locem.sent[-1] == "CANCEL HOME"
+    assert rig.ctx.outstanding() == []
+
+
+@pytest.mark.parametrize("reply,expect", [
+    (LocemReply(False, "HARDWARE_ERROR", "compressor link down"), "LOCEM HARDWARE_ERROR for 'SCAN': compressor link down"),
+    (LocemReply(False, "EXPLODED", "?"), "unexpected code 'EXPLODED'"),
+    (LocemReply(True, "BUSY", ""), "inconsistent"),
+])
+def test_send_locem_command_fails_on_error_and_unexpected_codes(reply, expect):
+    rig = Rig('<SendLocemCommand command="SCAN"/>')
+    rig.locem.fail_next["SCAN"] = reply
+    assert rig.tree.tick() == F
+    assert expect in rig.reason()
+
+
+def test_send_locem_command_refused_command_and_timeout():
+    rig = Rig('<SendLocemCommand command="FLY 1"/>')
+    assert rig.tree.tick() == F and "INVALID_COMMAND" in rig.reason()
+    rig = Rig('<SendLocemCommand command="HOME" timeout="2"/>', durations={"HOME": 60.0})
+    assert rig.tree.tick() == R
+    rig.now[0] = 2.5
+    assert rig.tree.tick() == F
+    assert "no reply to 'HOME' within 2.000 s" in rig.reason() and rig.locem.handles[0].cancelled
+
+
+def test_template_refuses_values_that_would_inject_arguments():
+    rig = Rig('<SendLocemCommand command="MOUNT_TOOL {tool}"/>', cfg={"tool": "spray_gun STOP"})
+    assert rig.tree.tick() == F
+    assert "whitespace" in rig.reason() and rig.locem.sent == []
+    rig = Rig('<SendLocemCommand command="GOTO {missing}"/>')
+    assert rig.tree.tick() == F and "'missing' is not set" in rig.reason()
+
+
+def test_render_numbers_and_fields():
+    bb = Blackboard()
+    bb.update({"s": {"origin": [0.0, -0.0, 1e-7], "w": 4.8}, "n": 3, "flag": True})
+    assert render("X {s.origin} {s.w} {n} {flag}", bb) == "X 0 0 0 4.8 3 true"
+    assert format_number(1.23456789) == "1.234568"
+
+
+def test_check_health_guards_running_command():
+    rig = Rig('<ReactiveSequence><CheckHealth/><SendLocemCommand command="HOME"/></ReactiveSequence>',
+              durations={"HOME": 60.0})
+    assert rig.tree.tick() == R
+    rig.health.report("locem", "ERROR", "RTDE link lost")
+    assert rig.tree.tick() == F
+    assert rig.locem.handles[0].cancelled
+    assert "RTDE link lost" in rig.reason()
+
+
+def test_wait_for_operator_prompt_answer_and_withdraw():
+    rig = Rig('<WaitForOperator kind="validate_line" text="Is {line} ok?" choices="valid;invalid" answer="{a}"/>',
+              cfg={"line": "wall 1 joint 2"})
+    assert rig.tree.tick() == R
+    (p,) = rig.operator.open_prompts()
+    assert p.text == "Is wall 1 joint 2 ok?" and p.choices == ("valid", "invalid")
+    rig.operator.reply(p.id, "invalid")
+    assert rig.tree.tick() == S and rig.bb.get("a") == "invalid"
+    rig2 = Rig('<WaitForOperator kind="k" text="t" choices="done"/>')
+    assert rig2.tree.tick() == R
+    rig2.tree.halt()
+    assert rig2.operator.open_prompts() == []
+
+
+def test_wait_for_operator_timeout():
+    rig = Rig('<WaitForOperator kind="k" text="t" choices="done" timeout="30"/>')
+    assert rig.tree.tick() == R
+    rig.now[0] = 31.0
+    assert rig.tree.tick() == F and "did not answer within 30.0 s" in rig.reason()
+    assert rig.operator.open_prompts() == []
+
+
+def test_data_store_read_write_and_missing():
+    rig = Rig('<Sequence><WriteDataStore collection="robot" key="tool" value="{t}"/>'
+              '<ReadDataStore collection="features" key="wall_1_joint_1" field="start" value="{s}"/>'
+              '<ReadDataStore collection="robot" key="tool" value="{back}"/></Sequence>', cfg={"t": "sander"})
+    assert rig.tree.tick() == S
+    assert rig.bb.get("s") == [1.2, 3.0, 0.0] and rig.bb.get("back") == "sander"
+    rig = Rig('<ReadDataStore collection="robot" key="nothing" value="{x}"/>')
+    assert rig.tree.tick() == F and "no entry robot/nothing" in rig.reason()
+
+
+def test_tag_id_name_to_object_id_maps_iris_and_checks_kind():
+    rig = Rig('<TagIdNameToObjectId symbol="{p}" kind="joint" object_id="{o}"/>',
+              cfg={"p": "http://example.org/world#wall_1_joint_2"})
+    assert rig.tree.tick() == S and rig.bb.get("o") == "wall_1_joint_2"
+    rig = Rig('<TagIdNameToObjectId symbol="wall_1_area_1" kind="joint" object_id="{o}"/>')
+    assert rig.tree.tick() == F and "no stored joint with id 'wall_1_area_1'" in rig.reason()
+    rig = Rig('<TagIdNameToObjectId symbol="drill" kind="tool" object_id="{o}"/>')
+    assert rig.tree.tick() == F and "unknown tool 'drill'" in rig.reason()
+
+
+def test_get_taping_position_vertical_and_horizontal():
+    rig = Rig('<GetTapingPosition line_id="wall_1_joint_1" approach_pose="{p}"/>')
+    assert rig.tree.tick() == S
+    x, y, th = rig.bb.get("p")
+    # wall_1 runs +x at y=3 with normal -y: base 0.8 m in front, shifted 0.1 m along +x, facing +y
+    assert (x, y) == pytest.approx((1.3, 2.2)) and th == pytest.approx(math.pi / 2)
+    rig = Rig('<GetTapingPosition line_id="wall_2_joint_1" approach_pose="{p}" lateral_offset="0"/>')
+    assert rig.tree.tick() == S
+    x, y, th = rig.bb.get("p")
+    # horizontal joint on wall_2 (x=4.8, normal -x): middle at y=1.5, base at x=4.0 facing +x
+    assert (x, y, th) == pytest.approx((4.0, 1.5, 0.0))
+
+
+def test_get_tape_path_offsets_along_normal():
+    rig = Rig('<GetTapePath line_id="wall_1_joint_1" path_start="{s}" path_end="{e}" normal="{n}" length="{l}"/>')
+    assert rig.tree.tick() == S
+    assert rig.bb.get("s") == pytest.approx([1.2, 2.99, 0.0])
+    assert rig.bb.get("e") == pytest.approx([1.2, 2.99, 2.5])
+    assert rig.bb.get("n") == pytest.approx([0, -1, 0]) and rig.bb.get("l") == pytest.approx(2.5)
+
+
+def test_get_area_raster_sections_cover_the_area():
+    rig = Rig('<GetAreaRaster area_id="wall_1_area_1" section_width="1.5" base_standoff="0.9" yaw_offset="0" '
+              'sections="{s}" count="{c}"/>')
+    assert rig.tree.tick() == S
+    secs = rig.bb.get("s")
+    assert rig.bb.get("c") == 4 and len(secs) == 4
+    assert sum(s["width"] for s in secs) == pytest.approx(4.8)
+    assert [s["origin"][0] for s in secs] == pytest.approx([0.0, 1.2, 2.4, 3.6])
+    assert secs[0]["approach"] == pytest.approx([0.6, 2.1, math.pi / 2])
+
+
+def test_node_needing_a_missing_handle_fails_clearly():
+    lib = TreeLibrary()
+    lib.load_string('<root BTCPP_format="4"><BehaviorTree ID="T"><CheckHealth/></BehaviorTree></root>')
+    t = lib.build("T", NodeContext())
+    assert t.tick() == F
+    assert "needs the 'health' handle" in t.ctx.last_failure()[1]
+
+
+def test_select_entry_with_fallback_and_unknown_key():
+    body = '<SelectEntry table="{@cfg.site.locations}" key="{param_location}" fallback_key="home" value="{v}"/>'
+    locs = {"cfg.site.locations": {"home": [1.0, 2.0, 0.0], "dock": [0.0, 0.0, 3.1]}}
+    rig = Rig(body, cfg=locs)
+    assert rig.tree.tick() == S and rig.bb.get("v") == [1.0, 2.0, 0.0]
+    rig = Rig(body, cfg=dict(locs, param_location="dock"))
+    assert rig.tree.tick() == S and rig.bb.get("v") == [0.0, 0.0, 3.1]
+    rig = Rig(body, cfg=dict(locs, param_location="garage"))
+    assert rig.tree.tick() == F and "no entry 'garage'; the table has: dock, home" in rig.reason()
