@@ -1,0 +1,114 @@
+"""Follows one job (a sequence of processes run by HICEM) from HICEM's state and prompt events.
+
+ROS-free: the job node feeds it the fields of ``/hicem/state`` and ``/hicem/prompts`` messages as dicts. It
+turns them into one-line progress messages ("[2/3 spraying] SPRAY_AREA, area 2 of 4"), per-process records
+for the report, and the count of operator interventions (answered prompts, by kind).
+"""
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, List, Mapping, Optional
+
+from .report import ProcessRecord
+
+TERMINAL_PHASES = ("ended", "failed", "stopped")
+LINE_ACTIONS = ("VALIDATE_TAPE_LINE", "TAPE_LINE", "MANUAL_TAPING")
+AREA_ACTIONS = ("SPRAY_AREA", "SAND_AREA")
+
+
+@dataclass(frozen=True)
+class JobStep:
+    """One process of the job: a short name, the abstract process IRI and its options."""
+
+    name: str
+    iri: str
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+class JobTracker:
+    """State of a running job. ``totals`` gives ``joints`` and ``areas`` of the site, for "n of N" progress."""
+
+    def __init__(self, steps: List[JobStep], totals: Mapping[str, int],
+                 say: Callable[[str], None] = print, clock: Callable[[], float] = time.monotonic) -> None:
+        self.steps = steps
+        self.totals = dict(totals)
+        self.say = say
+        self.clock = clock
+        self.records: List[ProcessRecord] = []
+        self.interventions: Dict[str, int] = {}
+        self.current: Optional[int] = None
+        self._started = 0.0
+        self._tasks: Dict[str, List[str]] = {}
+        self._last_task = ""
+        self._done: Optional[Dict[str, Any]] = None
+
+    # -- feeding ------------------------------------------------------------------------------------------
+    def begin(self, index: int) -> None:
+        """The job node is about to start ``steps[index]``."""
+        self.current = index
+        self._started = self.clock()
+        self._tasks = {}
+        self._last_task = ""
+        self._done = None
+        step = self.steps[index]
+        self.say("%s starting %s" % (self._tag(), step.name))
+
+    def on_state(self, state: Mapping[str, Any]) -> None:
+        """A ``/hicem/state`` message (process, phase, action_type, task, node, detail) as a dict."""
+        if self.current is None or state.get("process") != self.steps[self.current].iri:
+            return
+        task = state.get("task", "")
+        action = state.get("action_type", "")
+        if task and task != self._last_task and state.get("phase") in ("running", "asking", "reporting"):
+            self._last_task = task
+            seen = self._tasks.setdefault(action, [])
+            if task not in seen:
+                seen.append(task)
+            self.say("%s %s%s" % (self._tag(), action, self._count(action, len(seen))))
+        if state.get("phase") in TERMINAL_PHASES and self._done is None:
+            self._done = dict(state)
+
+    def on_prompt(self, prompt: Mapping[str, Any]) -> None:
+        """A ``/hicem/prompts`` event (id, event, kind, text, answer) as a dict."""
+        if prompt.get("event") == "opened":
+            self.say("%s operator: %s" % (self._tag(), prompt.get("text", "")))
+        elif prompt.get("event") == "answered":
+            kind = str(prompt.get("kind", "other"))
+            self.interventions[kind] = self.interventions.get(kind, 0) + 1
+
+    # -- reading ------------------------------------------------------------------------------------------
+    @property
+    def finished(self) -> Optional[Dict[str, Any]]:
+        """The terminal state of the current process once it has ended, else None."""
+        return self._done
+
+    def end(self, status: Optional[str] = None, detail: str = "") -> ProcessRecord:
+        """Close the current process (with its terminal state, or ``status`` when it never got one)."""
+        assert self.current is not None
+        step = self.steps[self.current]
+        final = self._done or {}
+        phase = status or final.get("phase", "failed")
+        record = ProcessRecord(step.name, step.iri, "succeeded" if phase == "ended" else phase,
+                               self.clock() - self._started, detail or final.get("detail", ""))
+        self.records.append(record)
+        self.say("%s %s %s in %.1f s%s" % (self._tag(), step.name, record.status, record.duration_s,
+                                          (": " + record.detail) if record.detail and record.status != "succeeded"
+                                          else ""))
+        self.current = None
+        return record
+
+    @property
+    def total_interventions(self) -> int:
+        return sum(self.interventions.values())
+
+    def _tag(self) -> str:
+        if self.current is None:
+            return "[job]"
+        return "[%d/%d %s]" % (self.current + 1, len(self.steps), self.steps[self.current].name)
+
+    def _count(self, action: str, n: int) -> str:
+        if action in LINE_ACTIONS and self.totals.get("joints"):
+            return ", joint %d of %d" % (n, self.totals["joints"])
+        if action in AREA_ACTIONS and self.totals.get("areas"):
+            return ", area %d of %d" % (n, self.totals["areas"])
+        return ""

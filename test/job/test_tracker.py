@@ -1,0 +1,67 @@
+"""The job tracker: progress lines from HICEM state, per-process records, operator interventions."""
+from locem_bridge.job.tracker import JobStep, JobTracker
+
+TAPING = JobStep("taping", "urn:p#Taping", {"validateLines": True})
+SPRAYING = JobStep("spraying", "urn:p#Spraying")
+
+
+class Clock:
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+
+def tracker():
+    lines, clock = [], Clock()
+    return JobTracker([TAPING, SPRAYING], {"joints": 3, "areas": 2}, say=lines.append, clock=clock), lines, clock
+
+
+def state(process, phase, action="", task="", detail=""):
+    return {"process": process, "phase": phase, "action_type": action, "task": task, "detail": detail}
+
+
+def test_progress_counts_joints_and_areas_once_per_task():
+    t, lines, clock = tracker()
+    t.begin(0)
+    for s in [state("urn:p#Taping", "asking"), state("urn:p#Taping", "running", "SCAN", "t1"),
+              state("urn:p#Taping", "running", "SCAN", "t1"),          # same task again: no new line
+              state("urn:p#Taping", "running", "VALIDATE_TAPE_LINE", "t2"),
+              state("urn:p#Taping", "running", "TAPE_LINE", "t3"),
+              state("urn:p#Taping", "running", "VALIDATE_TAPE_LINE", "t4"),
+              state("urn:p#Spraying", "running", "SPRAY_AREA", "x")]:  # another process: ignored
+        t.on_state(s)
+    assert lines == ["[1/2 taping] starting taping", "[1/2 taping] SCAN",
+                     "[1/2 taping] VALIDATE_TAPE_LINE, joint 1 of 3", "[1/2 taping] TAPE_LINE, joint 1 of 3",
+                     "[1/2 taping] VALIDATE_TAPE_LINE, joint 2 of 3"]
+    assert t.finished is None
+    clock.t += 42.5
+    t.on_state(state("urn:p#Taping", "ended", detail="completed"))
+    assert t.finished["phase"] == "ended"
+    record = t.end()
+    assert (record.name, record.status, record.duration_s) == ("taping", "succeeded", 42.5)
+    assert lines[-1] == "[1/2 taping] taping succeeded in 42.5 s"
+
+
+def test_failed_process_keeps_its_reason_and_interventions_are_counted_by_kind():
+    t, lines, _ = tracker()
+    t.begin(1)
+    t.on_prompt({"event": "opened", "kind": "mount_tool", "text": "Mount the spray_gun"})
+    t.on_prompt({"event": "answered", "kind": "mount_tool", "answer": "done"})
+    t.on_prompt({"event": "cancelled", "kind": "validate_line"})
+    t.on_state(state("urn:p#Spraying", "running", "SPRAY_AREA", "a1"))
+    t.on_state(state("urn:p#Spraying", "failed", "SPRAY_AREA", "a1", "compressor link lost"))
+    record = t.end()
+    assert (record.status, record.detail) == ("failed", "compressor link lost")
+    assert t.interventions == {"mount_tool": 1} and t.total_interventions == 1
+    assert "[2/2 spraying] operator: Mount the spray_gun" in lines
+    assert "[2/2 spraying] SPRAY_AREA, area 1 of 2" in lines
+    assert lines[-1].endswith("spraying failed in 0.0 s: compressor link lost")
+
+
+def test_a_process_that_never_reported_is_recorded_with_the_given_status():
+    t, _, _ = tracker()
+    t.begin(0)
+    record = t.end(status="timeout", detail="no end state within 600 s")
+    assert (record.status, record.detail) == ("timeout", "no end state within 600 s")
