@@ -60,9 +60,12 @@ def test_clients_connect_with_default_flags_and_stream_at_500hz(ur_standin):
             stamps.add(round(r.getTimestamp(), 6))
             time.sleep(0.0005)
         stamps = sorted(stamps)
-        assert len(stamps) > 100, "too few distinct samples in 0.5 s: %d" % len(stamps)
-        steps = np.diff(stamps)
-        assert np.median(steps) == pytest.approx(0.002, abs=0.0005)
+        assert len(stamps) > 50, "too few distinct samples in 0.5 s: %d" % len(stamps)
+        steps = np.diff(stamps) / 0.002
+        # every package is one 2 ms controller cycle later (a 125 Hz stream would step by 4 cycles); the client
+        # may miss some while it polls, so look for the smallest step and for whole cycles only
+        assert np.min(steps) == pytest.approx(1.0, abs=1e-3)
+        assert np.allclose(steps, np.round(steps), atol=1e-3)
         assert ur_standin.refused() == []
     finally:
         _disconnect(c, r, io)

@@ -9,9 +9,11 @@ from locem_bridge.sim.ur import ArmSnapshot, UrControllerStandIn
 def test_step_listener_sees_every_cycle_and_can_trigger_a_protective_stop(ur_address):
     ctl = UrControllerStandIn(ur_address, time_scale=4.0)
     seen = []
+    wall = []
 
     def on_step(snap: ArmSnapshot) -> None:
         seen.append(snap)
+        wall.append(time.perf_counter())
         if len(seen) == 50:                       # e.g. the world detected a collision
             ctl.inject_protective_stop("collision with wall_1")
 
@@ -25,9 +27,9 @@ def test_step_listener_sees_every_cycle_and_can_trigger_a_protective_stop(ur_add
         first, last = seen[0], seen[-1]
         assert len(first.q) == 6 and len(first.tcp_pose) == 6
         assert np.allclose(first.tcp_pose, ctl.get_tcp_pose(), atol=1e-12)
-        # motion time runs 4x faster than the 500 Hz wall clock
-        dt = (last.motion_time - first.motion_time) / (len(seen) - 1)
-        assert 0.004 < dt < 0.016
+        # motion time runs 4x faster than the wall clock (a stall longer than 50 ms is not caught up)
+        ratio = (last.motion_time - first.motion_time) / (wall[len(seen) - 1] - wall[0])
+        assert 3.0 < ratio < 4.4
         assert last.safety_mode == 3
         state = ctl.get_state()
         assert state["safety_mode_name"] == "PROTECTIVE_STOP"
