@@ -10,8 +10,10 @@ import os
 from setuptools import find_packages, setup
 
 PACKAGES = find_packages(os.path.join(os.path.dirname(os.path.abspath(__file__)), "src"))
+PACKAGE_DATA = {"locem_bridge.hmi": ["static/*"]}  # the operator page (HTML, JS, CSS)
 
 if generate_distutils_setup is not None:
-    setup(**generate_distutils_setup(packages=PACKAGES, package_dir={"": "src"}))
+    setup(**generate_distutils_setup(packages=PACKAGES, package_dir={"": "src"}, package_data=PACKAGE_DATA))
 else:
-    setup(name="locem_bridge", version="0.1.0", packages=PACKAGES, package_dir={"": "src"}, python_requires=">=3.8")
+    setup(name="locem_bridge", version="0.1.0", packages=PACKAGES, package_dir={"": "src"}, package_data=PACKAGE_DATA,
+          python_requires=">=3.8")

@@ -1,0 +1,74 @@
+"""The operator HMI (ROS-free): a small web server with the operator's page, and an automatic operator.
+
+- :mod:`.backend` -- :class:`HmiBackend`, the Protocol the HMI needs from the executive (HICEM + PEMKRE); the ROS
+  adapter ``locem_bridge.ros.operator_hmi`` implements it, tests implement it in process.
+- :mod:`.server` -- :class:`HmiServer`: standard-library HTTP server (127.0.0.1, configurable port) serving the
+  page (HTML/CSS/JS shipped in ``static/``, no external resources), the JSON API and Server-Sent Events.
+- :mod:`.hub` -- :class:`StateHub`: polls the backend in one thread and pushes only changes.
+- :mod:`.auto_operator` -- :class:`AutoOperator` / :class:`AutoOperatorPolicy`: answers prompts from
+  configuration (tool mounted -> done after N s; line valid, except listed line ids -> invalid).
+- :mod:`.hicem_view` -- pure functions: HICEM state + health monitor snapshot -> HMI snapshot; wall pictures in
+  a folder.
+- :mod:`.pemkre_view` -- pure functions: processes from the ontologies, KPI/query rows from PEMKRE answers,
+  taping progress.
+- :mod:`.sim_hands` -- the simulated operator's hands: simulator operations an answer implies (mount the tool,
+  tape a joint by hand) in the simulated worksite.
+- :mod:`.executive_backend` -- :class:`ExecutiveBackend`: the backend over a HICEM executive in the same process.
+- :mod:`.errors` -- :class:`HmiError` and its subclasses.
+
+JSON API
+--------
+All JSON bodies are UTF-8 objects. POSTs need ``Content-Type: application/json`` (body at most 64 KiB).
+
+==========================================  ===================================================================
+``GET  /``                                  the operator page
+``GET  /api``                               list of endpoints
+``GET  /api/state``                         ``{"version": n, "server_id": str, "snapshot": S, "prompts": [P],
+                                            "processes": [R], "walls": [W], "kpis": K, "events": [E],
+                                            "backend_error": str}`` (version grows on every change)
+``GET  /api/events``                        ``text/event-stream``; an ``event: state`` whose ``data`` is the
+                                            /api/state document, sent at connect and on every change; ``: ping``
+                                            comments keep the stream alive; the stream ends after 5 min (the
+                                            browser reconnects by itself)
+``GET  /api/processes``                     ``{"processes": [R]}``
+``POST /api/processes/start``               ``{"iri": str}`` -> ``{"ok": true, "started": iri, "result": ...}``
+``POST /api/stop``                          ``{}`` (or no body) -> ``{"ok": true}``; never refused
+``GET  /api/prompts``                       ``{"prompts": [P]}`` (open prompts only)
+``POST /api/prompts/<id>/reply``            ``{"answer": str}`` -> ``{"ok": true, "prompt": id, "answer": str}``
+``GET  /api/kpis``                          ``{"kpis": K}``
+``GET  /api/walls``                         ``{"walls": [W]}``
+``GET  /api/walls/<wall_id>.png``           ``image/png``, the wall's current picture
+==========================================  ===================================================================
+
+Shapes: S = ``{"process", "phase", "action", "tree", "node", "detail": str, "health": {"status": "ok" | "degraded"
+| "fault" | "unknown", "detail": str}, "progress": {"done": int, "total": int, "text": str} | null}``;
+P = ``{"id", "kind", "text": str, "choices": [str], "context": {...}}``; R = ``{"iri", "name", "description"}``;
+W = ``{"id": wall_id, "version": token, "url": "/api/walls/<id>.png?v=<token>" | ""}`` (empty url: the picture
+is not written yet); K = ``{table_name: [flat row objects]}``; E = ``{"time", "level", "text"}``.
+
+Errors are ``{"error": {"status": int, "code": str, "message": str}}`` with: 400 ``malformed_json``,
+``bad_body``, ``missing_body``, ``missing_field``, ``unknown_field``, ``answer_not_allowed``; 403
+``forbidden_host`` (loopback server asked for another Host), ``forbidden_origin`` (a POST from a page served
+elsewhere); 404 ``not_found`` (unknown endpoint; the message lists the endpoints), ``unknown_process``,
+``unknown_wall``, ``picture_not_ready``; 405 ``method_not_allowed``; 409
+``prompt_not_open`` (answered, withdrawn or never asked; the message lists the open prompts), ``refused`` (the
+backend declined, with its reason); 411/413/415 for body framing, size and type; 502 ``backend_error`` /
+``bad_picture``; 503 ``backend_unavailable``, ``too_many_streams``. The server keeps serving after any of them.
+
+Run it against the robot with ``rosrun locem_bridge operator_hmi`` (default http://127.0.0.1:8088/; ``_mode:=auto``
+for the automatic operator alone, ``_mode:=both`` for both; see ``locem_bridge.ros.operator_hmi``).
+"""
+from .auto_operator import (DEFAULT_CONFIG, AutoOperator, AutoOperatorConfig, AutoOperatorPolicy,  # noqa: F401
+                            PromptRule)
+from .backend import HmiBackend, normalize_prompt, normalize_snapshot  # noqa: F401
+from .errors import (AutoOperatorConfigError, BackendRefused, BackendUnavailable, HmiError,  # noqa: F401
+                     RequestError, ServerStartError)
+from .executive_backend import ExecutiveBackend  # noqa: F401
+from .hicem_view import health_summary, snapshot_from_hicem, wall_pictures_in  # noqa: F401
+from .hub import StateHub  # noqa: F401
+from .server import HmiServer  # noqa: F401
+
+__all__ = ["DEFAULT_CONFIG", "AutoOperator", "AutoOperatorConfig", "AutoOperatorConfigError", "AutoOperatorPolicy",
+           "BackendRefused", "BackendUnavailable", "ExecutiveBackend", "HmiBackend", "HmiError", "HmiServer",
+           "PromptRule", "RequestError", "ServerStartError", "StateHub", "health_summary", "normalize_prompt",
+           "normalize_snapshot", "snapshot_from_hicem", "wall_pictures_in"]

@@ -1,0 +1,73 @@
+"""An :class:`~locem_bridge.hmi.backend.HmiBackend` over a HICEM executive in the same process (no ROS).
+
+For ROS-free runs (a main job without a ROS master, tests of the HMI with the real executive) this adapter
+hands the HMI HICEM's own objects: the high-level controller (start, stop, state, operator replies), its
+operator desk (prompts) and its health monitor. What HICEM does not know -- the processes to offer, KPIs, wall
+pictures, progress -- comes from injected callables. Lifecycle: construct with the executive's parts; nothing
+to close (it owns nothing).
+"""
+from typing import Any, Callable, Dict, List, Optional, Sequence
+
+from ..hicem.errors import HicemError
+from .errors import BackendRefused
+from .hicem_view import snapshot_from_hicem
+
+KpiSource = Callable[[], Dict[str, List[Dict[str, Any]]]]
+PictureSource = Callable[[], Dict[str, Any]]
+ProgressSource = Callable[[], Optional[Dict[str, Any]]]
+
+
+class ExecutiveBackend:
+    """HmiBackend over ``controller`` (HighLevelController), ``operator`` (OperatorDesk), ``health``
+    (HealthMonitor, optional). ``processes`` lists what may be started (``{"iri", "name", "description"}``)."""
+
+    def __init__(self, controller: Any, operator: Any, health: Any = None,
+                 processes: Sequence[Dict[str, Any]] = (), kpis: Optional[KpiSource] = None,
+                 pictures: Optional[PictureSource] = None, progress: Optional[ProgressSource] = None,
+                 stop_reason: str = "STOP pressed on the operator HMI") -> None:
+        self.controller = controller
+        self.operator = operator
+        self.health = health
+        self.processes = [dict(p) for p in processes]
+        self._kpis = kpis
+        self._pictures = pictures
+        self._progress = progress
+        self.stop_reason = stop_reason
+
+    @classmethod
+    def for_executive(cls, executive: Any, **kw: Any) -> "ExecutiveBackend":
+        """From a :class:`locem_bridge.hicem.executive.Executive` (controller, operator and health taken from it)."""
+        return cls(executive.controller, executive.operator, executive.health, **kw)
+
+    def list_processes(self) -> List[Dict[str, Any]]:
+        return [dict(p) for p in self.processes]
+
+    def start_process(self, iri: str) -> Any:
+        try:
+            self.controller.start_process(iri)
+        except HicemError as err:
+            raise BackendRefused(str(err))
+        return None
+
+    def stop(self) -> None:
+        self.controller.stop(self.stop_reason)
+
+    def snapshot(self) -> Dict[str, Any]:
+        modules = self.health.snapshot() if self.health is not None else None
+        progress = self._progress() if self._progress is not None else None
+        return snapshot_from_hicem(self.controller.state(), modules, progress)
+
+    def prompts(self) -> List[Dict[str, Any]]:
+        return [p.as_dict() for p in self.operator.open_prompts()]
+
+    def reply(self, prompt_id: str, answer: str) -> None:
+        try:
+            self.controller.operator_reply(prompt_id, answer)
+        except HicemError as err:
+            raise BackendRefused(str(err))
+
+    def kpis(self) -> Dict[str, List[Dict[str, Any]]]:
+        return self._kpis() if self._kpis is not None else {}
+
+    def wall_pictures(self) -> Dict[str, Any]:
+        return self._pictures() if self._pictures is not None else {}

@@ -1,0 +1,74 @@
+"""How HICEM's own state reads on the operator's screen: pure functions shared by every HICEM backend.
+
+HICEM's controller publishes a state dict (``process``, ``specific_process``, ``action_type``, ``task``,
+``tree``, ``node``, ``path``, ``phase``, ``detail``; the ROS adapter carries the same fields on ``/hicem/state``)
+and its health monitor a per-module snapshot (``{module: {"level", "message", "crucial", "fault"}}``). These
+functions turn them into the HMI snapshot of :mod:`locem_bridge.hmi.backend`. No I/O, no ROS.
+"""
+import os
+import re
+from typing import Any, Dict, Optional
+
+_FEATURE = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+
+
+def local_name(iri: str) -> str:
+    """The part after the last ``#`` or ``/`` of an IRI (the whole string when there is none)."""
+    text = iri or ""
+    cut = max(text.rfind("#"), text.rfind("/"))
+    return text[cut + 1:] if cut >= 0 and cut + 1 < len(text) else text
+
+
+def health_summary(modules: Optional[Dict[str, Dict[str, Any]]]) -> Dict[str, str]:
+    """``{"status": ok | degraded | fault | unknown, "detail": str}`` from a HEM snapshot.
+
+    fault: a crucial module is faulty; degraded: a non-crucial module is faulty or any module reports WARN or
+    worse; ok: modules known and none of that; unknown: no modules reported at all.
+    """
+    if not modules:
+        return {"status": "unknown", "detail": "no module has reported yet"}
+    crucial = ["%s" % m.get("fault") for _n, m in sorted(modules.items()) if m.get("fault") and m.get("crucial")]
+    if crucial:
+        return {"status": "fault", "detail": "; ".join(crucial)}
+    other = ["%s" % m.get("fault") for _n, m in sorted(modules.items()) if m.get("fault")]
+    other += ["%s reports %s%s" % (n, m.get("level"), (": %s" % m["message"]) if m.get("message") else "")
+              for n, m in sorted(modules.items())
+              if not m.get("fault") and str(m.get("level", "OK")).upper() not in ("OK", "DEBUG", "INFO")]
+    if other:
+        return {"status": "degraded", "detail": "; ".join(other)}
+    return {"status": "ok", "detail": "%d module%s alive: %s" % (len(modules), "" if len(modules) == 1 else "s",
+                                                                ", ".join(sorted(modules)))}
+
+
+def action_label(action_type: str, task: str) -> str:
+    """``"VALIDATE_TAPE_LINE (task_7)"`` -- the action type and the task's local name."""
+    if not action_type:
+        return ""
+    return "%s (%s)" % (action_type, local_name(task)) if task else action_type
+
+
+def snapshot_from_hicem(state: Optional[Dict[str, Any]], modules: Optional[Dict[str, Dict[str, Any]]] = None,
+                        progress: Optional[Dict[str, Any]] = None,
+                        health: Optional[Dict[str, str]] = None) -> Dict[str, Any]:
+    """The HMI snapshot for a HICEM state dict plus health (a HEM snapshot, or an already summarized
+    ``health``) and an optional progress dict."""
+    st = state or {}
+    return {"process": str(st.get("process", "") or ""), "phase": str(st.get("phase", "") or "idle"),
+            "action": action_label(str(st.get("action_type", "") or ""), str(st.get("task", "") or "")),
+            "tree": str(st.get("tree", "") or ""), "node": str(st.get("node", "") or ""),
+            "detail": str(st.get("detail", "") or ""),
+            "health": health if health is not None else health_summary(modules),
+            "progress": progress}
+
+
+def wall_pictures_in(folder: Optional[str]) -> Dict[str, str]:
+    """``{wall_id: path}`` for every ``<wall_id>.png`` in ``folder`` (the worksite's picture folder); ``{}`` when
+    the folder does not exist (yet). Files whose stem is not a feature id are ignored."""
+    if not folder or not os.path.isdir(folder):
+        return {}
+    out = {}
+    for name in sorted(os.listdir(folder)):
+        stem, ext = os.path.splitext(name)
+        if ext.lower() == ".png" and _FEATURE.match(stem):
+            out[stem] = os.path.join(folder, name)
+    return out

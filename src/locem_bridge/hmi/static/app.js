@@ -1,0 +1,272 @@
+// Operator page of locem_bridge: renders /api/state (pushed by Server-Sent Events, polled when the stream is
+// down) and sends the operator's actions as JSON POSTs. Plain JS, no external resources.
+"use strict";
+(function () {
+  var $ = function (id) { return document.getElementById(id); };
+  var lastParts = {};          // section -> JSON text last rendered (render only what changed)
+  var wallImgs = {};           // wall id -> {fig, img, version}
+  var pollTimer = null;
+  var POSITIVE = ["valid", "done", "yes", "ok", "mounted", "success", "SUCCESS"];
+  var NEGATIVE = ["invalid", "no", "reject", "failure", "FAILURE"];
+
+  function el(tag, attrs, text) {
+    var e = document.createElement(tag);
+    Object.keys(attrs || {}).forEach(function (k) {
+      if (k === "class") e.className = attrs[k]; else e.setAttribute(k, attrs[k]);
+    });
+    if (text !== undefined && text !== null) e.textContent = String(text);
+    return e;
+  }
+  function setText(id, text) { var e = $(id); var t = (text === "" || text == null) ? "–" : String(text);
+    if (e.textContent !== t) e.textContent = t; }
+  function localName(v) {
+    if (typeof v !== "string") return v;
+    var m = /^[a-z][a-z0-9+.-]*:\/\/\S*[#\/]([^#\/]+)$/i.exec(v);
+    return m ? m[1] : v;
+  }
+
+  // ---------------------------------------------------------------- errors
+  // the server logs every refusal in the event log itself; the banner shows the latest one until dismissed
+  function showError(message) {
+    $("error-text").textContent = message;
+    $("error-banner").hidden = false;
+  }
+  function hideError() { $("error-banner").hidden = true; }
+  $("error-close").addEventListener("click", hideError);
+
+  // ---------------------------------------------------------------- actions
+  function post(url, body) {
+    return fetch(url, {method: "POST", headers: {"Content-Type": "application/json"},
+                       body: JSON.stringify(body || {})})
+      .then(function (r) {
+        return r.text().then(function (t) {
+          var data = null;
+          try { data = t ? JSON.parse(t) : {}; } catch (e) { data = null; }
+          if (!r.ok) {
+            var msg = (data && data.error && data.error.message) || ("HTTP " + r.status + " " + r.statusText);
+            throw new Error(msg);
+          }
+          hideError();
+          return data;
+        });
+      })
+      .catch(function (err) { showError(err.message || String(err)); throw err; });
+  }
+  $("stop-button").addEventListener("click", function () {
+    post("/api/stop", {}).then(refreshNow, function () {});
+  });
+
+  // ---------------------------------------------------------------- rendering
+  function changed(part, value) {
+    var t = JSON.stringify(value);
+    if (lastParts[part] === t) return false;
+    lastParts[part] = t;
+    return true;
+  }
+
+  function renderStatus(s) {
+    if (!changed("status", s)) return;
+    setText("status-process", localName(s.process));
+    var phase = $("status-phase");
+    phase.textContent = s.phase || "idle";
+    phase.className = "phase phase-" + (s.phase || "idle");
+    setText("status-action", s.action);
+    setText("status-tree", s.tree);
+    setText("status-node", s.node);
+    setText("status-detail", s.detail);
+    var h = s.health || {status: "unknown", detail: ""};
+    [$("status-health"), $("header-health")].forEach(function (b, i) {
+      b.className = "badge health-" + h.status;
+      b.textContent = (i ? "health: " : "") + h.status;
+    });
+    $("status-health-detail").textContent = h.detail || "";
+    var p = s.progress;
+    if (p && p.total > 0) {
+      $("progress-bar").style.width = Math.max(0, Math.min(100, 100 * p.done / p.total)).toFixed(1) + "%";
+      setText("progress-text", p.text || (p.done + " of " + p.total));
+    } else {
+      $("progress-bar").style.width = "0%";
+      setText("progress-text", p && p.text ? p.text : "");
+    }
+  }
+
+  var promptBoxes = {};         // prompt id -> its box (kept while the prompt stays open: no flicker)
+  function renderPrompts(prompts) {
+    if (!changed("prompts", prompts)) return;
+    var list = $("prompt-list");
+    var count = $("prompt-count");
+    count.textContent = String(prompts.length);
+    count.className = "count" + (prompts.length ? " has" : "");
+    var open = {};
+    prompts.forEach(function (p) { open[p.id] = true; });
+    Object.keys(promptBoxes).forEach(function (id) {
+      if (!open[id]) { list.removeChild(promptBoxes[id]); delete promptBoxes[id]; }
+    });
+    var empty = $("no-prompts");
+    if (!prompts.length) {
+      if (!empty) list.appendChild(el("p", {"class": "muted", "id": "no-prompts"}, "No open prompts."));
+      return;
+    }
+    if (empty) list.removeChild(empty);
+    prompts.forEach(function (p) {
+      if (promptBoxes[p.id]) return;
+      var box = el("div", {"class": "prompt", "data-prompt-id": p.id, "data-kind": p.kind});
+      box.appendChild(el("div", {"class": "prompt-kind"}, (p.kind || "question").replace(/_/g, " ")));
+      box.appendChild(el("div", {"class": "prompt-text"}, p.text));
+      p.choices.forEach(function (c) {
+        var cls = POSITIVE.indexOf(c) >= 0 ? "answer-positive" : (NEGATIVE.indexOf(c) >= 0 ? "answer-negative" : "");
+        var b = el("button", {"type": "button", "class": cls, "data-answer": c}, c);
+        b.addEventListener("click", function () {
+          box.querySelectorAll("button").forEach(function (x) { x.disabled = true; });
+          post("/api/prompts/" + encodeURIComponent(p.id) + "/reply", {answer: c})
+            .then(refreshNow, function () {
+              box.querySelectorAll("button").forEach(function (x) { x.disabled = false; });
+            });
+        });
+        box.appendChild(b);
+      });
+      promptBoxes[p.id] = box;
+      list.appendChild(box);
+    });
+  }
+
+  function renderProcesses(procs) {
+    if (!changed("processes", procs)) return;
+    var list = $("process-list");
+    list.textContent = "";
+    if (!procs.length) { list.appendChild(el("li", {"class": "muted"}, "No processes offered.")); return; }
+    procs.forEach(function (p) {
+      var li = el("li", {"data-iri": p.iri});
+      var name = el("span", {"class": "pname", "title": p.description || ""}, p.name || localName(p.iri));
+      name.appendChild(el("span", {"class": "piri"}, p.iri));
+      li.appendChild(name);
+      var b = el("button", {"type": "button", "class": "start-button", "data-iri": p.iri}, "Start");
+      b.addEventListener("click", function () {
+        b.disabled = true;
+        post("/api/processes/start", {iri: p.iri}).then(refreshNow, function () {})
+          .then(function () { b.disabled = false; });
+      });
+      li.appendChild(b);
+      list.appendChild(li);
+    });
+  }
+
+  function renderWalls(walls) {
+    if (!changed("walls", walls)) return;
+    var box = $("walls");
+    if (!walls.length) { box.textContent = ""; box.appendChild(el("p", {"class": "muted"}, "No wall pictures yet."));
+      wallImgs = {}; return; }
+    var seen = {};
+    walls.forEach(function (w) {
+      seen[w.id] = true;
+      var entry = wallImgs[w.id];
+      if (!entry) {
+        if (!Object.keys(wallImgs).length) box.textContent = "";
+        var fig = el("figure", {"data-wall": w.id});
+        var img = el("img", {"alt": "picture of " + w.id, "data-wall": w.id});
+        fig.appendChild(img);
+        var cap = el("figcaption", {}, w.id);
+        fig.appendChild(cap);
+        box.appendChild(fig);
+        entry = wallImgs[w.id] = {fig: fig, img: img, cap: cap, version: null};
+      }
+      if (entry.version !== w.version) {
+        entry.version = w.version;
+        if (w.url) { entry.img.src = w.url; entry.img.hidden = false; entry.cap.textContent = w.id; }
+        else { entry.img.hidden = true; entry.cap.textContent = w.id + " (picture not available yet)"; }
+        entry.img.setAttribute("data-version", w.version || "");
+      }
+    });
+    Object.keys(wallImgs).forEach(function (id) {
+      if (!seen[id]) { box.removeChild(wallImgs[id].fig); delete wallImgs[id]; }
+    });
+  }
+
+  function fmt(v) {
+    if (typeof v === "number") return Number.isInteger(v) ? String(v) : v.toFixed(3).replace(/0+$/, "").replace(/\.$/, "");
+    if (v === null || v === undefined) return "";
+    if (typeof v === "object") return JSON.stringify(v);
+    return String(localName(v));
+  }
+  function renderKpis(kpis) {
+    if (!changed("kpis", kpis)) return;
+    var box = $("kpi-tables");
+    box.textContent = "";
+    var names = Object.keys(kpis || {});
+    if (!names.length) { box.appendChild(el("p", {"class": "muted"}, "No KPIs yet (shown when a run has data).")); return; }
+    names.forEach(function (name) {
+      var rows = kpis[name];
+      if (!Array.isArray(rows)) rows = Object.keys(rows || {}).map(function (k) { return {name: k, value: rows[k]}; });
+      var cols = [];
+      rows.forEach(function (r) { Object.keys(r).forEach(function (k) { if (cols.indexOf(k) < 0) cols.push(k); }); });
+      var wrap = el("div", {"class": "kpi-scroll"});
+      var t = el("table", {"class": "kpi", "data-kpi": name});
+      t.appendChild(el("caption", {}, name.replace(/_/g, " ")));
+      var hr = el("tr");
+      cols.forEach(function (c) { hr.appendChild(el("th", {}, c)); });
+      t.appendChild(hr);
+      if (!rows.length) { var er = el("tr"); er.appendChild(el("td", {"colspan": Math.max(1, cols.length)}, "no rows"));
+        t.appendChild(er); }
+      rows.forEach(function (r) {
+        var tr = el("tr");
+        cols.forEach(function (c) {
+          var v = r[c];
+          var td = el("td", {"class": typeof v === "number" ? "num" : ""}, fmt(v));
+          if (typeof v === "string" && v !== fmt(v)) td.title = v;
+          tr.appendChild(td);
+        });
+        t.appendChild(tr);
+      });
+      wrap.appendChild(t);
+      box.appendChild(wrap);
+    });
+  }
+
+  function renderEvents(events) {
+    if (!changed("events", events)) return;
+    var log = $("event-log");
+    log.textContent = "";
+    (events || []).forEach(function (e) { log.appendChild(el("li", {"class": e.level}, e.time + " " + e.text)); });
+    log.scrollTop = log.scrollHeight;
+  }
+
+  var shown = {server: null, version: -1};   // the document on screen
+  function render(doc) {
+    if (!doc || !doc.snapshot) return;
+    // documents can arrive out of order (a /api/state answer overtaken by a pushed event): never go back
+    if (doc.server_id === shown.server && doc.version <= shown.version) return;
+    shown.server = doc.server_id;
+    shown.version = doc.version;
+    renderStatus(doc.snapshot);
+    renderPrompts(doc.prompts || []);
+    renderProcesses(doc.processes || []);
+    renderWalls(doc.walls || []);
+    renderKpis(doc.kpis || {});
+    renderEvents(doc.events || []);
+    var be = $("backend-error");
+    be.hidden = !doc.backend_error;
+    be.textContent = doc.backend_error ? "Backend problem: " + doc.backend_error : "";
+    document.body.setAttribute("data-version", String(doc.version));
+  }
+
+  // ---------------------------------------------------------------- transport
+  function refreshNow() {
+    return fetch("/api/state").then(function (r) { return r.json(); }).then(render, function () {});
+  }
+  function setConnected(on) {
+    var c = $("connection");
+    c.className = "conn " + (on ? "conn-on" : "conn-off");
+    c.textContent = on ? "live" : "reconnecting…";
+    if (on && pollTimer) { clearInterval(pollTimer); pollTimer = null; }
+    if (!on && !pollTimer) pollTimer = setInterval(refreshNow, 2000);
+  }
+  function connect() {
+    if (!window.EventSource) { setConnected(false); return; }
+    var es = new EventSource("/api/events");
+    es.addEventListener("state", function (e) { setConnected(true); render(JSON.parse(e.data)); });
+    es.onopen = function () { setConnected(true); };
+    es.onerror = function () { setConnected(false); };
+  }
+  refreshNow();
+  connect();
+})();

@@ -1,0 +1,427 @@
+"""Operator HMI node: the web HMI (:mod:`locem_bridge.hmi`) and/or the automatic operator, over ROS.
+
+:class:`RosHmiBackend` implements :class:`locem_bridge.hmi.backend.HmiBackend` on HICEM's and PEMKRE's ROS
+interfaces (names relative to the node's namespace unless absolute):
+
+- ``<hicem>/state`` (``HicemState``, latched) -> snapshot, and the open prompts (its ``prompts`` JSON field);
+- ``<hicem>/start_process`` (``HicemStartProcess``, with ``~process_options`` as JSON), ``<hicem>/stop``
+  (``HicemStop``), ``<hicem>/operator_reply`` (``HicemOperatorReply``); a ``success: false`` answer becomes a
+  refusal shown to the operator (HTTP 409), an unreachable service a 503;
+- ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) -> health, with HICEM's own liveness and its
+  ``waiting_for_health`` phase;
+- ``<pemkre>/query`` (``locem_bridge/PemkreQuery``, SPARQL results JSON) -> KPIs (``kpi_by_process``,
+  ``kpi_by_task_type`` for the running specific process) and progress (``feature_counts``). When PEMKRE is not
+  up the page says so and the rest keeps working.
+- wall pictures: every ``<wall_id>.png`` in ``~pictures_dir``, and, when the simulated worksite runs, its
+  pictures refreshed every ``~sim_picture_period`` s through ``<sim>/save_outcome`` into a private folder;
+- the simulated operator's hands (:mod:`locem_bridge.hmi.sim_hands`): before an answer is sent, the simulator
+  operations it implies (``<sim>/remove_tool`` + ``<sim>/mount_tool`` for a mounted tool, ``<sim>/manual_taping``
+  for a joint taped by hand) run through ``locem_bridge/JsonCall``; if one fails the answer is not sent and the
+  operator sees why. ``~sim_hands``: ``auto`` (default: when ``<sim>/mount_tool`` exists), ``true``, ``false``.
+
+Parameters: ``~mode`` (``web``: serve the page; ``auto``: automatic operator only; ``both``), ``~host``
+(default 127.0.0.1), ``~port`` (default 8088), ``~hicem_ns`` (``hicem``), ``~pemkre_ns`` (``pemkre``),
+``~processes`` (list of ``{iri, name, description}``; default: every ``proc:AbstractProcess`` of
+``~ontologies``, default the package's ``ontologies/*.ttl``), ``~process_options`` (dict, e.g.
+``{validateLines: true}``), ``~pictures_dir``, ``~auto_operator`` (dict, see :mod:`locem_bridge.hmi.auto_operator`,
+merged over its defaults), ``~reject_lines`` (joint ids the automatic operator answers ``invalid``: a list or a
+comma-separated string), ``~call_timeout`` (s, default 5), ``~sim_ns`` (``sim``), ``~sim_hands``,
+``~sim_picture_period`` (s, default 5; 0 = never ask the simulator for pictures).
+Lifecycle: start -> serve until ROS shutdown -> the server and the automatic operator are stopped.
+"""
+import glob
+import json
+import logging
+import os
+import shutil
+import sys
+import tempfile
+import threading
+import time
+from typing import Any, Callable, Dict, List, Optional
+
+
+def _see_virtualenv() -> None:
+    """catkin's relay runs nodes with /usr/bin/python3; the project's virtual environment (tools/setup.sh, made
+    from that interpreter) holds rdflib. Append its site-packages so they are found (system ones win)."""
+    venv = os.environ.get("VIRTUAL_ENV")
+    if venv:
+        for p in sorted(glob.glob(os.path.join(venv, "lib", "python3*", "site-packages"))):
+            if p not in sys.path:
+                sys.path.append(p)
+
+
+_see_virtualenv()
+
+import rospy  # noqa: E402
+import rosservice  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+
+from locem_bridge.hmi import (DEFAULT_CONFIG, AutoOperator, AutoOperatorConfig, BackendRefused,  # noqa: E402
+                              BackendUnavailable, HmiError, HmiServer, snapshot_from_hicem, wall_pictures_in)
+from locem_bridge.hmi.pemkre_view import (KPI_QUERIES, processes_from_ontologies, rows_from_result,  # noqa: E402
+                                          taping_progress)
+from locem_bridge.hmi.sim_hands import HandsError, hand_actions  # noqa: E402
+from locem_bridge.msg import HicemState  # noqa: E402
+from locem_bridge.srv import (HicemOperatorReply, HicemStartProcess, HicemStop, JsonCall,  # noqa: E402
+                              PemkreQuery)
+
+STATE_FIELDS = ("process", "specific_process", "phase", "action_type", "task", "tree", "node", "path", "detail")
+DIAG_LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
+MODES = ("web", "auto", "both")
+
+
+def _timed_call(fn: Callable[[], Any], timeout: float, what: str) -> Any:
+    """Run a blocking ROS call in a helper thread; BackendUnavailable if it fails or does not answer in time."""
+    box: Dict[str, Any] = {}
+
+    def run() -> None:
+        try:
+            box["value"] = fn()
+        except Exception as err:  # noqa: BLE001 - reported to the caller below
+            box["error"] = err
+
+    t = threading.Thread(target=run, name="hmi-ros-call", daemon=True)
+    t.start()
+    t.join(timeout)
+    if t.is_alive():
+        raise BackendUnavailable("%s did not answer within %.1f s" % (what, timeout))
+    if "error" in box:
+        raise BackendUnavailable("%s failed: %s" % (what, box["error"]))
+    return box.get("value")
+
+
+class RosHmiBackend:
+    """HmiBackend over ROS (see the module docstring). Create after ``rospy.init_node``; :meth:`close` ends the
+    subscriptions."""
+
+    def __init__(self, hicem_ns: str = "hicem", pemkre_ns: str = "pemkre",
+                 processes: Optional[List[Dict[str, Any]]] = None, process_options: Optional[Dict[str, Any]] = None,
+                 pictures_dir: str = "", call_timeout: float = 5.0, stop_timeout: float = 12.0,
+                 progress_period_s: float = 1.0, sim_ns: str = "sim", sim_hands: str = "auto",
+                 sim_picture_period_s: float = 5.0) -> None:
+        self.hicem = rospy.resolve_name(hicem_ns).rstrip("/")
+        self.pemkre = rospy.resolve_name(pemkre_ns).rstrip("/")
+        self.processes = [dict(p) for p in (processes or [])]
+        self.process_options = dict(process_options or {})
+        self.pictures_dir = pictures_dir
+        self.call_timeout = float(call_timeout)
+        self.stop_timeout = float(stop_timeout)
+        self.progress_period_s = float(progress_period_s)
+        self._lock = threading.Lock()
+        self._state: Optional[Dict[str, Any]] = None
+        self._prompts: List[Dict[str, Any]] = []
+        self._diag: Dict[str, Any] = {}             # status name -> (level name, message, receive time)
+        self._alive_checked = 0.0
+        self._alive = False
+        self._progress: Optional[Dict[str, Any]] = None
+        self._progress_at = 0.0
+        self._query = rospy.ServiceProxy(self.pemkre + "/query", PemkreQuery)
+        self.sim = rospy.resolve_name(sim_ns).rstrip("/")
+        if str(sim_hands).lower() not in ("auto", "true", "false"):
+            raise HmiError("~sim_hands must be auto, true or false, got %r" % (sim_hands,))
+        self.sim_hands = str(sim_hands).lower()
+        self.sim_picture_period_s = float(sim_picture_period_s)
+        self._sim_pictures_dir = tempfile.mkdtemp(prefix="operator_hmi_walls_")
+        self._sim_pictures_at = -1e9
+        self._sim_pictures_phase: Optional[str] = None
+        self._joints: Optional[List[str]] = None
+        self._start = rospy.ServiceProxy(self.hicem + "/start_process", HicemStartProcess)
+        self._stop = rospy.ServiceProxy(self.hicem + "/stop", HicemStop)
+        self._reply = rospy.ServiceProxy(self.hicem + "/operator_reply", HicemOperatorReply)
+        self._subs = [rospy.Subscriber(self.hicem + "/state", HicemState, self._on_state, queue_size=20),
+                      rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diagnostics, queue_size=20)]
+
+    def close(self) -> None:
+        for s in self._subs:
+            s.unregister()
+        self._subs = []
+        shutil.rmtree(self._sim_pictures_dir, ignore_errors=True)
+
+    # -- subscriptions --------------------------------------------------------------------------------------
+    def _on_state(self, msg: Any) -> None:
+        state = {f: str(getattr(msg, f, "")) for f in STATE_FIELDS}
+        try:
+            prompts = json.loads(msg.prompts) if msg.prompts.strip() else []
+            if not isinstance(prompts, list):
+                raise ValueError("not a list")
+        except ValueError as err:
+            rospy.logwarn_throttle(10, "operator_hmi: %s/state prompts field is not a JSON list: %s" % (self.hicem,
+                                                                                                     err))
+            prompts = []
+        with self._lock:
+            self._state = state
+            self._prompts = [p for p in prompts if isinstance(p, dict)]
+
+    def _on_diagnostics(self, msg: Any) -> None:
+        now = time.monotonic()
+        with self._lock:
+            for st in msg.status:
+                self._diag[st.name] = (DIAG_LEVELS.get(int(ord(st.level) if isinstance(st.level, bytes) else st.level),
+                                                       "ERROR"), st.message, now)
+
+    # -- health ---------------------------------------------------------------------------------------------
+    def _hicem_alive(self) -> bool:
+        now = time.monotonic()
+        if now - self._alive_checked > 2.0:
+            self._alive_checked = now
+            try:
+                self._alive = rosservice.get_service_uri(self.hicem + "/stop") is not None
+            except Exception:  # noqa: BLE001 - master unreachable: not alive
+                self._alive = False
+        return self._alive
+
+    def _health(self, state: Optional[Dict[str, Any]]) -> Dict[str, str]:
+        if not self._hicem_alive():
+            return {"status": "fault", "detail": "HICEM is not running (no %s/stop service)" % self.hicem}
+        if state is None:
+            return {"status": "unknown", "detail": "no %s/state received yet" % self.hicem}
+        if state.get("phase") == "waiting_for_health":
+            return {"status": "fault", "detail": state.get("detail") or "HICEM waits for crucial modules"}
+        now = time.monotonic()
+        with self._lock:
+            recent = {n: v for n, v in self._diag.items() if now - v[2] < 10.0}
+        bad = ["%s %s: %s" % (n, lvl, m) for n, (lvl, m, _t) in sorted(recent.items()) if lvl == "ERROR"]
+        if bad:
+            return {"status": "fault", "detail": "; ".join(bad)}
+        warn = ["%s %s: %s" % (n, lvl, m) for n, (lvl, m, _t) in sorted(recent.items()) if lvl in ("WARN", "STALE")]
+        if warn:
+            return {"status": "degraded", "detail": "; ".join(warn)}
+        return {"status": "ok", "detail": "HICEM up" + (", %d diagnostics OK" % len(recent) if recent else "")}
+
+    # -- PEMKRE queries -------------------------------------------------------------------------------------
+    def query(self, name: str, bindings: Optional[Dict[str, str]] = None) -> List[Dict[str, Any]]:
+        """Rows of PEMKRE's named query; ``bindings`` maps variables to N-Triples terms (``<iri>``, ``"text"``).
+        BackendUnavailable when PEMKRE cannot be reached, BackendRefused when it refuses."""
+        names = sorted(bindings or {})
+        values = [(bindings or {})[n] for n in names]
+        resp = _timed_call(lambda: self._query(name, names, values), self.call_timeout,
+                           "%s/query %s" % (self.pemkre, name))
+        if not resp.success:
+            raise BackendRefused("PEMKRE query %s refused (%s): %s" % (name, resp.code, resp.message))
+        try:
+            return rows_from_result(resp.results)
+        except ValueError as err:
+            raise BackendUnavailable("PEMKRE query %s: %s" % (name, err))
+
+    # -- the simulated worksite -----------------------------------------------------------------------------
+    def _service_exists(self, name: str) -> bool:
+        try:
+            return rosservice.get_service_uri(name) is not None
+        except Exception:  # noqa: BLE001 - no master: no service
+            return False
+
+    def sim_call(self, operation: str, args: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+        """One ``<sim>/<operation>`` JsonCall; BackendRefused with the simulator's message if it refuses."""
+        service = "%s/%s" % (self.sim, operation)
+        proxy = rospy.ServiceProxy(service, JsonCall)
+        resp = _timed_call(lambda: proxy(json.dumps(args or {})), self.call_timeout, service)
+        if not resp.success:
+            raise BackendRefused("simulated worksite: %s" % resp.message)
+        try:
+            result = json.loads(resp.result or "{}")
+        except ValueError:
+            result = {}
+        return result if isinstance(result, dict) else {}
+
+    def _hands_enabled(self) -> bool:
+        if self.sim_hands == "auto":
+            return self._service_exists(self.sim + "/mount_tool")
+        return self.sim_hands == "true"
+
+    def _site_joints(self) -> List[str]:
+        if self._joints is None:
+            joints = self.sim_call("outcome").get("joints", {})
+            self._joints = sorted(joints) if isinstance(joints, (dict, list)) else []
+        return self._joints
+
+    def _do_hands(self, prompt: Dict[str, Any], answer: str) -> None:
+        if not self._hands_enabled():
+            return
+        try:
+            needs_joints = prompt.get("kind") in ("manual_taping", "finish_interrupted") and answer == "done"
+            actions = hand_actions(prompt, answer, self._site_joints() if needs_joints else ())
+        except HandsError as err:
+            raise BackendRefused("the simulated operator cannot do this: %s" % err)
+        for operation, args in actions:
+            self.sim_call(operation, args)
+            rospy.loginfo("operator_hmi: simulated operator did %s %s", operation, json.dumps(args))
+
+    def _sim_pictures(self, phase: str) -> Dict[str, str]:
+        now = time.monotonic()
+        due = now - self._sim_pictures_at >= self.sim_picture_period_s
+        if self.sim_picture_period_s <= 0 or not due:
+            return wall_pictures_in(self._sim_pictures_dir)
+        if phase == self._sim_pictures_phase and phase in ("", "idle", "ended", "failed", "stopped"):
+            return wall_pictures_in(self._sim_pictures_dir)        # nothing moves: no need to redraw
+        self._sim_pictures_at = now
+        if self._service_exists(self.sim + "/save_outcome"):
+            self.sim_call("save_outcome", {"folder": self._sim_pictures_dir})
+            self._sim_pictures_phase = phase
+        return wall_pictures_in(self._sim_pictures_dir)
+
+    # -- HmiBackend -----------------------------------------------------------------------------------------
+    def list_processes(self) -> List[Dict[str, Any]]:
+        return [dict(p) for p in self.processes]
+
+    def start_process(self, iri: str) -> Any:
+        opts = json.dumps(self.process_options) if self.process_options else ""
+        resp = _timed_call(lambda: self._start(process=iri, options=opts), self.call_timeout,
+                           self.hicem + "/start_process")
+        if not resp.success:
+            raise BackendRefused(resp.message or "HICEM did not start %s" % iri)
+        return {"message": resp.message}
+
+    def stop(self) -> None:
+        _timed_call(lambda: self._stop(reason="STOP pressed on the operator HMI"), self.stop_timeout,
+                    self.hicem + "/stop")
+
+    def snapshot(self) -> Dict[str, Any]:
+        with self._lock:
+            state = dict(self._state) if self._state is not None else None
+        now = time.monotonic()
+        if state is not None and state.get("phase") not in ("", "idle") and \
+                now - self._progress_at >= self.progress_period_s:
+            self._progress_at = now
+            try:
+                self._progress = taping_progress(self.query("feature_counts"))
+            except HmiError:
+                pass                                # progress is optional; KPIs report PEMKRE's absence
+        return snapshot_from_hicem(state, progress=self._progress, health=self._health(state))
+
+    def prompts(self) -> List[Dict[str, Any]]:
+        with self._lock:
+            return [dict(p) for p in self._prompts]
+
+    def reply(self, prompt_id: str, answer: str) -> None:
+        with self._lock:
+            prompt = next((dict(p) for p in self._prompts if p.get("id") == prompt_id), None)
+        if prompt is None:
+            raise BackendRefused("prompt %r is not open" % prompt_id)
+        self._do_hands(prompt, answer)
+        resp = _timed_call(lambda: self._reply(prompt_id=prompt_id, answer=answer), self.call_timeout,
+                           self.hicem + "/operator_reply")
+        if not resp.success:
+            raise BackendRefused(resp.message or "HICEM refused the answer")
+
+    def kpis(self) -> Dict[str, List[Dict[str, Any]]]:
+        with self._lock:
+            specific = (self._state or {}).get("specific_process", "")
+        if not specific:
+            return {}
+        return {table: self.query(name, {"process": "<%s>" % specific}) for table, name in KPI_QUERIES}
+
+    def wall_pictures(self) -> Dict[str, Any]:
+        with self._lock:
+            phase = (self._state or {}).get("phase", "")
+        pictures: Dict[str, Any] = dict(self._sim_pictures(phase))
+        pictures.update(wall_pictures_in(self.pictures_dir))
+        return pictures
+
+
+def _param(name: str, default: Any) -> Any:
+    """Private parameter; an empty string (launch-file default) means the built-in default."""
+    v = rospy.get_param("~" + name, default)
+    return default if v == "" else v
+
+
+def _share_dir() -> str:
+    try:
+        import rospkg
+        return rospkg.RosPack().get_path("locem_bridge")
+    except Exception:  # noqa: BLE001 - not in a ROS package path: the checkout this file lives in
+        return os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+
+
+def _list_param(value: Any) -> List[str]:
+    if isinstance(value, str):
+        return [v.strip() for v in value.split(",") if v.strip()]
+    return [str(v) for v in (value or [])]
+
+
+def auto_config_from_params(raw: Any, reject_lines: List[str]) -> AutoOperatorConfig:
+    """``~auto_operator`` merged over the defaults, plus ``~reject_lines`` as validate_line ``invalid`` answers."""
+    cfg = json.loads(json.dumps(raw or {}))
+    if not isinstance(cfg, dict):
+        raise HmiError("~auto_operator must be a mapping, got %r" % (raw,))
+    if reject_lines:
+        kinds = cfg.setdefault("kinds", {})
+        rule = dict(kinds.get("validate_line") or DEFAULT_CONFIG["kinds"]["validate_line"])
+        per = dict(rule.get("per_feature") or {})
+        per["invalid"] = sorted(set(_list_param(per.get("invalid"))) | set(reject_lines))
+        rule["per_feature"] = per
+        kinds["validate_line"] = rule
+    return AutoOperatorConfig.from_dict(cfg, base=DEFAULT_CONFIG)
+
+
+class _RosLogHandler(logging.Handler):
+    """Forwards the ROS-free HMI's Python log records (locem_bridge.hmi.*) to rosout."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        text = "operator_hmi: %s" % self.format(record)
+        if record.levelno >= logging.ERROR:
+            rospy.logerr(text)
+        elif record.levelno >= logging.WARNING:
+            rospy.logwarn(text)
+        else:
+            rospy.loginfo(text)
+
+
+class OperatorHmiNode:
+    def __init__(self) -> None:
+        hmi_log = logging.getLogger("locem_bridge.hmi")
+        if not any(isinstance(h, _RosLogHandler) for h in hmi_log.handlers):
+            hmi_log.addHandler(_RosLogHandler())
+            hmi_log.setLevel(logging.INFO)
+            hmi_log.propagate = False
+        mode = str(_param("mode", "web"))
+        if mode not in MODES:
+            raise HmiError("~mode must be one of %s, got %r" % (", ".join(MODES), mode))
+        port = int(_param("port", 8088))
+        if not 0 <= port <= 65535:
+            raise HmiError("~port must be in [0, 65535], got %d" % port)
+        processes = _param("processes", None)
+        if not processes:
+            files = _list_param(_param("ontologies", "")) or sorted(glob.glob(os.path.join(_share_dir(),
+                                                                                             "ontologies", "*.ttl")))
+            processes = processes_from_ontologies(files)
+        options = _param("process_options", {})
+        if isinstance(options, str):
+            options = json.loads(options) if options.strip() else {}
+        self.backend = RosHmiBackend(_param("hicem_ns", "hicem"), _param("pemkre_ns", "pemkre"), processes,
+                                     options, str(_param("pictures_dir", "")), float(_param("call_timeout", 5.0)),
+                                     sim_ns=str(_param("sim_ns", "sim")), sim_hands=str(_param("sim_hands", "auto")),
+                                     sim_picture_period_s=float(_param("sim_picture_period", 5.0)))
+        self.server: Optional[HmiServer] = None
+        self.auto: Optional[AutoOperator] = None
+        if mode in ("auto", "both"):
+            self.auto = AutoOperator(self.backend, auto_config_from_params(_param("auto_operator", {}),
+                                                                           _list_param(_param("reject_lines", ""))))
+            self.auto.start()
+        if mode in ("web", "both"):
+            self.server = HmiServer(self.backend, str(_param("host", "127.0.0.1")), port).start()
+            rospy.loginfo("operator_hmi: serving the operator page on %s", self.server.url)
+            if self.auto is not None:
+                hub = self.server.hub
+                self.auto.add_listener(lambda r: hub.note("automatic operator answered %s: %s (%s)" % (
+                    r["kind"], r["answer"], r["reason"])))
+        rospy.loginfo("operator_hmi: mode %s, %d processes offered, HICEM at %s", mode, len(processes),
+                      self.backend.hicem)
+
+    def shutdown(self) -> None:
+        if self.auto is not None:
+            self.auto.stop()
+        if self.server is not None:
+            self.server.close()
+        self.backend.close()
+
+
+def main() -> None:
+    rospy.init_node("operator_hmi")
+    try:
+        node = OperatorHmiNode()
+    except (HmiError, ValueError) as err:
+        rospy.logfatal("operator_hmi: %s", err)
+        sys.exit(2)
+    rospy.on_shutdown(node.shutdown)
+    rospy.spin()

@@ -1,0 +1,148 @@
+"""The operator page in a real headless browser (Debian's chromium + chromedriver, driven by selenium).
+
+Clicks through a run against the scripted HICEM test double: start a process, see the state change, answer the
+tool prompt and the line-validation prompts (one invalid), see a refusal shown clearly, press STOP, see the KPI
+table -- asserting on what the page shows and on what the backend received. Saves a screenshot.
+Skipped only when /usr/bin/chromium is absent. Every wait is bounded.
+"""
+import os
+import shutil
+import tempfile
+
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMEDRIVER = "/usr/bin/chromedriver"
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(not os.path.exists(CHROMIUM), reason="Debian's chromium is not installed at /usr/bin/chromium"),
+]
+
+from hicem_double import TAPING  # noqa: E402
+
+WAIT_S = 15.0
+
+
+@pytest.fixture
+def browser():
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    if not os.path.exists(CHROMEDRIVER):
+        pytest.fail("chromium is installed but %s is missing (install Debian's chromium-driver)" % CHROMEDRIVER)
+    profile = tempfile.mkdtemp(prefix="hmi-chromium-")
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM
+    for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--no-first-run", "--user-data-dir=%s" % profile, "--window-size=1280,1400"):
+        opts.add_argument(flag)
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
+    driver.set_page_load_timeout(WAIT_S)
+    driver.set_script_timeout(WAIT_S)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+def test_click_through_a_run(browser, server, double, tmp_path):
+    from selenium.common.exceptions import StaleElementReferenceException
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    def wait(cond, what):
+        # an element read while the page replaces it (a prompt answered meanwhile) is looked up again
+        return WebDriverWait(browser, WAIT_S, poll_frequency=0.05,
+                             ignored_exceptions=(StaleElementReferenceException,)).until(lambda d: cond(),
+                                                                                         message=what)
+
+    def text(elem_id):
+        return browser.find_element(By.ID, elem_id).text
+
+    def prompt_boxes():
+        return browser.find_elements(By.CSS_SELECTOR, "#prompt-list .prompt")
+
+    def answer(kind, needle, choice):
+        box = wait(lambda: next((b for b in prompt_boxes() if b.get_attribute("data-kind") == kind
+                                 and needle in b.text), None), "a %s prompt about %s" % (kind, needle))
+        pid = box.get_attribute("data-prompt-id")
+        box.find_element(By.CSS_SELECTOR, 'button[data-answer="%s"]' % choice).click()
+        return pid
+
+    browser.get(server.url)
+    assert browser.title == server.title
+    wait(lambda: text("connection") == "live", "the event stream to connect")
+    assert text("status-phase") == "idle" and "No open prompts" in text("prompt-list")
+    start = wait(lambda: browser.find_element(By.CSS_SELECTOR, '.start-button[data-iri="%s"]' % TAPING),
+                 "the Start button of the taping process")
+    assert [li.get_attribute("data-iri") for li in browser.find_elements(By.CSS_SELECTOR, "#process-list li")] == [
+        p["iri"] for p in double.list_processes()]
+    wall_1 = wait(lambda: browser.find_element(By.CSS_SELECTOR, 'img[data-wall="wall_1"]'), "wall_1's picture")
+    wait(lambda: browser.execute_script("return arguments[0].complete && arguments[0].naturalWidth", wall_1) == 480,
+         "wall_1's PNG to load (480 px wide)")
+    first_version = wall_1.get_attribute("data-version")
+
+    start.click()
+    wait(lambda: text("status-phase") == "running", "the phase to show running")
+    assert text("status-tree") == "GET_TOOL" and text("status-node") == "ask_mount"
+    assert text("status-process") == "TapingProcess" and text("status-health") == "ok"
+    assert text("progress-text") == "joint 1 of 3"
+
+    mount_id = answer("mount_tool", "taping_tool", "done")
+    wait(lambda: text("status-tree") == "VALIDATE_TAPE_LINE", "the validation tree to start")
+    answer("validate_line", "wall_1_joint_1", "valid")
+    wait(lambda: any("wall_1_joint_2" in b.text for b in prompt_boxes()), "the prompt for wall_1_joint_2")
+    assert browser.save_screenshot(str(tmp_path / "operator_hmi_prompt.png"))
+    answer("validate_line", "wall_1_joint_2", "invalid")
+    wait(lambda: text("progress-text") == "joint 3 of 3", "progress to reach joint 3 of 3")
+    assert "wall_2_joint_1" in text("status-action")
+    wait(lambda: wall_1.get_attribute("data-version") != first_version, "wall_1's picture to change")
+
+    # a refusal from the backend is shown clearly: starting again while the process runs
+    start = browser.find_element(By.CSS_SELECTOR, '.start-button[data-iri="%s"]' % TAPING)
+    start.click()
+    wait(lambda: browser.find_element(By.ID, "error-banner").is_displayed(), "the error banner")
+    assert "still running" in text("error-text")
+    # ... and a reply to a prompt that is no longer open (a lagging prompt list still shows the mount prompt)
+    double.lagging_prompts = [double.desk.get(mount_id).as_dict()]
+    answer("mount_tool", "taping_tool", "done")
+    wait(lambda: "already answered" in text("error-text"), "the refusal of the stale prompt")
+    assert browser.find_element(By.ID, "error-banner").is_displayed()
+    assert browser.save_screenshot(str(tmp_path / "operator_hmi_refused.png"))
+    double.lagging_prompts = []
+    browser.find_element(By.ID, "error-close").click()
+    assert not browser.find_element(By.ID, "error-banner").is_displayed()
+
+    browser.find_element(By.ID, "stop-button").click()
+    wait(lambda: text("status-phase") == "stopped", "the phase to show stopped")
+    wait(lambda: browser.find_elements(By.CSS_SELECTOR, 'table.kpi[data-kpi="processes"]'), "the KPI table")
+    assert "No open prompts" in text("prompt-list")
+    kpi = browser.find_element(By.CSS_SELECTOR, 'table.kpi[data-kpi="processes"]')
+    headers = [th.text for th in kpi.find_elements(By.TAG_NAME, "th")]
+    cells = dict(zip(headers, [td.text for td in kpi.find_elements(By.TAG_NAME, "td")]))
+    assert cells["operatorInterventions"] == "3" and cells["manualFallbacks"] == "1" and cells["status"] == "stopped"
+    types = browser.find_element(By.CSS_SELECTOR, 'table.kpi[data-kpi="task_types"]').text
+    assert "MANUAL_TAPING" in types and "TAPE_LINE" in types
+    log = text("event-log")
+    assert "started Taping" in log and "STOP pressed" in log and "answered validate_line: invalid" in log
+
+    # what the backend received, in order
+    replies = [(c[0], c[2]) if c[0] == "reply" else c for c in double.calls]
+    assert replies == [("start_process", TAPING), ("reply", "done"), ("reply", "valid"), ("reply", "invalid"),
+                       ("start_process", TAPING), ("reply", "done"), ("stop",)]
+    assert double.joint_state == {"wall_1_joint_1": "taped", "wall_1_joint_2": "manual", "wall_2_joint_1": "open"}
+
+    # no script error on the page (the refused requests above are logged by Chrome as failed loads: expected)
+    severe = [e["message"] for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert [m for m in severe if "status of 409" not in m] == [], severe
+    assert len([m for m in severe if "status of 409" in m]) == 2
+
+    height = browser.execute_script("return document.documentElement.scrollHeight")
+    browser.set_window_size(1280, min(max(900, height + 200), 4000))
+    shot = str(tmp_path / "operator_hmi.png")
+    assert browser.save_screenshot(shot) and os.path.getsize(shot) > 10000
+    print("screenshot: %s" % shot)

@@ -1,0 +1,91 @@
+"""The HMI and the automatic operator over the REAL HICEM executive (controller, trees, operator desk, health
+monitor) in process, with HICEM's own test doubles standing in for PEMKRE and LOCEM (test/hicem/hicem_doubles).
+
+Proves the pieces fit: the prompts the real trees open are answered by the configured policy (joint 2 rejected
+-> PEMKRE sends it to MANUAL_TAPING), the page's state document shows the real controller's process, tree and
+health, and STOP from the HTTP API halts the real controller and withdraws the open prompt.
+"""
+import os
+import sys
+import time
+
+import pytest
+
+_HICEM_TESTS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "hicem")
+if _HICEM_TESTS not in sys.path:
+    sys.path.insert(0, _HICEM_TESTS)
+
+from hicem_doubles import Heartbeats, LocemDouble, PemkreDouble  # noqa: E402
+from hmi_client import post, state, wait_state  # noqa: E402
+from locem_bridge.hicem.executive import create_executive  # noqa: E402
+from locem_bridge.hmi import (DEFAULT_CONFIG, AutoOperator, AutoOperatorConfig, ExecutiveBackend,  # noqa: E402
+                              HmiServer)
+
+PROCESS = PemkreDouble.PROCESS
+
+
+@pytest.fixture
+def hicem():
+    pemkre = PemkreDouble()
+    locem = LocemDouble(durations={"GOTO": 0.02, "APPLY_TAPE": 0.02, "HOME": 0.02})
+    ex = create_executive(pemkre, locem, None)
+    ex.health.heartbeat("locem")
+    beats = Heartbeats(ex.health)
+    backend = ExecutiveBackend.for_executive(ex, processes=[{"iri": PROCESS, "name": "Taping"}])
+    try:
+        yield ex, pemkre, locem, backend
+    finally:
+        beats.stop()
+        ex.close()
+
+
+def test_headless_run_with_the_automatic_operator(hicem):
+    ex, pemkre, locem, backend = hicem
+    cfg = AutoOperatorConfig.from_dict({"poll_period_s": 0.02, "kinds": {
+        "mount_tool": {"answer": "done", "delay_s": 0.05},
+        "validate_line": {"answer": "valid", "delay_s": 0.0, "per_feature": {"invalid": ["wall_1_joint_2"]}}}},
+        base=DEFAULT_CONFIG)
+    auto = AutoOperator(backend, cfg)
+    auto.start()
+    try:
+        backend.start_process(PROCESS)
+        end = time.monotonic() + 30
+        while time.monotonic() < end and backend.snapshot()["phase"] not in ("ended", "failed", "stopped"):
+            time.sleep(0.02)
+    finally:
+        auto.stop()
+    snap = backend.snapshot()
+    assert snap["phase"] == "ended", snap
+    assert snap["health"]["status"] == "ok" and "locem" in snap["health"]["detail"]
+    # what the real trees asked, and what PEMKRE was told
+    assert [(a["kind"], a["answer"]) for a in auto.answers] == [
+        ("mount_tool", "done"), ("validate_line", "valid"), ("validate_line", "invalid"),
+        ("manual_taping", "done"), ("validate_line", "valid")]
+    assert auto.answers[2]["features"] == ["wall_1_joint_2"]       # found in the tree's prompt text
+    assert [s[4]["line"] for s in pemkre.executed("MANUAL_TAPING")] == ["wall_1_joint_2"]
+    assert sorted(s[4]["line"] for s in pemkre.executed("TAPE_LINE")) == ["wall_1_joint_1", "wall_2_joint_1"]
+    assert ex.operator.interventions == 5 and not auto.errors
+
+
+def test_stop_from_the_http_api_halts_the_real_controller(hicem):
+    ex, pemkre, locem, backend = hicem
+    with HmiServer(backend, "127.0.0.1", 0, poll_period_s=0.05, shutdown_poll_s=0.05) as srv:
+        assert post(srv.url, "/api/processes/start", {"iri": PROCESS}).status == 200
+        doc = wait_state(srv.url, lambda d: d["prompts"], timeout=15)
+        mount = doc["prompts"][0]
+        assert mount["kind"] == "mount_tool" and "taping_tool" in mount["text"]
+        snap = doc["snapshot"]
+        assert snap["process"] == PROCESS and snap["tree"] == "GET_TOOL" and snap["node"] == "ask_mount"
+        assert snap["action"].startswith("GET_TOOL (") and snap["health"]["status"] == "ok"
+        again = post(srv.url, "/api/processes/start", {"iri": PROCESS})
+        assert again.status == 409 and "still running" in again.error["message"]
+
+        assert post(srv.url, "/api/stop", {}).status == 200
+        doc = wait_state(srv.url, lambda d: d["snapshot"]["phase"] == "stopped", timeout=10)
+        assert doc["prompts"] == [] and "STOP pressed on the operator HMI" in doc["snapshot"]["detail"]
+        assert ex.controller.join(5.0) and not locem.running()
+        assert ex.operator.get(mount["id"]).state == "cancelled"
+        stale = post(srv.url, "/api/prompts/%s/reply" % mount["id"], {"answer": "done"})
+        assert stale.status == 409 and stale.error["code"] == "prompt_not_open"
+        assert mount["id"] in stale.error["message"]
+        assert state(srv.url)["snapshot"]["phase"] == "stopped"
