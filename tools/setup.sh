@@ -16,6 +16,9 @@ say() { printf '[setup] %s\n' "$*" >&2; }
 hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -c1-16; }
 
 mkdir -p "$LOCEM_HOME"
+# One setup at a time per LOCEM_HOME: parallel runs (several shells, CI next to a developer) wait here.
+exec 9>"$LOCEM_HOME/.setup.lock"
+flock 9
 . /etc/os-release
 SUDO=""
 if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi

@@ -11,6 +11,10 @@ from .registry import CommandSpec
 
 DECLARATION_MODULES: Tuple[str, ...] = (
     "locem_bridge.locem.system_commands",
+    "locem_bridge.bridges.commands_arm",
+    "locem_bridge.bridges.commands_compressor",
+    "locem_bridge.bridges.commands_base",
+    "locem_bridge.bridges.commands_wall",
 )
 
 

@@ -191,15 +191,54 @@ def _action_result(response: Optional[Response]) -> CommandResult:
 
 
 def main() -> None:
-    """Entry point of ``rosrun locem_bridge locem_node``."""
+    """Entry point of ``rosrun locem_bridge locem_node``.
+
+    Without ``~robot_config`` LOCEM serves the system commands only. With it, the bridges named in the robot YAML
+    are built (lazily imported through :mod:`locem_bridge.bridges.backends`), installed into the core, and their
+    state is published by :mod:`.locem_devices`. Parameters: ``~robot_config`` (path), ``~robot_overrides``
+    (dict deep-merged into the ``robot`` section, e.g. another address), ``~devices`` (comma list, default
+    ``arm,compressor,base,scanner``), ``~site_config`` (site YAML for the simulated scanner), ``~initial_pose``
+    ([x, y, theta] in map; default: the site's ``robot_start``, else the origin), ``~named_poses`` ({name: [x, y, theta]} for GOTO_TAG).
+    """
     rospy.init_node("locem")
     core = LocemCore(grace=float(rospy.get_param("~grace", 1.0)),
                      stop_timeout=float(rospy.get_param("~stop_timeout", 2.0)))
+    robot = devices = None
+    robot_config = str(rospy.get_param("~robot_config", "") or "")
+    if robot_config:
+        from locem_bridge.bridges.config import load_robot_config
+        from locem_bridge.bridges.robot import build_robot
+        from locem_bridge.ros.locem_devices import LocemDevices
+
+        robot_cfg = load_robot_config(robot_config, rospy.get_param("~robot_overrides", {}) or {})
+        site_config = str(rospy.get_param("~site_config", "") or "") or None
+        pose = rospy.get_param("~initial_pose", None) or None
+        if pose is None and site_config:           # odometry starts where the site says the robot stands
+            import yaml
+            with open(site_config, encoding="utf-8") as handle:
+                pose = (yaml.safe_load(handle) or {}).get("site", {}).get("robot_start")
+        robot = build_robot(robot_cfg, devices=[d.strip() for d in str(rospy.get_param(
+                                "~devices", "arm,compressor,base,scanner")).split(",") if d.strip()],
+                            site=site_config,
+                            initial_pose=tuple(float(v) for v in pose) if pose else None,
+                            named_base_poses=rospy.get_param("~named_poses", {}) or {})
+        for command_set in robot.command_sets:
+            core.install(command_set)
+        robot.start()
+        devices = LocemDevices(robot, core.dispatcher.health)
     node = LocemNode(core)
     node.start()
-    rospy.on_shutdown(node.shutdown)
+    if devices is not None:
+        devices.start()
+
+    def shutdown() -> None:
+        if devices is not None:
+            devices.shutdown()
+        node.shutdown()
+        if robot is not None:
+            robot.close()
+    rospy.on_shutdown(shutdown)
     served = [s.name for s in core.registry.specs() if core.registry.handler(s.name)]
     rospy.loginfo("LOCEM ready on %s: %d commands (%s)", rospy.resolve_name("~command"), len(served),
                   ", ".join(served))
     rospy.spin()
-

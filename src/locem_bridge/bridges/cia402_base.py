@@ -1,0 +1,446 @@
+"""Mobile base over CAN: four CiA 402 wheel drives (canopen ``BaseNode402``) and a mecanum control loop.
+
+Lifecycle: ``Cia402Base(base_cfg, eds_path)`` -> :meth:`start` (opens the python-can bus named by
+``robot.base.drives.can``; a supervisor thread enables every drive: heartbeat seen, NMT OPERATIONAL, PROFILED
+VELOCITY, OPERATION ENABLED; then runs the control loop at ``control_rate`` Hz) -> :meth:`close` (zero velocity,
+drives disabled, bus closed).
+
+Each control cycle: check every drive's heartbeat (consumer timeout = ``heartbeat_ms`` x
+``consumer_timeout_factor``) and statusword; integrate odometry from the wheel positions (TPDO2, 0x6064) through
+the mecanum kinematics; compute the body twist (GOTO closed loop, an open-loop ``/cmd_vel`` twist while it is
+fresh, or zero); send the wheel targets (RPDO2, 0x60FF). A silent or faulted drive latches a fault: every drive
+is commanded to zero in the same cycle (the drives decelerate at ``stop_deceleration``), running motions end
+with :class:`~.errors.DeviceFault` (``HARDWARE_ERROR``). When every drive is back (boot-up, heartbeat) the
+supervisor enables them again; nothing moves until the next command.
+
+Poses: ``[x, y, theta]`` of base_footprint in ``map``; odometry starts at :meth:`set_pose` (initial pose).
+"""
+
+import logging
+import math
+import threading
+import time
+from typing import Any, Dict, List, Mapping, Optional, Tuple
+
+from .config import need
+from .errors import BadRequest, DeviceFault, LinkDown, MotionTimeout, NotConnected
+from .geometry import wrap_angle
+from .interfaces import Base, Health, Waiter
+from .mecanum import Mecanum
+
+log = logging.getLogger(__name__)
+
+SW_FAULT = 0x08
+
+
+class Cia402Base(Base):
+    """The base backend (see the module docstring). ``cfg`` is ``robot.base``."""
+
+    def __init__(self, cfg: Mapping[str, Any], eds_path: str, initial_pose: Tuple[float, float, float] = (0.0, 0.0, 0.0),
+                 bus: Any = None) -> None:
+        w = "robot.base"
+        drives = need(cfg, "drives", dict, where=w)
+        self.can_cfg = dict(need(drives, "can", dict, where=w + ".drives"))
+        self.wheels = list(need(drives, "wheels", list, where=w + ".drives"))
+        if len(self.wheels) != 4:
+            raise BadRequest("robot.base.drives.wheels must list 4 wheels (fl, fr, rl, rr), got %d" % len(self.wheels))
+        self.node_ids = [int(x["node_id"]) for x in self.wheels]
+        self.names = [str(x["name"]) for x in self.wheels]
+        self.polarity = [int(x["polarity"]) for x in self.wheels]
+        self.vel_scale = need(drives, "velocity_units_per_rad_s", float, lo=1e-6, where=w + ".drives")
+        self.pos_scale = need(drives, "counts_per_rad", float, lo=1e-6, where=w + ".drives")
+        self.heartbeat_s = need(drives, "heartbeat_ms", float, lo=1.0, where=w + ".drives") / 1000.0
+        self.hb_timeout = self.heartbeat_s * need(drives, "consumer_timeout_factor", float, default=1.5, lo=1.0,
+                                                  where=w + ".drives")
+        self.accel_units = int(need(drives, "profile_acceleration", float, lo=0.1, where=w + ".drives") * self.vel_scale)
+        self.stop_decel_units = int(need(drives, "stop_deceleration", float, default=200.0, lo=1.0,
+                                         where=w + ".drives") * self.vel_scale)
+        wheel = need(cfg, "wheel", dict, where=w)
+        self.kin = Mecanum(need(wheel, "radius", float, where=w + ".wheel"),
+                           need(wheel, "half_wheelbase", float, where=w + ".wheel"),
+                           need(wheel, "half_track", float, where=w + ".wheel"))
+        limits = need(cfg, "limits", dict, where=w)
+        self.max_wheel = need(limits, "max_wheel_speed", float, lo=0.1, where=w + ".limits")
+        self.max_lin = need(limits, "max_linear_velocity", float, lo=0.01, where=w + ".limits")
+        self.max_ang = need(limits, "max_angular_velocity", float, lo=0.01, where=w + ".limits")
+        self.lin_accel = need(limits, "linear_acceleration", float, default=0.6, lo=0.01, where=w + ".limits")
+        self.ang_accel = need(limits, "angular_acceleration", float, default=1.2, lo=0.01, where=w + ".limits")
+        self.rate = need(cfg, "control_rate", float, default=50.0, lo=5.0, hi=1000.0, where=w)
+        self.named_poses = {k: [float(x) for x in v] for k, v in dict(cfg.get("named_poses", {}) or {}).items()}
+        self.eds_path = eds_path
+        self._bus_given = bus
+        self._bus: Any = None
+        self.network: Any = None
+        self.nodes: List[Any] = []
+        self._health = Health("connecting")
+        self._lock = threading.RLock()
+        self._pose = [float(v) for v in initial_pose]
+        self._twist = [0.0, 0.0, 0.0]          # measured body twist
+        self._cmd = [0.0, 0.0, 0.0]            # commanded body twist (after ramps)
+        self._open_loop: Optional[Tuple[List[float], float]] = None
+        self._goal: Optional[Dict[str, Any]] = None
+        self._last_pos: Optional[List[float]] = None
+        self._last_hb = [0.0] * 4
+        self._enabled = False
+        self._fault: Optional[str] = None
+        self._fault_kind = ""
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self.cycles = 0
+        self.loop_started = 0.0
+        self.late_cycles = 0
+        self.stop_latency: Optional[float] = None
+
+    # -- lifecycle ---------------------------------------------------------------------------------------
+    def _open_bus(self) -> Any:
+        from .can_bus import open_master_bus
+        return open_master_bus(self.can_cfg)
+
+    def start(self) -> None:
+        import canopen
+
+        self._bus = self._bus_given or self._open_bus()
+        self.network = canopen.Network(self._bus)
+        self.network.connect()
+        for node_id in self.node_ids:
+            node = canopen.BaseNode402(node_id, self.eds_path)
+            self.network.add_node(node)
+            self.nodes.append(node)
+        for i, node_id in enumerate(self.node_ids):
+            self.network.subscribe(0x700 + node_id, self._heartbeat_cb(i))
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="base-control", daemon=True)
+        self._thread.start()
+
+    def _heartbeat_cb(self, i: int) -> Any:
+        def on_heartbeat(can_id: int, data: bytes, timestamp: float) -> None:
+            self._last_hb[i] = time.monotonic()
+        return on_heartbeat
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(3.0)
+            self._thread = None
+        if self.network is not None:
+            try:
+                self._send_wheels([0.0] * 4)
+            except Exception:
+                pass
+            for node in self.nodes:
+                try:
+                    node.rpdo[1]["Controlword"].raw = 0x06
+                    node.rpdo[1].transmit()
+                except Exception:
+                    pass
+            try:
+                self.network.disconnect() if self._bus_given is None else self.network.notifier.stop(1.0)
+            except Exception:
+                pass
+            self.network = None
+        self._health.set(link="down", device="closed")
+
+    # -- enabling ----------------------------------------------------------------------------------------
+    def _enable_all(self) -> None:
+        for i, node in enumerate(self.nodes):
+            node.nmt.wait_for_heartbeat(max(1.0, 3 * self.heartbeat_s))
+            node.setup_402_state_machine()
+            node.nmt.state = "OPERATIONAL"
+            node.op_mode = "PROFILED VELOCITY"
+            node.sdo[0x6083].raw = self.accel_units
+            node.sdo[0x6084].raw = self.stop_decel_units
+            node.rpdo[2]["Target velocity"].raw = 0
+            node.rpdo[2].transmit()
+            node.state = "OPERATION ENABLED"
+            node.tpdo_values.pop(0x6041, None)     # a statusword cached before the enable (e.g. FAULT) is stale
+            self._last_hb[i] = time.monotonic()
+        with self._lock:
+            self._last_pos = None
+            self._enabled = True
+            self._fault = None
+            self._cmd = [0.0, 0.0, 0.0]
+
+    def _run(self) -> None:
+        backoff = 0.5
+        while not self._stop.is_set():
+            if not self._enabled:
+                self._health.set(link="connecting")
+                try:
+                    self._enable_all()
+                    backoff = 0.5
+                    self._health.set(link="up", device="ok")
+                    log.info("base: drives %s enabled", self.node_ids)
+                except Exception as exc:  # canopen raises several kinds (SdoCommunicationError, RuntimeError, ...)
+                    self._health.set(link="down", error="enabling the drives failed: %s: %s" % (type(exc).__name__, exc))
+                    self._stop.wait(backoff)
+                    backoff = min(5.0, backoff * 2.0)
+                    continue
+            self._control_loop()
+
+    def _control_loop(self) -> None:
+        period = 1.0 / self.rate
+        self.loop_started = time.monotonic()
+        self.cycles = 0
+        self.late_cycles = 0
+        nxt = self.loop_started
+        while not self._stop.is_set() and self._enabled:
+            now = time.monotonic()
+            try:
+                self._cycle(now, period)
+            except Exception as exc:
+                log.exception("base control cycle failed")
+                self._latch("control cycle failed: %s" % exc)
+            self.cycles += 1
+            nxt += period
+            delay = nxt - time.monotonic()
+            if delay < 0:
+                self.late_cycles += 1
+                if delay < -period:
+                    nxt = time.monotonic()
+                    delay = 0.0
+            self._stop.wait(max(0.0, delay))
+
+    def loop_rate(self) -> Dict[str, float]:
+        elapsed = time.monotonic() - self.loop_started if self.loop_started else 0.0
+        achieved = self.cycles / elapsed if elapsed > 0 else 0.0
+        return {"configured_hz": self.rate, "achieved_hz": achieved, "cycles": self.cycles, "late": self.late_cycles}
+
+    # -- one cycle ---------------------------------------------------------------------------------------
+    def _latch(self, why: str, kind: str = "other") -> None:
+        with self._lock:
+            first = self._fault is None
+            self._fault = why
+            if first:
+                self._fault_kind = kind
+            self._cmd = [0.0, 0.0, 0.0]
+            self._open_loop = None
+        try:
+            self._send_wheels([0.0] * 4)
+        except Exception:
+            pass
+        if first:
+            log.error("base stopped: %s", why)
+            self._health.set(device="fault: %s" % why, error=why)
+
+    def _cycle(self, now: float, period: float) -> None:
+        # 1. heartbeat consumer and drive state
+        for i, node in enumerate(self.nodes):
+            silent = now - self._last_hb[i]
+            if silent > self.hb_timeout:
+                self._latch("drive %d (%s) heartbeat lost (silent %.0f ms, timeout %.0f ms)"
+                            % (self.node_ids[i], self.names[i], silent * 1000, self.hb_timeout * 1000), "heartbeat")
+            sw = node.tpdo_values.get(0x6041)
+            if sw is not None and sw & SW_FAULT:
+                self._latch("drive %d (%s) reports FAULT (statusword 0x%04X)" % (self.node_ids[i], self.names[i], sw),
+                            "drive")
+        if self._fault is not None:
+            self._send_wheels([0.0] * 4)
+            self._maybe_recover(now)
+            return
+        # 2. odometry
+        self._odometry()
+        # 3. command
+        twist = self._command(period)
+        self._send_wheels(self.kin.wheels(*twist))
+
+    def _maybe_recover(self, now: float) -> None:
+        """After a heartbeat loss: re-enable once every drive's heartbeat is back (a rebooted drive must be enabled
+        again). A drive FAULT stays latched until :meth:`reset` (RESET_BASE, an operator's decision)."""
+        if self._fault_kind == "heartbeat" and all(now - t < self.hb_timeout for t in self._last_hb):
+            with self._lock:
+                self._enabled = False              # the supervisor enables the drives again
+            self._health.set(link="connecting")
+
+    def _odometry(self) -> None:
+        pos = []
+        for node, pol in zip(self.nodes, self.polarity):
+            counts = node.tpdo_values.get(0x6064)
+            if counts is None:
+                return
+            pos.append(pol * counts / self.pos_scale)
+        with self._lock:
+            if self._last_pos is not None:
+                d = [a - b for a, b in zip(pos, self._last_pos)]
+                dx, dy, dth = self.kin.body(d)
+                x, y, yaw = self._pose
+                ym = yaw + dth / 2.0
+                self._pose = [x + math.cos(ym) * dx - math.sin(ym) * dy, y + math.sin(ym) * dx + math.cos(ym) * dy,
+                              wrap_angle(yaw + dth)]
+            self._last_pos = pos
+            speeds = []
+            for node, pol in zip(self.nodes, self.polarity):
+                v = node.tpdo_values.get(0x606C)
+                speeds.append(pol * (v or 0) / self.vel_scale)
+            self._twist = list(self.kin.body(speeds))
+
+    def _command(self, period: float) -> List[float]:
+        with self._lock:
+            goal = self._goal
+            if goal is not None:
+                target = self._goal_twist(goal)
+            elif self._open_loop is not None and time.monotonic() < self._open_loop[1]:
+                target = list(self._open_loop[0])
+            else:
+                self._open_loop = None
+                target = [0.0, 0.0, 0.0]
+            # acceleration ramps
+            cmd = list(self._cmd)
+            dv = [target[0] - cmd[0], target[1] - cmd[1]]
+            norm = math.hypot(*dv)
+            step = self.lin_accel * period
+            if norm > step:
+                dv = [dv[0] * step / norm, dv[1] * step / norm]
+            cmd[0] += dv[0]
+            cmd[1] += dv[1]
+            dw = target[2] - cmd[2]
+            cmd[2] += max(-self.ang_accel * period, min(self.ang_accel * period, dw))
+            cmd = list(self.kin.scale_to_limit(cmd[0], cmd[1], cmd[2], self.max_wheel))
+            self._cmd = cmd
+            return cmd
+
+    def _goal_twist(self, goal: Dict[str, Any]) -> List[float]:
+        x, y, yaw = self._pose
+        ex, ey = goal["x"] - x, goal["y"] - y
+        eth = wrap_angle(goal["theta"] - yaw)
+        dist = math.hypot(ex, ey)
+        if dist <= goal["tolerance"] and abs(eth) <= goal["angle_tolerance"]:
+            if math.hypot(self._twist[0], self._twist[1]) < 0.01 and abs(self._twist[2]) < 0.02:
+                goal["reached"].set()
+            return [0.0, 0.0, 0.0]
+        # linear: toward the goal, slowing down so it can stop (v^2 = 2 a d) and proportionally near it
+        v = 0.0
+        if dist > 0.3 * goal["tolerance"]:
+            v = min(goal["speed"], math.sqrt(2.0 * self.lin_accel * 0.8 * dist), 1.5 * dist)
+            v = max(v, 0.01)
+        w = 0.0
+        if abs(eth) > 0.3 * goal["angle_tolerance"]:
+            w = min(self.max_ang, math.sqrt(2.0 * self.ang_accel * 0.8 * abs(eth)), 2.0 * abs(eth))
+            w = math.copysign(max(w, 0.01), eth)
+        if dist > 1e-9:
+            c, s = math.cos(-yaw), math.sin(-yaw)
+            bx, by = (c * ex - s * ey) / dist, (s * ex + c * ey) / dist
+        else:
+            bx = by = 0.0
+        return [v * bx, v * by, w]
+
+    def _send_wheels(self, wheels: List[float]) -> None:
+        for node, pol, speed in zip(self.nodes, self.polarity, wheels):
+            node.rpdo[2]["Target velocity"].raw = int(round(pol * speed * self.vel_scale))
+            node.rpdo[2].transmit()
+
+    # -- interface ---------------------------------------------------------------------------------------
+    def _ready(self) -> None:
+        if self._fault is not None:
+            raise DeviceFault("base stopped: %s" % self._fault, device="base")
+        if not self._enabled:
+            raise NotConnected("base drives are not enabled yet (%s)" % (self._health.last_error or "enabling"),
+                               device="base")
+
+    def pose(self) -> List[float]:
+        with self._lock:
+            return list(self._pose)
+
+    def set_pose(self, x: float, y: float, theta: float) -> None:
+        with self._lock:
+            self._pose = [float(x), float(y), wrap_angle(float(theta))]
+
+    def twist(self) -> List[float]:
+        with self._lock:
+            return list(self._twist)
+
+    def set_velocity(self, vx: float, vy: float, wz: float, hold: float = 0.5) -> None:
+        if self._fault is not None or not self._enabled:
+            return
+        vx = max(-self.max_lin, min(self.max_lin, vx))
+        vy = max(-self.max_lin, min(self.max_lin, vy))
+        wz = max(-self.max_ang, min(self.max_ang, wz))
+        with self._lock:
+            if self._goal is None:
+                self._open_loop = ([vx, vy, wz], time.monotonic() + hold)
+
+    def goto(self, waiter: Waiter, x: float, y: float, theta: float, tolerance: float, angle_tolerance: float,
+             speed: float) -> Dict[str, Any]:
+        self._ready()
+        start = self.pose()
+        dist = math.hypot(x - start[0], y - start[1])
+        turn = abs(wrap_angle(theta - start[2]))
+        speed = min(speed, self.max_lin)
+        budget = (max(dist / speed, turn / (0.8 * self.max_ang)) + 2.0 * speed / self.lin_accel
+                  + self.max_ang / self.ang_accel + 5.0)
+        goal = {"x": x, "y": y, "theta": wrap_angle(theta), "tolerance": tolerance,
+                "angle_tolerance": angle_tolerance, "speed": speed, "reached": threading.Event()}
+        t0 = time.monotonic()
+        with self._lock:
+            self._goal = goal
+            self._open_loop = None
+        waiter.on_cancel(self.halt)
+        try:
+            while not goal["reached"].is_set():
+                waiter.sleep(0.02)
+                if self._fault is not None:
+                    raise DeviceFault("base stopped during GOTO: %s" % self._fault, device="base")
+                if not self._enabled:
+                    raise LinkDown("base drives were disabled during GOTO", device="base")
+                if self._goal is not goal:
+                    from locem_bridge.locem.errors import Aborted
+                    raise Aborted("GOTO stopped by STOP_BASE")
+                p = self.pose()
+                left = math.hypot(x - p[0], y - p[1])
+                waiter.report(1.0 - min(1.0, left / dist) if dist > 1e-6 else 0.5, "%.3f m to go" % left)
+                if time.monotonic() - t0 > budget:
+                    raise MotionTimeout("GOTO did not reach (%.3f, %.3f, %.3f) within %.1f s (at %s)"
+                                        % (x, y, theta, budget, ", ".join("%.3f" % v for v in p)), device="base")
+        finally:
+            with self._lock:
+                if self._goal is goal:
+                    self._goal = None
+        p = self.pose()
+        return {"pose": p, "error_xy": math.hypot(x - p[0], y - p[1]), "error_theta": abs(wrap_angle(theta - p[2])),
+                "duration_s": round(time.monotonic() - t0, 3)}
+
+    def halt(self) -> None:
+        """Zero velocity now (drives decelerate at stop_deceleration); ends a GOTO."""
+        with self._lock:
+            self._goal = None
+            self._open_loop = None
+            self._cmd = [0.0, 0.0, 0.0]
+        if self.network is not None and self._enabled:
+            try:
+                self._send_wheels([0.0] * 4)
+            except Exception as exc:
+                log.warning("base halt: %s", exc)
+
+    def stop(self) -> None:
+        self.halt()
+
+    def reset(self, waiter: Waiter, timeout: float = 15.0) -> Dict[str, Any]:
+        """Operator reset after a drive fault: fault reset and enable every drive again (the base stays still)."""
+        cleared = self._fault or ""
+        with self._lock:
+            self._enabled = False           # the supervisor runs the enable sequence (fault reset included)
+            self._fault = None
+            self._fault_kind = ""
+        end = time.monotonic() + timeout
+        while not (self._enabled and self._fault is None):
+            if time.monotonic() > end:
+                raise DeviceFault("RESET_BASE: drives not enabled within %.0f s (%s)"
+                                  % (timeout, self._fault or self._health.last_error), device="base")
+            waiter.sleep(0.05)
+        waiter.sleep(3.0 / self.rate)              # a few control cycles with fresh drive states
+        if self._fault is not None:
+            raise DeviceFault("RESET_BASE: the drives fault again: %s" % self._fault, device="base")
+        return {"cleared": cleared}
+
+    def named_pose(self, name: str) -> List[float]:
+        if name not in self.named_poses:
+            raise BadRequest("no named base pose '%s'; known: %s" % (name, ", ".join(sorted(self.named_poses))
+                                                                     or "none configured (robot.base.named_poses)"),
+                             device="base", argument="name")
+        return list(self.named_poses[name])
+
+    def health(self) -> Dict[str, Any]:
+        report = self._health.report()
+        report["fault"] = self._fault or ""
+        report["pose"] = [round(v, 4) for v in self.pose()]
+        report.update({k: round(v, 2) if isinstance(v, float) else v for k, v in self.loop_rate().items()})
+        return report

@@ -1,0 +1,190 @@
+"""LOCEM commands of the UR arm (declarations in ``SPECS``; :class:`ArmCommands` binds them to an arm backend).
+
+Joint positions in rad; poses ``[x, y, z, rx, ry, rz]`` (m, rotation vector in rad) in the UR ``base`` frame,
+TCP offset applied. Motions have a registry deadline computed from the arguments (worst case) and a tighter one
+from the actual path length once the start is known; a safety stop answers ``HARDWARE_ERROR`` until
+``RESET_ARM``.
+"""
+
+import math
+from typing import Any, Dict, Iterable, List
+
+from locem_bridge.locem.registry import Arg, CommandSpec
+
+from .errors import BadRequest
+from .ur_arm import MOTION_MARGIN_S, UrRtdeArm, joint_travel_bound
+
+CATEGORY = "arm"
+_ARM = frozenset({"arm"})
+TWO_PI = 2.0 * math.pi
+REACH = 1.5                     # m, bound of TCP coordinates accepted (UR10e reach 1.3 m + tool)
+MAX_PATH_POINTS = 50
+
+
+def _joints() -> tuple:
+    return tuple(Arg.number("q%d" % (i + 1), "rad", -TWO_PI, TWO_PI, "joint %d position" % (i + 1)) for i in range(6))
+
+
+def _pose(doc: str) -> tuple:
+    return (Arg.number("x", "m", -REACH, REACH, doc + " x"), Arg.number("y", "m", -REACH, REACH, doc + " y"),
+            Arg.number("z", "m", -REACH, REACH, doc + " z"),
+            Arg.number("rx", "rad", -TWO_PI, TWO_PI, doc + " rotation vector x"),
+            Arg.number("ry", "rad", -TWO_PI, TWO_PI, doc + " rotation vector y"),
+            Arg.number("rz", "rad", -TWO_PI, TWO_PI, doc + " rotation vector z"))
+
+
+def _speed_j(default: float = 1.05) -> tuple:
+    return (Arg.number("speed", "rad/s", 0.01, 3.14, "joint speed of the leading joint", default=default,
+                       keyword_only=True),
+            Arg.number("accel", "rad/s^2", 0.01, 40.0, "joint acceleration", default=1.4, keyword_only=True))
+
+
+def _speed_l(default: float = 0.25) -> tuple:
+    return (Arg.number("speed", "m/s", 0.001, 1.0, "TCP speed", default=default, keyword_only=True),
+            Arg.number("accel", "m/s^2", 0.01, 10.0, "TCP acceleration", default=1.2, keyword_only=True))
+
+
+_MOTION_RESULT = (("q", "joint positions at the end, rad"), ("tcp_pose", "TCP pose at the end"),
+                  ("duration_s", "seconds from start to standstill"))
+
+MOVE_J = CommandSpec(
+    "MOVE_J", "Move the arm to joint positions (synchronised joint motion).", args=_joints() + _speed_j(),
+    resources=_ARM, category=CATEGORY, pausable=False, result=_MOTION_RESULT,
+    deadline=lambda v: joint_travel_bound(v["speed"], v["accel"]))
+MOVE_L = CommandSpec(
+    "MOVE_L", "Move the TCP in a straight line to a pose in the arm base frame.", args=_pose("target") + _speed_l(),
+    resources=_ARM, category=CATEGORY, result=_MOTION_RESULT,
+    deadline=lambda v: 2.0 * REACH / v["speed"] + 2.0 * v["speed"] / v["accel"] + MOTION_MARGIN_S + 1.0)
+MOVE_PATH = CommandSpec(
+    "MOVE_PATH", "Move the TCP in straight lines through waypoints (stops at each; the UR stand-in has no "
+    "blended path moves). Waypoints: x:y:z:rx:ry:rz separated by '/', e.g. 0.5:0.2:0.4:0:3.14:0/0.5:0.3:0.4:0:3.14:0.",
+    args=(Arg.word("waypoints", "up to %d poses x:y:z:rx:ry:rz (m, rad) joined by '/'" % MAX_PATH_POINTS),)
+    + _speed_l(), resources=_ARM, category=CATEGORY, result=_MOTION_RESULT + (("waypoints", "waypoints reached"),),
+    deadline=lambda v: (v["waypoints"].count("/") + 1) * (2.0 * REACH / v["speed"] + 2.0 * v["speed"] / v["accel"]
+                                                          + MOTION_MARGIN_S) + 1.0)
+MOVE_HOME = CommandSpec(
+    "MOVE_HOME", "Move the arm to a named joint pose of the robot configuration (default home).",
+    args=(Arg.word("pose", "named pose of robot.arm.named_poses", default="home"),) + _speed_j(),
+    resources=_ARM, category=CATEGORY, result=_MOTION_RESULT,
+    deadline=lambda v: joint_travel_bound(v["speed"], v["accel"]))
+STOP_ARM = CommandSpec(
+    "STOP_ARM", "Stop the arm now (the running arm command ends ABORTED); never BUSY.", category=CATEGORY,
+    timeout=3.0, preemptive=True, inline=True, result=(("stopped", "true"),))
+GET_JOINTS = CommandSpec(
+    "GET_JOINTS", "Read the joint positions now.", category=CATEGORY, timeout=2.0, inline=True, query=True,
+    result=(("q", "joint positions, rad"), ("names", "joint names")))
+GET_TCP_POSE = CommandSpec(
+    "GET_TCP_POSE", "Read the TCP pose now (arm base frame, TCP offset applied).", category=CATEGORY, timeout=2.0,
+    inline=True, query=True, result=(("pose", "[x, y, z, rx, ry, rz], m and rad"),))
+SET_TCP = CommandSpec(
+    "SET_TCP", "Set the TCP offset from the flange.", args=_pose("TCP offset"), resources=_ARM, category=CATEGORY,
+    timeout=3.0, result=(("tcp", "the offset set"),))
+SET_PAYLOAD = CommandSpec(
+    "SET_PAYLOAD", "Set the payload mass and centre of gravity (flange frame).",
+    args=(Arg.number("mass", "kg", 0.0, 12.5, "payload mass"), Arg.number("cx", "m", -0.5, 0.5, "centre of gravity x"),
+          Arg.number("cy", "m", -0.5, 0.5, "centre of gravity y"), Arg.number("cz", "m", -0.5, 0.5, "centre of gravity z")),
+    resources=_ARM, category=CATEGORY, timeout=3.0, result=(("mass", "kg"), ("cog", "m")))
+TOOL_OUTPUT = CommandSpec(
+    "TOOL_OUTPUT", "Switch a standard digital output of the arm controller (tool power, taping, sander).",
+    args=(Arg.integer("index", 0, 7, "standard digital output DO0..DO7"), Arg.flag("state", "on (true) or off")),
+    resources=frozenset({"tool"}), category=CATEGORY, timeout=3.0, result=(("outputs", "DO0..DO7 after the change"),))
+RESET_ARM = CommandSpec(
+    "RESET_ARM", "Operator reset after a protective or emergency stop whose cause is removed.", resources=_ARM,
+    category=CATEGORY, timeout=30.0, result=(("cleared", "the latched safety stop"), ("steps", "recovery steps")))
+
+SPECS = (MOVE_J, MOVE_L, MOVE_PATH, MOVE_HOME, STOP_ARM, GET_JOINTS, GET_TCP_POSE, SET_TCP, SET_PAYLOAD,
+         TOOL_OUTPUT, RESET_ARM)
+
+
+def parse_waypoints(text: str) -> List[List[float]]:
+    """``x:y:z:rx:ry:rz/...`` -> poses; BadRequest naming the bad waypoint."""
+    points = []
+    for i, chunk in enumerate(text.split("/")):
+        parts = chunk.split(":")
+        try:
+            values = [float(p) for p in parts]
+        except ValueError:
+            values = []
+        if len(values) != 6 or not all(math.isfinite(v) for v in values):
+            raise BadRequest("MOVE_PATH: waypoint %d '%s' must be 6 numbers x:y:z:rx:ry:rz" % (i + 1, chunk[:60]),
+                             argument="waypoints")
+        if any(abs(v) > REACH for v in values[:3]):
+            raise BadRequest("MOVE_PATH: waypoint %d position out of range; allowed -%g to %g m" % (i + 1, REACH, REACH),
+                             argument="waypoints")
+        points.append(values)
+    if len(points) > MAX_PATH_POINTS:
+        raise BadRequest("MOVE_PATH: %d waypoints, allowed at most %d" % (len(points), MAX_PATH_POINTS),
+                         argument="waypoints")
+    return points
+
+
+class ArmCommands:
+    """The arm command set for :meth:`LocemCore.install`."""
+
+    name = "arm"
+
+    def __init__(self, arm: UrRtdeArm) -> None:
+        self.arm = arm
+
+    def specs(self) -> Iterable[CommandSpec]:
+        return SPECS
+
+    def handlers(self) -> Dict[str, Any]:
+        return {"MOVE_J": self.move_j, "MOVE_L": self.move_l, "MOVE_PATH": self.move_path,
+                "MOVE_HOME": self.move_home, "STOP_ARM": self.stop_arm, "GET_JOINTS": self.get_joints,
+                "GET_TCP_POSE": self.get_tcp_pose, "SET_TCP": self.set_tcp, "SET_PAYLOAD": self.set_payload,
+                "TOOL_OUTPUT": self.tool_output, "RESET_ARM": self.reset_arm}
+
+    def stop(self) -> None:
+        self.arm.stop()
+
+    def health(self) -> Dict[str, Any]:
+        return self.arm.health()
+
+    def move_j(self, ctx: Any, q1: float, q2: float, q3: float, q4: float, q5: float, q6: float, speed: float,
+               accel: float) -> Dict[str, Any]:
+        return self.arm.move_joints(ctx, [q1, q2, q3, q4, q5, q6], speed, accel)
+
+    def move_l(self, ctx: Any, x: float, y: float, z: float, rx: float, ry: float, rz: float, speed: float,
+               accel: float) -> Dict[str, Any]:
+        return self.arm.move_linear(ctx, [x, y, z, rx, ry, rz], speed, accel)
+
+    def move_path(self, ctx: Any, waypoints: str, speed: float, accel: float) -> Dict[str, Any]:
+        points = parse_waypoints(waypoints)
+        out: Dict[str, Any] = {}
+        for i, pose in enumerate(points):
+            out = self.arm.move_linear(ctx, pose, speed, accel)
+            ctx.report((i + 1) / len(points), "waypoint %d of %d" % (i + 1, len(points)))
+        out["waypoints"] = len(points)
+        return out
+
+    def move_home(self, ctx: Any, pose: str, speed: float, accel: float) -> Dict[str, Any]:
+        return self.arm.move_joints(ctx, self.arm.named_pose(pose), speed, accel)
+
+    def stop_arm(self, ctx: Any) -> Dict[str, Any]:
+        self.arm.stop_motion("STOP_ARM")
+        return {"stopped": True}
+
+    def get_joints(self, ctx: Any) -> Dict[str, Any]:
+        q = self.arm.joint_positions()
+        return {"q": q, "names": list(self.arm.joint_names),
+                "message": " ".join("%.4f" % v for v in q)}
+
+    def get_tcp_pose(self, ctx: Any) -> Dict[str, Any]:
+        pose = self.arm.tcp_pose()
+        return {"pose": pose, "message": " ".join("%.4f" % v for v in pose)}
+
+    def set_tcp(self, ctx: Any, x: float, y: float, z: float, rx: float, ry: float, rz: float) -> Dict[str, Any]:
+        self.arm.set_tcp([x, y, z, rx, ry, rz])
+        return {"tcp": [x, y, z, rx, ry, rz]}
+
+    def set_payload(self, ctx: Any, mass: float, cx: float, cy: float, cz: float) -> Dict[str, Any]:
+        self.arm.set_payload(mass, [cx, cy, cz])
+        return {"mass": mass, "cog": [cx, cy, cz]}
+
+    def tool_output(self, ctx: Any, index: int, state: bool) -> Dict[str, Any]:
+        self.arm.set_digital_output(index, state)
+        return {"outputs": self.arm.digital_outputs()}
+
+    def reset_arm(self, ctx: Any) -> Dict[str, Any]:
+        return self.arm.reset(ctx)

@@ -1,0 +1,61 @@
+"""One exception hierarchy for every bridge, mapped to LOCEM result codes.
+
+:class:`BridgeError` derives from :class:`locem_bridge.locem.errors.LocemError`, so a handler can let any bridge
+error escape and the dispatcher answers with the right code:
+
+=========================  ==================  ===========================================================
+class                      LOCEM code          raised when
+=========================  ==================  ===========================================================
+:class:`LinkDown`          HARDWARE_ERROR      the link to a device is down or a request timed out
+:class:`DeviceFault`       HARDWARE_ERROR      the device reports a fault (drive FAULT, compressor fault)
+:class:`SafetyStop`        HARDWARE_ERROR      protective / emergency stop; latched until RESET_ARM
+:class:`NotConnected`      NOT_READY           the backend has not connected yet (startup, reconnecting)
+:class:`BridgeConfigError` NOT_READY           the robot YAML lacks or mis-states something a bridge needs
+:class:`BadRequest`        INVALID_ARGUMENT    arguments are well-formed but impossible (unknown pose name,
+                                               unreachable point, wrong tool)
+:class:`MotionTimeout`     TIMEOUT             a motion did not end within its path-length deadline
+=========================  ==================  ===========================================================
+"""
+
+from typing import Optional
+
+from locem_bridge.locem.codes import Code
+from locem_bridge.locem.errors import LocemError
+
+
+class BridgeError(LocemError):
+    """Base class of every bridge error; ``device`` names the backend (``arm``, ``compressor``, ``base``)."""
+
+    code = Code.HARDWARE_ERROR
+
+    def __init__(self, message: str, device: str = "", argument: Optional[str] = None) -> None:
+        super().__init__(message, argument=argument)
+        self.device = device
+
+
+class LinkDown(BridgeError):
+    code = Code.HARDWARE_ERROR
+
+
+class DeviceFault(BridgeError):
+    code = Code.HARDWARE_ERROR
+
+
+class SafetyStop(DeviceFault):
+    code = Code.HARDWARE_ERROR
+
+
+class NotConnected(BridgeError):
+    code = Code.NOT_READY
+
+
+class BridgeConfigError(BridgeError):
+    code = Code.NOT_READY
+
+
+class BadRequest(BridgeError):
+    code = Code.INVALID_ARGUMENT
+
+
+class MotionTimeout(BridgeError):
+    code = Code.TIMEOUT

@@ -1,0 +1,235 @@
+"""Spray compressor over Modbus TCP (pymodbus client), register map of ``locem_bridge.sim.compressor``.
+
+=================  =======  ======================================================================
+table              address  meaning
+=================  =======  ======================================================================
+coils              0, 1     motor_on, spray_valve (write 1 = on / open); coil 2 fault_reset
+holding register   0        pressure set-point, centibar
+input registers    0..3     measured pressure (cbar), motor current (cA), fault code, status bits
+                            (bit0 motor running, bit1 valve open, bit2 pressure in range, bit3 fault)
+=================  =======  ======================================================================
+
+Lifecycle: ``ModbusCompressor(cfg)`` -> :meth:`start` (poll thread at ``poll_rate`` Hz, 10..20) -> :meth:`close`.
+Every request has a timeout of at most 500 ms and is retried once on a fresh connection (pymodbus reconnects on
+the next request, with its own growing delay). A failed poll marks the link ``down``; commands then fail with
+:class:`~.errors.LinkDown` (``HARDWARE_ERROR``). The first successful poll after a loss commands the spray valve
+closed before anything else: a valve left open when the link died never reopens by itself.
+"""
+
+import inspect
+import logging
+import threading
+import time
+from typing import Any, Callable, Dict, List, Mapping, Optional
+
+from .config import need
+from .errors import DeviceFault, LinkDown
+from .interfaces import Compressor, Health
+
+log = logging.getLogger(__name__)
+
+COIL_MOTOR, COIL_VALVE, COIL_FAULT_RESET = 0, 1, 2
+HOLD_SETPOINT = 0
+IN_PRESSURE = 0
+FAULTS = {0: "none", 1: "overpressure", 2: "motor overload"}
+MAX_REQUEST_TIMEOUT = 0.5
+
+
+class ModbusCompressor(Compressor):
+    """The compressor backend (see the module docstring). ``cfg`` is ``robot.compressor``."""
+
+    def __init__(self, cfg: Mapping[str, Any], poll_rate: float = 15.0, stale_after: float = 0.5) -> None:
+        self.host = need(cfg, "host", str, where="robot.compressor")
+        self.port = need(cfg, "port", int, lo=1, hi=65535, where="robot.compressor")
+        self.device_id = need(cfg, "device_id", int, lo=0, hi=247, where="robot.compressor")
+        self.timeout = min(MAX_REQUEST_TIMEOUT, need(cfg, "timeout", float, default=0.5, lo=0.01,
+                                                     where="robot.compressor"))
+        band = need(cfg, "pressure_range", list, where="robot.compressor")
+        self.pressure_range = (float(band[0]), float(band[1]))
+        self.max_setpoint = need(cfg, "max_setpoint", float, lo=0.1, where="robot.compressor")
+        if not 10.0 <= poll_rate <= 20.0:
+            raise ValueError("poll_rate must be 10..20 Hz, got %r" % poll_rate)
+        self.poll_rate = poll_rate
+        self.stale_after = stale_after
+        self._health = Health("connecting")
+        self._lock = threading.Lock()           # one request at a time on the client
+        self._client: Any = None
+        self._id_kw = "device_id"
+        self._state: Dict[str, Any] = {}
+        self._last_ok = 0.0
+        self._was_down = False
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self.polls = 0
+
+    # -- lifecycle ---------------------------------------------------------------------------------------
+    def start(self) -> None:
+        from pymodbus.client import ModbusTcpClient
+
+        # pymodbus logs every failed attempt at ERROR level; this backend reports link state itself (health,
+        # one warning per loss), so keep the node's log readable while a device is unplugged
+        logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+        params = inspect.signature(ModbusTcpClient.read_input_registers).parameters
+        self._id_kw = "device_id" if "device_id" in params else "slave"
+        kwargs: Dict[str, Any] = {"port": self.port, "timeout": self.timeout, "retries": 0}
+        init = inspect.signature(ModbusTcpClient.__init__).parameters
+        if "reconnect_delay" in init:
+            kwargs.update(reconnect_delay=0.1, reconnect_delay_max=1.0)
+        self._client = ModbusTcpClient(self.host, **kwargs)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._poll_loop, name="compressor-poll", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+            self._thread = None
+        if self._client is not None:
+            try:
+                self._request(lambda c, kw: c.write_coil(COIL_VALVE, False, **kw), attempts=1)
+            except LinkDown:
+                pass
+            self._client.close()
+            self._client = None
+        self._health.set(link="down", device="closed")
+
+    # -- requests ----------------------------------------------------------------------------------------
+    def _request(self, call: Callable[[Any, Dict[str, Any]], Any], attempts: int = 2) -> Any:
+        """One Modbus request with a bounded timeout, retried; raises LinkDown / DeviceFault."""
+        from pymodbus.exceptions import ModbusException
+
+        if self._client is None:
+            raise LinkDown("compressor backend is not started", device="compressor")
+        error = ""
+        for attempt in range(attempts):
+            with self._lock:
+                try:
+                    reply = call(self._client, {self._id_kw: self.device_id})
+                except (ModbusException, OSError) as exc:
+                    error = "%s: %s" % (type(exc).__name__, exc)
+                    try:
+                        self._client.close()       # the next attempt reconnects
+                    except Exception:
+                        pass
+                    continue
+            if reply.isError():
+                code = getattr(reply, "exception_code", None)
+                if code is None:
+                    error = "no valid answer (%s)" % (reply,)
+                    continue
+                raise DeviceFault("compressor refused the request (Modbus exception %s)" % code, device="compressor")
+            return reply
+        raise LinkDown("compressor %s:%d does not answer (%d attempts, %.0f ms timeout each): %s"
+                       % (self.host, self.port, attempts, self.timeout * 1000, error), device="compressor")
+
+    def _read_state(self) -> Dict[str, Any]:
+        regs = self._request(lambda c, kw: c.read_input_registers(IN_PRESSURE, count=4, **kw)).registers
+        hold = self._request(lambda c, kw: c.read_holding_registers(HOLD_SETPOINT, count=1, **kw)).registers
+        bits = regs[3]
+        state = {"pressure": regs[0] / 100.0, "motor_current": regs[1] / 100.0, "fault_code": regs[2],
+                 "fault": FAULTS.get(regs[2], "code %d" % regs[2]), "motor_running": bool(bits & 1),
+                 "valve_open": bool(bits & 2), "in_range": bool(bits & 4), "fault_active": bool(bits & 8),
+                 "setpoint": hold[0] / 100.0, "stamp": time.time()}
+        return state
+
+    def _poll_loop(self) -> None:
+        period = 1.0 / self.poll_rate
+        nxt = time.monotonic()
+        while not self._stop.is_set():
+            try:
+                state = self._read_state()
+                silent = self._last_ok > 0.0 and time.monotonic() - self._last_ok > self.stale_after
+                if self._was_down or silent or self._last_ok == 0.0:
+                    # link (re)gained: the valve is commanded closed before anything else happens
+                    self._request(lambda c, kw: c.write_coil(COIL_VALVE, False, **kw))
+                    state["valve_open"] = False
+                    if self._was_down or silent:
+                        log.warning("compressor link back: spray valve commanded closed")
+                    self._was_down = False
+                with self._lock:
+                    self._state = state
+                self._last_ok = time.monotonic()
+                self.polls += 1
+                self._health.set(link="up", device="fault: %s" % state["fault"] if state["fault_active"] else "ok",
+                                 pressure=state["pressure"], setpoint=state["setpoint"],
+                                 motor_running=state["motor_running"], valve_open=state["valve_open"])
+            except LinkDown as exc:
+                if not self._was_down:
+                    log.warning("%s", exc)
+                self._was_down = True
+                self._health.set(link="down", device="unknown", error=exc.message)
+            except DeviceFault as exc:
+                self._health.set(error=exc.message)
+            nxt += period
+            delay = nxt - time.monotonic()
+            if delay < -period:
+                nxt = time.monotonic()
+                delay = 0.0
+            self._stop.wait(max(0.0, delay))
+
+    # -- interface ---------------------------------------------------------------------------------------
+    def check_link(self) -> None:
+        age = time.monotonic() - self._last_ok
+        if self._was_down or self._last_ok == 0.0 or age > self.stale_after:
+            raise LinkDown("compressor link is down (no answer for %.2f s): %s"
+                           % (age if self._last_ok else float("inf"), self._health.last_error or "not connected yet"),
+                           device="compressor")
+
+    def cached(self) -> Dict[str, Any]:
+        with self._lock:
+            return dict(self._state)
+
+    def read(self) -> Dict[str, Any]:
+        state = self._read_state()
+        with self._lock:
+            self._state = state
+        return dict(state)
+
+    def read_pressure(self) -> float:
+        """One fresh read of the measured pressure register (bar)."""
+        regs = self._request(lambda c, kw: c.read_input_registers(IN_PRESSURE, count=1, **kw)).registers
+        return regs[0] / 100.0
+
+    def set_motor(self, on: bool) -> None:
+        self.check_link()
+        if not on:
+            self._request(lambda c, kw: c.write_coil(COIL_VALVE, False, **kw))
+        self._request(lambda c, kw: c.write_coil(COIL_MOTOR, bool(on), **kw))
+
+    def set_setpoint(self, bar: float) -> None:
+        self.check_link()
+        value = int(round(bar * 100.0))
+        self._request(lambda c, kw: c.write_register(HOLD_SETPOINT, value, **kw))
+
+    def set_valve(self, open_: bool) -> None:
+        self.check_link()
+        self._request(lambda c, kw: c.write_coil(COIL_VALVE, bool(open_), **kw))
+
+    def reset_fault(self) -> None:
+        self.check_link()
+        self._request(lambda c, kw: c.write_coil(COIL_FAULT_RESET, True, **kw))
+
+    def stop(self) -> None:
+        """Valve closed, motor off; never blocks on a link known to be down (the valve closes when it returns)."""
+        try:
+            self.check_link()
+        except LinkDown as exc:
+            self._was_down = True
+            log.warning("compressor stop deferred until the link returns: %s", exc.message)
+            return
+        for coil in (COIL_VALVE, COIL_MOTOR):
+            try:
+                self._request(lambda c, kw, coil=coil: c.write_coil(coil, False, **kw), attempts=1)
+            except (LinkDown, DeviceFault) as exc:
+                self._was_down = True       # forces the valve-closed write on the next good poll
+                log.warning("compressor stop: %s", exc)
+
+    def health(self) -> Dict[str, Any]:
+        report = self._health.report()
+        age = time.monotonic() - self._last_ok if self._last_ok else None
+        report["age_s"] = round(age, 3) if age is not None else None
+        if report["link"] == "up" and age is not None and age > self.stale_after:
+            report["link"] = "down"        # a request is hanging: no answer within stale_after
+            report["last_error"] = "no answer from the compressor for %.2f s" % age
+        return report

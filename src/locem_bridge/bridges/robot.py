@@ -1,0 +1,85 @@
+"""Build every configured backend and command set of one robot from its YAML (the composition root of the
+bridges; ``locem_node`` calls it, tests and benchmarks may too).
+
+::
+
+    robot = build_robot(load_robot_config(path), site=site_yaml_path, initial_pose=(2.4, 1.6, 1.5708))
+    robot.start()                       # every backend starts connecting in the background
+    for command_set in robot.command_sets:
+        core.install(command_set)
+    ...
+    robot.close()
+
+Command sets are built base first, then arm, compressor and the wall commands: ``STOP`` runs the device stops in
+that order, so motion stops before process outputs are switched off. ``devices`` limits what is built (e.g. ``("compressor",)`` for a compressor-only bench); a section missing from
+the YAML is skipped, its commands then answer ``NOT_READY``. The wall (plasterboard) commands are built when an
+arm is.
+"""
+
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+
+from .backends import backend_class
+from .config import need, resolve_path
+
+ALL_DEVICES = ("arm", "compressor", "base", "scanner")
+
+
+class Robot:
+    """The backends (``arm``, ``compressor``, ``base``, ``scanner``) and command sets of one robot."""
+
+    def __init__(self) -> None:
+        self.backends: Dict[str, Any] = {}
+        self.command_sets: List[Any] = []
+
+    def get(self, kind: str) -> Any:
+        return self.backends.get(kind)
+
+    def start(self) -> None:
+        for kind, backend in self.backends.items():
+            if hasattr(backend, "start") and kind != "scanner":
+                backend.start()
+
+    def close(self) -> None:
+        for kind in ("base", "arm", "compressor"):
+            backend = self.backends.get(kind)
+            if backend is not None:
+                try:
+                    backend.close()
+                except Exception:  # close every backend, whatever one of them does
+                    pass
+
+
+def build_robot(robot_cfg: Mapping[str, Any], devices: Sequence[str] = ALL_DEVICES, site: Any = None,
+                initial_pose: Optional[Tuple[float, float, float]] = None,
+                named_base_poses: Optional[Mapping[str, Sequence[float]]] = None) -> Robot:
+    from .commands_arm import ArmCommands
+    from .commands_base import BaseCommands
+    from .commands_compressor import CompressorCommands
+    from .commands_wall import WallCommands
+
+    robot = Robot()
+    if "base" in devices and "base" in robot_cfg:
+        base_cfg = dict(robot_cfg["base"])
+        if named_base_poses:
+            base_cfg["named_poses"] = dict(base_cfg.get("named_poses", {}) or {}, **dict(named_base_poses))
+        cls = backend_class("base", str(need(base_cfg, "drives.profile", str, default="cia402", where="robot.base")))
+        eds = resolve_path(robot_cfg, need(base_cfg, "eds", str, where="robot.base"))
+        robot.backends["base"] = cls(base_cfg, eds, initial_pose=tuple(initial_pose or (0.0, 0.0, 0.0)))
+        robot.command_sets.append(BaseCommands(robot.backends["base"]))
+    if "arm" in devices and "arm" in robot_cfg:
+        cls = backend_class("arm", str(robot_cfg["arm"].get("backend", "ur_rtde")))
+        robot.backends["arm"] = cls(robot_cfg["arm"])
+        robot.command_sets.append(ArmCommands(robot.backends["arm"]))
+    if "compressor" in devices and "compressor" in robot_cfg:
+        cls = backend_class("compressor", str(robot_cfg["compressor"].get("protocol", "modbus_tcp")))
+        robot.backends["compressor"] = cls(robot_cfg["compressor"])
+        robot.command_sets.append(CompressorCommands(robot.backends["compressor"]))
+    if "scanner" in devices and "scanner" in robot_cfg and site:
+        cls = backend_class("scanner", str(robot_cfg["scanner"].get("backend", "sim")))
+        robot.backends["scanner"] = cls(robot_cfg["scanner"], site)
+    if "arm" in robot.backends:
+        robot.command_sets.append(WallCommands(robot_cfg, arm=robot.backends.get("arm"),
+                                               base=robot.backends.get("base"),
+                                               compressor=robot.backends.get("compressor"),
+                                               scanner=robot.backends.get("scanner")))
+    return robot

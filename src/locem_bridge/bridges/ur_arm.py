@@ -1,0 +1,417 @@
+"""UR arm backend over RTDE (ur_rtde in a supervised child process, see :mod:`.ur_worker`).
+
+Lifecycle: ``UrRtdeArm(arm_cfg)`` -> :meth:`start` (a supervisor thread starts the worker, polls the arm state at
+``poll_rate`` Hz, and restarts the worker with exponential backoff, 0.5 s doubling to 5 s, whenever the link is
+lost: a reconnect redoes the whole handshake including the script upload) -> :meth:`close`.
+
+Motions: every move is started asynchronously and watched: it ends when the controller reports the async
+operation finished and the arm stands still at the target; it is stopped (``stopJ`` / ``stopL``) on cancel,
+STOP, STOP_ARM and when it overruns its deadline ``path / speed + 2 speed / accel + margin``
+(:class:`~.errors.MotionTimeout`). Before each command the link and the safety state are checked.
+
+Safety: a protective stop, an emergency stop or any safety mode other than NORMAL / REDUCED is latched as
+:class:`~.errors.SafetyStop` (``HARDWARE_ERROR``) and refuses every motion until :meth:`reset` (``RESET_ARM``),
+which an operator sends after removing the cause; nothing clears it automatically.
+"""
+
+import json
+import logging
+import math
+import os
+import queue
+import subprocess
+import sys
+import threading
+import time
+from typing import Any, Dict, List, Mapping, Optional, Sequence
+
+from locem_bridge.locem.errors import Aborted
+
+from .config import need
+from .errors import BadRequest, DeviceFault, LinkDown, MotionTimeout, NotConnected, SafetyStop
+from .geometry import angle_between, distance
+from .interfaces import Arm, Health, Waiter
+
+log = logging.getLogger(__name__)
+
+SAFETY_OK = (1, 2)                       # NORMAL, REDUCED
+SAFETY_NAMES = {1: "NORMAL", 2: "REDUCED", 3: "PROTECTIVE_STOP", 4: "RECOVERY", 5: "SAFEGUARD_STOP",
+                6: "SYSTEM_EMERGENCY_STOP", 7: "ROBOT_EMERGENCY_STOP", 8: "VIOLATION", 9: "FAULT"}
+ROBOT_RUNNING = 7
+STOP_DECEL_J = 10.0                      # rad/s^2 used by stopJ (1 rad/s stops in 0.1 s)
+STOP_DECEL_L = 5.0                       # m/s^2 used by stopL
+MOTION_MARGIN_S = 2.0
+JOINT_TOL = 2e-3                         # rad, "at the target" for joint moves
+LINEAR_TOL = 1e-3                        # m, "at the target" for linear moves
+REQUEST_TIMEOUT = 3.0
+
+
+class UrRtdeArm(Arm):
+    """The UR arm backend (see the module docstring). ``cfg`` is ``robot.arm``."""
+
+    def __init__(self, cfg: Mapping[str, Any], poll_rate: float = 50.0, connect_timeout: float = 20.0) -> None:
+        self.host = need(cfg, "controller.host", str, where="robot.arm")
+        self.frequency = need(cfg, "controller.rtde_frequency", float, default=500.0, lo=1.0, hi=500.0,
+                              where="robot.arm")
+        self.joint_names = list(need(cfg, "joint_names", list, where="robot.arm"))
+        self.named_poses = {k: [float(x) for x in v] for k, v in need(cfg, "named_poses", dict, where="robot.arm").items()}
+        self.poll_rate = poll_rate
+        self.connect_timeout = connect_timeout
+        self._health = Health("connecting")
+        self._io_lock = threading.Lock()
+        self._proc: Optional[subprocess.Popen] = None
+        self._replies: "queue.Queue[Dict[str, Any]]" = queue.Queue()
+        self._ids = 0
+        self._state: Dict[str, Any] = {}
+        self._state_lock = threading.Lock()
+        self._safety: Optional[str] = None           # latched safety stop (text), cleared only by reset()
+        self._link_up = threading.Event()
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self._motion_kind = ""
+        self._stop_requested: Optional[str] = None
+        self.reconnects = 0
+        self.connections = 0
+
+    # -- worker process ----------------------------------------------------------------------------------
+    def _spawn(self) -> None:
+        src = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        env = dict(os.environ)
+        env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        proc = subprocess.Popen([sys.executable, "-u", "-m", "locem_bridge.bridges.ur_worker", "--host", self.host,
+                                 "--frequency", repr(self.frequency)], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,
+                                universal_newlines=True, bufsize=1)
+        replies: "queue.Queue[Dict[str, Any]]" = queue.Queue()
+
+        def reader() -> None:
+            assert proc.stdout is not None
+            for line in proc.stdout:
+                try:
+                    replies.put(json.loads(line))
+                except ValueError:
+                    continue
+            replies.put({"eof": True})
+        threading.Thread(target=reader, name="ur-worker-reader", daemon=True).start()
+        try:
+            first = replies.get(timeout=self.connect_timeout)
+        except queue.Empty:
+            first = {"ready": False, "error": "no answer within %.0f s" % self.connect_timeout}
+        if not first.get("ready"):
+            _kill(proc)
+            raise LinkDown("UR controller %s: connection failed: %s" % (self.host, first.get("error", "worker ended")),
+                           device="arm")
+        with self._io_lock:
+            self._proc, self._replies = proc, replies
+
+    def _call(self, op: str, *args: Any, timeout: float = REQUEST_TIMEOUT) -> Any:
+        with self._io_lock:
+            proc = self._proc
+            if proc is None or proc.poll() is not None:
+                raise LinkDown("UR controller %s is not connected (%s)" % (self.host, self._health.last_error
+                                                                             or "reconnecting"), device="arm")
+            self._ids += 1
+            rid = self._ids
+            try:
+                assert proc.stdin is not None
+                proc.stdin.write(json.dumps({"id": rid, "op": op, "args": list(args)}) + "\n")
+                proc.stdin.flush()
+                while True:
+                    reply = self._replies.get(timeout=timeout)
+                    if reply.get("eof"):
+                        raise LinkDown("UR worker for %s ended during %s" % (self.host, op), device="arm")
+                    if reply.get("id") == rid:
+                        break
+            except (OSError, queue.Empty) as exc:
+                self._drop_locked("no answer to %s: %s" % (op, type(exc).__name__))
+                raise LinkDown("UR controller %s: no answer to %s" % (self.host, op), device="arm")
+        if not reply.get("ok"):
+            raise DeviceFault("UR controller %s refused %s: %s" % (self.host, op, reply.get("error")), device="arm")
+        return reply.get("result")
+
+    def _drop_locked(self, why: str) -> None:
+        proc, self._proc = self._proc, None
+        self._link_up.clear()
+        self._health.set(link="down", error=why)
+        if proc is not None:
+            threading.Thread(target=_kill, args=(proc,), daemon=True).start()
+
+    # -- supervisor ----------------------------------------------------------------------------------------
+    def start(self) -> None:
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._supervise, name="ur-supervisor", daemon=True)
+        self._thread.start()
+
+    def _supervise(self) -> None:
+        backoff = 0.5
+        while not self._stop.is_set():
+            if self._proc is None:
+                self._health.set(link="connecting")
+                try:
+                    self._spawn()
+                except LinkDown as exc:
+                    self._health.set(link="down", error=exc.message)
+                    self._stop.wait(backoff)
+                    backoff = min(5.0, backoff * 2.0)
+                    continue
+                self.connections += 1
+                if self.connections > 1:
+                    self.reconnects += 1
+                    log.warning("UR controller %s: reconnected (%d)", self.host, self.reconnects)
+                backoff = 0.5
+            try:
+                self._poll()
+            except (LinkDown, DeviceFault) as exc:
+                with self._io_lock:
+                    self._drop_locked(exc.message)
+                log.warning("UR controller %s: link lost: %s", self.host, exc.message)
+                continue
+            self._stop.wait(1.0 / self.poll_rate)
+
+    def _poll(self) -> Dict[str, Any]:
+        st = self._call("state")
+        if not (st["receive_connected"] and st["control_connected"]):
+            raise LinkDown("UR controller %s: RTDE connection lost" % self.host, device="arm")
+        with self._state_lock:
+            self._state = st
+            self._state["stamp"] = time.time()
+        mode = st["safety_mode"]
+        if mode not in SAFETY_OK and self._safety is None:
+            self._safety = "%s (safety mode %d)" % (SAFETY_NAMES.get(mode, "UNKNOWN").lower().replace("_", " "), mode)
+            log.error("UR controller %s: %s latched; RESET_ARM after the cause is removed", self.host, self._safety)
+        self._link_up.set()
+        device = "safety stop: %s" % self._safety if self._safety else (
+            "ok" if st["robot_mode"] == ROBOT_RUNNING and st["program_running"] else
+            "robot mode %d, program %s" % (st["robot_mode"], "running" if st["program_running"] else "stopped"))
+        self._health.set(link="up", device=device, safety_mode=SAFETY_NAMES.get(mode, str(mode)),
+                         reconnects=self.reconnects)
+        return st
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(3.0)
+            self._thread = None
+        with self._io_lock:
+            proc, self._proc = self._proc, None
+        if proc is not None:
+            try:
+                assert proc.stdin is not None
+                proc.stdin.write(json.dumps({"op": "exit"}) + "\n")
+                proc.stdin.flush()
+                proc.wait(3.0)
+            except Exception:
+                pass
+            _kill(proc)
+        self._link_up.clear()
+        self._health.set(link="down", device="closed")
+
+    # -- state -----------------------------------------------------------------------------------------------
+    def cached_state(self) -> Dict[str, Any]:
+        with self._state_lock:
+            return dict(self._state)
+
+    def joint_positions(self) -> List[float]:
+        return list(self._call("q"))
+
+    def tcp_pose(self) -> List[float]:
+        return list(self._call("tcp"))
+
+    def health(self) -> Dict[str, Any]:
+        return self._health.report()
+
+    @property
+    def safety_latched(self) -> Optional[str]:
+        return self._safety
+
+    def _ready(self) -> Dict[str, Any]:
+        """Connection and safety check before a command; returns a fresh state."""
+        if not self._link_up.is_set():
+            raise NotConnected("UR controller %s is not connected yet (%s)" % (
+                self.host, self._health.last_error or "connecting"), device="arm")
+        st = self._poll()
+        if self._safety:
+            raise SafetyStop("arm %s is latched; remove the cause and send RESET_ARM" % self._safety, device="arm")
+        if st["robot_mode"] != ROBOT_RUNNING or not st["program_running"]:
+            raise DeviceFault("arm not ready: robot mode %d, control program %s" % (
+                st["robot_mode"], "running" if st["program_running"] else "not running"), device="arm")
+        return st
+
+    # -- motions ---------------------------------------------------------------------------------------------
+    def move_joints(self, waiter: Waiter, q: Sequence[float], speed: float, accel: float) -> Dict[str, Any]:
+        st = self._ready()
+        travel = max(abs(a - b) for a, b in zip(q, st["q"]))
+        return self._motion(waiter, "moveJ", list(q), speed, accel, travel, target_q=list(q))
+
+    def move_linear(self, waiter: Waiter, pose: Sequence[float], speed: float, accel: float) -> Dict[str, Any]:
+        st = self._ready()
+        travel = distance(pose[:3], st["tcp"][:3]) + 0.3 * angle_between(pose, st["tcp"])
+        return self._motion(waiter, "moveL", list(pose), speed, accel, travel, target_pose=list(pose))
+
+    def _motion(self, waiter: Waiter, op: str, target: List[float], speed: float, accel: float, travel: float,
+                target_q: Optional[List[float]] = None, target_pose: Optional[List[float]] = None) -> Dict[str, Any]:
+        budget = travel / speed + 2.0 * speed / accel + MOTION_MARGIN_S
+        self._stop_requested = None
+        self._motion_kind = op
+        waiter.on_cancel(lambda: self.stop_motion("cancelled"))
+        start = time.monotonic()
+        if not self._call(op, target, speed, accel):
+            self._raise_if_safety()
+            raise DeviceFault("UR controller refused %s to %s" % (op, _fmt(target)), device="arm")
+        moving_seen = False
+        try:
+            while True:
+                waiter.sleep(0.01)
+                if self._stop_requested:
+                    raise Aborted("%s stopped: %s" % (op, self._stop_requested))
+                st = self._poll()
+                self._raise_if_safety()
+                elapsed = time.monotonic() - start
+                still = max(abs(v) for v in st["qd"]) < 1e-4
+                moving_seen = moving_seen or not still or st["progress"] >= 0
+                if st["progress"] < 0 and still and (moving_seen or elapsed > 0.2):
+                    break
+                if travel > 0:
+                    waiter.report(min(0.99, elapsed / max(budget - MOTION_MARGIN_S, 1e-3)), "%s running" % op)
+                if elapsed > budget:
+                    self.stop_motion("deadline")
+                    raise MotionTimeout("%s did not finish within %.2f s (path %.3f, speed %.3f, accel %.3f)"
+                                        % (op, budget, travel, speed, accel), device="arm")
+        except BaseException:
+            if not self._safety and self._link_up.is_set():
+                self.stop_motion("aborted")
+            raise
+        finally:
+            self._motion_kind = ""
+        if target_q is not None:
+            err = max(abs(a - b) for a, b in zip(st["q"], target_q))
+            if err > JOINT_TOL:
+                raise DeviceFault("moveJ ended %.4f rad from the target" % err, device="arm")
+        if target_pose is not None:
+            err = distance(st["tcp"][:3], target_pose[:3])
+            if err > LINEAR_TOL:
+                raise DeviceFault("moveL ended %.4f m from the target" % err, device="arm")
+        return {"q": st["q"], "tcp_pose": st["tcp"], "duration_s": round(time.monotonic() - start, 3)}
+
+    def _raise_if_safety(self) -> None:
+        if self._safety:
+            raise SafetyStop("arm %s; the motion was stopped by the controller; remove the cause and send RESET_ARM"
+                             % self._safety, device="arm")
+
+    def inverse_kinematics(self, pose: Sequence[float], qnear: Optional[Sequence[float]] = None) -> List[float]:
+        """Joint positions for a TCP pose (controller's IK, closest to ``qnear`` / the current joints)."""
+        q = qnear if qnear is not None else self.cached_state().get("q") or self.joint_positions()
+        try:
+            return [float(v) for v in self._call("ik", list(pose), list(q))]
+        except DeviceFault as exc:
+            raise BadRequest("pose %s is not reachable by the arm: %s" % (_fmt(pose), exc.message), device="arm")
+
+    def stop_motion(self, reason: str = "") -> None:
+        """Decelerate now (stopL for a linear move, stopJ otherwise); never raises."""
+        self._stop_requested = reason or "stop requested"
+        try:
+            if self._motion_kind == "moveL":
+                self._call("stopL", STOP_DECEL_L, timeout=1.0)
+            else:
+                self._call("stopJ", STOP_DECEL_J, timeout=1.0)
+        except (LinkDown, DeviceFault, NotConnected) as exc:
+            log.warning("arm stop: %s", exc.message)
+
+    def stop(self) -> None:
+        self.stop_motion("STOP")
+
+    def named_pose(self, name: str) -> List[float]:
+        if name not in self.named_poses:
+            raise BadRequest("no named arm pose '%s'; known: %s" % (name, ", ".join(sorted(self.named_poses))),
+                             device="arm", argument="pose")
+        return list(self.named_poses[name])
+
+    # -- settings --------------------------------------------------------------------------------------------
+    def set_tcp(self, pose: Sequence[float]) -> None:
+        self._ready()
+        if not self._call("setTcp", list(pose)):
+            raise DeviceFault("setTcp refused", device="arm")
+
+    def set_payload(self, mass: float, cog: Sequence[float]) -> None:
+        self._ready()
+        if not self._call("setPayload", float(mass), list(cog)):
+            raise DeviceFault("setPayload refused", device="arm")
+
+    def set_digital_output(self, index: int, value: bool) -> None:
+        if not self._link_up.is_set():
+            raise NotConnected("UR controller %s is not connected yet" % self.host, device="arm")
+        if not self._call("setDO", int(index), bool(value)):
+            raise DeviceFault("setStandardDigitalOut(%d) refused" % index, device="arm")
+        end = time.monotonic() + 1.0          # confirmed when the controller reports the output
+        while bool(self._poll()["do_bits"] >> index & 1) != bool(value):
+            if time.monotonic() > end:
+                raise DeviceFault("digital output %d did not change to %s within 1 s" % (index, value), device="arm")
+            time.sleep(0.005)
+
+    def digital_outputs(self) -> List[bool]:
+        bits = self.cached_state().get("do_bits", 0)
+        return [bool(bits >> i & 1) for i in range(8)]
+
+    # -- operator reset ------------------------------------------------------------------------------------
+    def reset(self, waiter: Waiter) -> Dict[str, Any]:
+        if not self._link_up.is_set():
+            raise NotConnected("UR controller %s is not connected" % self.host, device="arm")
+        st = self._poll()
+        steps = []
+        mode = st["safety_mode"]
+        if mode == 3:                                  # protective stop: unlock (allowed 5 s after the stop)
+            end = time.monotonic() + 8.0
+            refusal = ""
+            while True:
+                try:
+                    self._call("dash", "unlock_protective_stop")
+                except DeviceFault as exc:        # e.g. "Cannot unlock protective stop until 5s after occurrence"
+                    refusal = exc.message
+                waiter.sleep(0.1)
+                st = self._poll()
+                if st["safety_mode"] in SAFETY_OK:
+                    steps.append("protective stop unlocked")
+                    break
+                if time.monotonic() > end:
+                    raise DeviceFault("RESET_ARM: the protective stop cannot be unlocked (safety mode %s) %s"
+                                      % (SAFETY_NAMES.get(st["safety_mode"]), refusal), device="arm")
+                waiter.sleep(0.25)
+        elif mode in (6, 7) or st["robot_mode"] != ROBOT_RUNNING:
+            for cmd in ("close_safety_popup", "power_on", "brake_release"):
+                self._call("dash", cmd)
+                steps.append(cmd.replace("_", " "))
+            with self._io_lock:
+                self._drop_locked("restarting the control script after an emergency stop")
+        end = time.monotonic() + 15.0
+        while True:
+            try:
+                st = self._poll() if self._link_up.is_set() else None
+            except (LinkDown, DeviceFault):
+                st = None
+            if st and st["safety_mode"] in SAFETY_OK and st["robot_mode"] == ROBOT_RUNNING and st["program_running"]:
+                break
+            if time.monotonic() > end:
+                raise DeviceFault("RESET_ARM: the arm did not come back (safety %s); is the cause removed?"
+                                  % (SAFETY_NAMES.get(st["safety_mode"]) if st else "unknown"), device="arm")
+            waiter.sleep(0.1)
+        cleared, self._safety = self._safety, None
+        self._health.set(device="ok")
+        return {"cleared": cleared or "", "steps": steps, "safety_mode": SAFETY_NAMES.get(st["safety_mode"])}
+
+
+def _kill(proc: subprocess.Popen) -> None:
+    try:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(5.0)
+    except Exception:
+        pass
+
+
+def _fmt(values: Sequence[float]) -> str:
+    return "[" + ", ".join("%.4f" % v for v in values) + "]"
+
+
+def joint_travel_bound(speed: float, accel: float) -> float:
+    """Registry deadline of a joint move before the start is known: a full turn of the farthest joint."""
+    return 2.0 * math.pi / speed + 2.0 * speed / accel + MOTION_MARGIN_S + 1.0

@@ -1,0 +1,188 @@
+"""Stand-in rigs and helpers shared by the bridge tests and the benchmark (not a test module)."""
+import itertools
+import os
+import socket
+import time
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROBOT_YAML = os.path.join(REPO, "config", "robots", "rbkairos_ur10e.yaml")
+
+_counter = itertools.count(1)
+
+
+def free_port(host="127.0.0.1"):
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+def wait_until(predicate, timeout=5.0, period=0.01):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(period)
+    return predicate()
+
+
+class CompressorRig:
+    """The compressor stand-in (model + pymodbus 3.16 server) on a free port, sim time scaled."""
+
+    def __init__(self, robot, time_scale=10.0):
+        from locem_bridge.sim.clock import SimClock
+        from locem_bridge.sim.compressor import CompressorModel
+        from locem_bridge.sim.modbus_server import CompressorServer
+        self.clock = SimClock(time_scale)
+        self.cfg = dict(robot["compressor"])
+        self.cfg["port"] = free_port()
+        self.model = CompressorModel(self.cfg, self.clock.now)
+        self.server = CompressorServer(self.model, "127.0.0.1", self.cfg["port"], self.cfg["device_id"])
+        self.server.start()
+
+    def close(self):
+        self.server.stop()
+
+
+
+
+def _address_free(addr, ports=(29999, 30003, 30004)):
+    for port in ports:
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                s.bind((addr, port))
+            except OSError:
+                return False
+    return True
+
+
+def next_ur_address():
+    """A loopback address whose three UR ports are free: 127.64.<pid-derived>.<counter>."""
+    third = 1 + os.getpid() % 250
+    for _ in range(250):
+        n = next(_counter)
+        addr = "127.64.%d.%d" % (third, 1 + (n - 1) % 250)
+        if _address_free(addr):
+            return addr
+    raise RuntimeError("no free loopback address for a UR stand-in")
+
+
+def arm_cfg(robot, address):
+    cfg = dict(robot["arm"])
+    cfg["controller"] = dict(cfg["controller"], host=address)
+    return cfg
+
+
+class BaseRig:
+    """The four CiA 402 drive stand-ins on a fresh python-can ``virtual`` channel plus the PyBullet world (ground
+    truth of the base pose), sim time scaled."""
+
+    def __init__(self, robot, site_cfg=None, time_scale=1.0, world=True):
+        import copy
+        import uuid
+        from locem_bridge.sim.arm_source import KinematicArm
+        from locem_bridge.sim.clock import SimClock
+        from locem_bridge.sim.config import load_site
+        from locem_bridge.sim.drives import DriveSet
+        from locem_bridge.sim.world import World
+        from locem_bridge.bridges.config import resolve_path
+        self.cfg = copy.deepcopy(robot["base"])
+        self.cfg["drives"]["can"] = {"interface": "virtual", "channel": "bridge-%s" % uuid.uuid4().hex[:8]}
+        self.eds = resolve_path(robot, robot["base"]["eds"])
+        self.clock = SimClock(time_scale)
+        self.drives = DriveSet(self.cfg["drives"], self.eds, self.clock.now,
+                               max_wheel_speed=self.cfg["limits"]["max_wheel_speed"])
+        self.drives.start()
+        self.world = None
+        if world:
+            site = copy.deepcopy(site_cfg or load_site())
+            self.world = World(site, {"robot": robot}, self.clock, arm=KinematicArm(robot["arm"]["named_poses"]["stow"]),
+                               drives=self.drives, gui=False)
+            self.world.start()
+
+    def still(self):
+        return all(abs(v) < 1e-9 for v in self.drives.wheel_speeds())
+
+    def close(self):
+        if self.world is not None:
+            self.world.close()
+        self.drives.stop()
+
+
+SHORT_WALL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sites", "short_wall.yaml")
+
+
+class StandInArmSource:
+    """The world's view of the arm: joint positions and digital outputs read from the UR stand-in process
+    (what the PyBullet world mirrors; the bridge under test talks RTDE to the same stand-in)."""
+
+    def __init__(self, standin):
+        self.standin = standin
+
+    def joint_positions(self):
+        return self.standin.get_joint_positions()
+
+    def digital_output(self, index):
+        return bool(self.standin.get_standard_digital_outputs()[index])
+
+
+class WorksiteRig:
+    """Every stand-in the wall commands need, on one sim clock: UR controller (child process), compressor
+    (Modbus server), four drives (virtual CAN) and the PyBullet world measuring the outcome."""
+
+    def __init__(self, robot, site_path=SHORT_WALL, time_scale=4.0, overrides=None):
+        import copy
+        import uuid
+        from locem_bridge.sim.clock import SimClock
+        from locem_bridge.sim.compressor import CompressorModel
+        from locem_bridge.sim.config import load_site
+        from locem_bridge.sim.drives import DriveSet
+        from locem_bridge.sim.modbus_server import CompressorServer
+        from locem_bridge.sim.ur.process import StandInProcess
+        from locem_bridge.sim.world import World
+        from locem_bridge.bridges.config import resolve_path
+        self.site_path = site_path
+        self.site = load_site(site_path)
+        self.clock = SimClock(time_scale)
+        from locem_bridge.bridges.config import deep_merge
+        self.robot = copy.deepcopy(robot)
+        if overrides:                          # the addresses the LOCEM node under test was given
+            self.robot = deep_merge(self.robot, overrides)
+        else:
+            self.robot["arm"]["controller"]["host"] = next_ur_address()
+            self.robot["compressor"]["port"] = free_port()
+            self.robot["base"]["drives"]["can"] = {"interface": "virtual",
+                                                   "channel": "wall-%s" % uuid.uuid4().hex[:8]}
+        self.address = self.robot["arm"]["controller"]["host"]
+        # model ur10: the kinematics of the URDF the world draws (robot.arm.description), so both agree
+        self.standin = StandInProcess(self.address, time_scale=time_scale, model="ur10",
+                                      q0=robot["arm"]["named_poses"]["home"]).start()
+        self.model = CompressorModel(self.robot["compressor"], self.clock.now)
+        self.server = CompressorServer(self.model, "127.0.0.1", self.robot["compressor"]["port"],
+                                       self.robot["compressor"]["device_id"])
+        self.server.start()
+        self.drives = DriveSet(self.robot["base"]["drives"], resolve_path(robot, robot["base"]["eds"]), self.clock.now,
+                               max_wheel_speed=self.robot["base"]["limits"]["max_wheel_speed"])
+        self.drives.start()
+        self.world = World(copy.deepcopy(self.site), {"robot": self.robot}, self.clock,
+                           arm=StandInArmSource(self.standin), drives=self.drives, compressor=self.model, gui=False)
+        self.world.start()
+
+    def nothing_running(self):
+        """No arm motion, no digital output on, valve closed, wheels still."""
+        state = self.standin.get_state()
+        return (not state["moving"] and not any(self.standin.get_standard_digital_outputs())
+                and not self.model.snapshot()["valve_open"]
+                and all(abs(v) < 1e-9 for v in self.drives.wheel_speeds()))
+
+    def area_coverage(self, wall_id, s_range, t_range):
+        m = self.world.outcome.maps[wall_id]
+        cells = m.thickness[(m.tc >= t_range[0]) & (m.tc <= t_range[1])][:, (m.sc >= s_range[0]) & (m.sc <= s_range[1])]
+        return float((cells >= self.world.outcome.target).mean())
+
+    def close(self):
+        self.world.close()
+        self.drives.stop()
+        self.server.stop()
+        self.standin.close()

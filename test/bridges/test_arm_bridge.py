@@ -1,0 +1,198 @@
+"""The arm bridge (ur_rtde in its worker process) against the UR controller stand-in (child process)."""
+import time
+
+import numpy as np
+import pytest
+
+from locem_bridge.bridges.commands_arm import ArmCommands
+from locem_bridge.bridges.ur_arm import UrRtdeArm
+from locem_bridge.locem.registry import Interface
+
+from bridge_rigs import arm_cfg, next_ur_address, wait_until
+
+pytest.importorskip("rtde_control")
+pytestmark = pytest.mark.slow
+
+HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+
+
+def make(robot, core, time_scale):
+    from locem_bridge.sim.ur.process import StandInProcess
+    address = next_ur_address()
+    standin = StandInProcess(address, time_scale=time_scale).start()
+    arm = UrRtdeArm(arm_cfg(robot, address))
+    arm.start()
+    core.install(ArmCommands(arm))
+    assert arm.wait_ready(20.0), arm.health()
+    return standin, arm
+
+
+@pytest.fixture
+def rig(robot, core):
+    standin, arm = make(robot, core, 10.0)
+    yield standin, arm
+    arm.close()
+    standin.close()
+
+
+@pytest.fixture
+def rig_realtime(robot, core):
+    standin, arm = make(robot, core, 1.0)
+    yield standin, arm
+    arm.close()
+    standin.close()
+
+
+def run(core, text):
+    return core.dispatcher.execute(text)
+
+
+def nothing_running(standin):
+    state = standin.get_state()
+    return (not state["moving"] and max(abs(v) for v in standin.get_joint_velocities()) < 1e-9
+            and not any(standin.get_standard_digital_outputs()))
+
+
+def test_get_joints_and_tcp_pose_match_the_controller(rig, core):
+    standin, _ = rig
+    r = run(core, "GET_JOINTS")
+    assert r.success and np.allclose(r.result["q"], standin.get_joint_positions(), atol=1e-9)
+    assert r.result["names"][0] == "shoulder_pan_joint"
+    p = run(core, "GET_TCP_POSE")
+    assert p.success and np.allclose(p.result["pose"], standin.get_tcp_pose(), atol=1e-9)
+
+
+def test_move_l_reaches_the_pose_within_1mm_and_move_j_the_joints(rig, core):
+    standin, _ = rig
+    start = standin.get_tcp_pose()
+    target = list(start)
+    target[0] += 0.10
+    target[2] -= 0.05
+    r = run(core, "MOVE_L %s speed=0.5 accel=2" % " ".join("%.6f" % v for v in target))
+    assert r.success, r.message
+    reached = standin.get_tcp_pose()
+    assert np.linalg.norm(np.subtract(reached[:3], target[:3])) < 0.001
+    q = [0.3, -1.4, 1.4, -1.5, -1.5, 0.2]
+    r = run(core, "MOVE_J %s speed=2" % " ".join(map(str, q)))
+    assert r.success, r.message
+    assert np.max(np.abs(np.subtract(standin.get_joint_positions(), q))) < 1e-3
+    r = run(core, "MOVE_HOME")
+    assert r.success and np.max(np.abs(np.subtract(standin.get_joint_positions(), HOME))) < 1e-3
+    assert run(core, "MOVE_HOME nowhere").code.value == "INVALID_ARGUMENT"
+
+
+def test_move_path_visits_every_waypoint(rig, core):
+    standin, _ = rig
+    p0 = standin.get_tcp_pose()
+    pts = [list(p0), list(p0)]
+    pts[0][1] += 0.05
+    pts[1][1] += 0.05
+    pts[1][2] += 0.05
+    text = "/".join(":".join("%.6f" % v for v in p) for p in pts)
+    r = run(core, "MOVE_PATH %s speed=0.5" % text)
+    assert r.success, r.message
+    assert r.result["waypoints"] == 2
+    assert np.linalg.norm(np.subtract(standin.get_tcp_pose()[:3], pts[1][:3])) < 0.001
+    bad = run(core, "MOVE_PATH 0.1:0.2:0.3")
+    assert bad.code.value == "INVALID_ARGUMENT" and "waypoint 1" in bad.message
+
+
+def test_tool_output_switches_the_controller_output(rig, core):
+    standin, _ = rig
+    assert run(core, "TOOL_OUTPUT 1 true").success
+    assert standin.get_standard_digital_outputs()[1] is True
+    assert run(core, "TOOL_OUTPUT 1 false").success
+    assert standin.get_standard_digital_outputs()[1] is False
+
+
+def test_stop_during_a_long_move_stops_the_arm_within_200ms_of_motion_time(rig_realtime, core):
+    standin, _ = rig_realtime
+    execution = core.dispatcher.submit("MOVE_J 2.5 -1.5708 1.5708 -1.5708 -1.5708 0 speed=1.0", Interface.SERVICE)
+    assert wait_until(lambda: standin.get_state()["moving"], timeout=5.0)
+    time.sleep(0.5)
+    t_stop = standin.get_state()["motion_time"]
+    r = run(core, "STOP")
+    assert r.success
+    assert execution.wait(3.0).code.value == "ABORTED"
+    assert wait_until(lambda: not standin.get_state()["moving"], timeout=2.0)
+    # motion time advances with wall time here (time scale 1): the standstill came within 200 ms of STOP
+    states = []
+    end = time.monotonic() + 0.5
+    while time.monotonic() < end:
+        states.append(standin.get_state())
+    stopped_at = min(s["motion_time"] for s in states)
+    assert stopped_at - t_stop < 0.2 + 0.05, "arm still moving %.3f s after STOP" % (stopped_at - t_stop)
+    assert nothing_running(standin)
+
+
+def test_stop_arm_cancels_only_the_arm_command(rig, core):
+    standin, _ = rig
+    execution = core.dispatcher.submit("MOVE_J 2.5 -1.5708 1.5708 -1.5708 -1.5708 0 speed=0.3", Interface.ACTION)
+    assert wait_until(lambda: standin.get_state()["moving"], timeout=5.0)
+    assert run(core, "STOP_ARM").success
+    r = execution.wait(3.0)
+    assert r.code.value == "ABORTED" and "STOP_ARM" in r.message
+    assert wait_until(lambda: nothing_running(standin), timeout=2.0)
+
+
+def test_action_cancel_stops_the_arm(rig, core):
+    standin, _ = rig
+    execution = core.dispatcher.submit("MOVE_J -2.5 -1.5708 1.5708 -1.5708 -1.5708 0 speed=0.3", Interface.ACTION)
+    assert wait_until(lambda: standin.get_state()["moving"], timeout=5.0)
+    execution.cancel("action goal canceled by its client")
+    assert execution.wait(3.0).code.value == "ABORTED"
+    assert wait_until(lambda: nothing_running(standin), timeout=2.0)
+
+
+def test_protective_stop_is_latched_until_reset_arm(rig, core):
+    standin, arm = rig
+    start = standin.get_tcp_pose()
+    target = list(start)
+    target[0] += 0.3
+    execution = core.dispatcher.submit("MOVE_L %s speed=0.05" % " ".join("%.6f" % v for v in target),
+                                       Interface.SERVICE)
+    assert wait_until(lambda: standin.get_state()["moving"], timeout=5.0)
+    standin.inject_protective_stop("test: collision")
+    r = execution.wait(5.0)
+    assert r is not None and r.code.value == "HARDWARE_ERROR" and "protective stop" in r.message
+    assert wait_until(lambda: nothing_running(standin), timeout=2.0)
+    # later moves are refused, even after the controller itself could move again
+    refused = run(core, "MOVE_HOME")
+    assert refused.code.value == "HARDWARE_ERROR" and "RESET_ARM" in refused.message
+    assert "safety stop" in run(core, "STATUS").result["health"]["arm"]["device"]
+    reset = run(core, "RESET_ARM")
+    assert reset.success, reset.message
+    assert "protective stop" in reset.result["cleared"]
+    ok = run(core, "MOVE_HOME")
+    assert ok.success, ok.message
+
+
+def test_controller_restart_is_followed_by_an_automatic_reconnect(rig, core):
+    standin, arm = rig
+    assert run(core, "GET_JOINTS").success
+    standin.stop()
+    assert wait_until(lambda: arm.health()["link"] != "up", timeout=3.0)
+    r = run(core, "MOVE_HOME")
+    assert r.code.value in ("HARDWARE_ERROR", "NOT_READY")
+    standin.start_server()
+    assert wait_until(lambda: arm.health()["link"] == "up", timeout=20.0), arm.health()
+    assert arm.reconnects >= 1
+    q = [0.2, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+    r = run(core, "MOVE_J %s" % " ".join(map(str, q)))
+    assert r.success, r.message
+    assert np.max(np.abs(np.subtract(standin.get_joint_positions(), q))) < 1e-3
+
+
+def test_emergency_stop_needs_reset_arm_after_release(rig, core):
+    standin, arm = rig
+    standin.inject_emergency_stop("test: e-stop pressed")
+    assert wait_until(lambda: arm.safety_latched, timeout=3.0)
+    r = run(core, "MOVE_HOME")
+    assert r.code.value == "HARDWARE_ERROR" and "emergency" in r.message
+    standin.release_emergency_stop()
+    reset = run(core, "RESET_ARM")
+    assert reset.success, reset.message
+    assert "emergency" in reset.result["cleared"] and "power on" in reset.result["steps"]
+    q = [0.1, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+    r = run(core, "MOVE_J %s" % " ".join(map(str, q)))
+    assert r.success, r.message

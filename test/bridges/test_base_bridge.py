@@ -1,0 +1,154 @@
+"""The base bridge (python-can + canopen BaseNode402) against four CiA 402 drive stand-ins and the PyBullet world."""
+import math
+import time
+
+import pytest
+
+from locem_bridge.bridges.cia402_base import Cia402Base
+from locem_bridge.bridges.commands_base import BaseCommands
+from locem_bridge.locem.registry import Interface
+
+from bridge_rigs import BaseRig, wait_until
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture
+def rig(robot, core):
+    rig = BaseRig(robot, time_scale=1.0)
+    cfg = dict(rig.cfg)
+    cfg["named_poses"] = {"door": [2.0, 1.2, 0.0]}
+    base = Cia402Base(cfg, rig.eds, initial_pose=tuple(rig.world.base_pose()))
+    base.start()
+    core.install(BaseCommands(base))
+    assert base.wait_ready(10.0), base.health()
+    yield rig, base
+    base.close()
+    rig.close()
+
+
+def run(core, text):
+    return core.dispatcher.execute(text)
+
+
+def truth_error(world, goal):
+    x, y, th = world.base_pose()
+    return math.hypot(x - goal[0], y - goal[1]), abs((th - goal[2] + math.pi) % (2 * math.pi) - math.pi)
+
+
+def test_goto_reaches_the_goal_within_2cm_and_1deg_of_ground_truth(rig, core):
+    r_, base = rig
+    goal = (2.9, 1.35, 1.2)
+    r = run(core, "GOTO %g %g %g speed=0.5" % goal)
+    assert r.success, r.message
+    time.sleep(0.1)
+    d, a = truth_error(r_.world, goal)
+    assert d < 0.02 and a < math.radians(1.0), (d, math.degrees(a))
+    p = run(core, "GET_POSE").result["pose"]
+    assert math.hypot(p[0] - goal[0], p[1] - goal[1]) < 0.02
+    assert r_.still()
+
+
+def test_move_base_rel_and_goto_tag(rig, core):
+    r_, base = rig
+    x0, y0, th0 = r_.world.base_pose()
+    r = run(core, "MOVE_BASE_REL 0.3 0.1 0.2")
+    assert r.success, r.message
+    goal = (x0 + math.cos(th0) * 0.3 - math.sin(th0) * 0.1, y0 + math.sin(th0) * 0.3 + math.cos(th0) * 0.1, th0 + 0.2)
+    d, a = truth_error(r_.world, goal)
+    assert d < 0.02 and a < math.radians(1.0), (d, math.degrees(a))
+    r = run(core, "GOTO_TAG door")
+    assert r.success, r.message
+    d, a = truth_error(r_.world, (2.0, 1.2, 0.0))
+    assert d < 0.02 and a < math.radians(1.0)
+    bad = run(core, "GOTO_TAG kitchen")
+    assert bad.code.value == "INVALID_ARGUMENT" and "door" in bad.message
+
+
+def _wheels_stopped_within(rig, since_sim, budget_sim, timeout=2.0):
+    """Sim time at which every wheel stood still (None if not within ``timeout`` s wall)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if rig.still():
+            return rig.clock.now() - since_sim
+        time.sleep(0.002)
+    return None
+
+
+def test_stop_during_goto_stops_the_base_within_200ms_sim_time(rig, core):
+    r_, base = rig
+    execution = core.dispatcher.submit("GOTO 2.4 3.0 1.5708 speed=0.8", Interface.SERVICE)
+    assert wait_until(lambda: abs(r_.drives.wheel_speeds()[0]) > 3.0, timeout=5.0)
+    t_stop = r_.clock.now()
+    assert run(core, "STOP").success
+    took = _wheels_stopped_within(r_, t_stop, 0.2)
+    assert took is not None and took < 0.2, took
+    assert execution.wait(2.0).code.value == "ABORTED"
+    time.sleep(0.3)
+    assert r_.still()
+
+
+def test_action_cancel_stops_the_base(rig, core):
+    r_, base = rig
+    execution = core.dispatcher.submit("GOTO 2.4 3.0 1.5708 speed=0.8", Interface.ACTION)
+    assert wait_until(lambda: abs(r_.drives.wheel_speeds()[0]) > 3.0, timeout=5.0)
+    t_stop = r_.clock.now()
+    execution.cancel("action goal canceled by its client")
+    took = _wheels_stopped_within(r_, t_stop, 0.2)
+    assert took is not None and took < 0.2, took
+    assert execution.wait(2.0).code.value == "ABORTED"
+
+
+def test_cmd_vel_twist_moves_the_base_and_stops_when_it_goes_stale(rig, core):
+    r_, base = rig
+    x0, y0, th0 = r_.world.base_pose()
+    end = time.monotonic() + 0.6
+    while time.monotonic() < end:
+        base.set_velocity(0.3, 0.0, 0.0, hold=0.2)
+        time.sleep(0.05)
+    assert wait_until(r_.still, timeout=2.0)
+    x1, y1, _ = r_.world.base_pose()
+    moved = (x1 - x0) * math.cos(th0) + (y1 - y0) * math.sin(th0)
+    assert 0.08 < moved < 0.3
+
+
+def test_drive_heartbeat_loss_stops_the_base_and_fails_the_goto(rig, core):
+    r_, base = rig
+    execution = core.dispatcher.submit("GOTO 2.4 3.0 1.5708 speed=0.8", Interface.SERVICE)
+    assert wait_until(lambda: abs(r_.drives.wheel_speeds()[0]) > 3.0, timeout=5.0)
+    r_.drives.drive(3).inject_heartbeat_loss()
+    t_loss = r_.clock.now()
+    assert wait_until(lambda: base.health()["fault"], timeout=1.0)
+    t_detect = r_.clock.now()
+    took = _wheels_stopped_within(r_, t_detect, 0.1)
+    assert took is not None and took < 0.1, "base stood still %.3f s after the loss was detected" % took
+    assert t_detect - t_loss < 0.1 + base.hb_timeout
+    r = execution.wait(2.0)
+    assert r.code.value == "HARDWARE_ERROR" and "heartbeat" in r.message
+    assert run(core, "GOTO 2.4 1.6 1.5708").code.value in ("HARDWARE_ERROR", "NOT_READY")
+    assert "heartbeat" in run(core, "STATUS").result["health"]["base"]["fault"]
+    time.sleep(0.3)
+    assert r_.still()
+    # the drive comes back: the bridge enables it again, the base obeys again
+    r_.drives.drive(3).restore()
+    assert wait_until(lambda: base.health()["link"] == "up" and not base.health()["fault"], timeout=10.0)
+    assert run(core, "MOVE_BASE_REL 0.05 0 0").success
+
+
+def test_drive_fault_is_latched_until_reset_base(rig, core):
+    r_, base = rig
+    execution = core.dispatcher.submit("GOTO 2.4 3.0 1.5708 speed=0.8", Interface.SERVICE)
+    assert wait_until(lambda: abs(r_.drives.wheel_speeds()[0]) > 3.0, timeout=5.0)
+    r_.drives.drive(1).inject_fault()
+    r = execution.wait(3.0)
+    assert r is not None and r.code.value == "HARDWARE_ERROR" and "FAULT" in r.message, r
+    assert wait_until(r_.still, timeout=1.0), r_.drives.wheel_speeds()
+    time.sleep(1.0)                                   # not cleared by itself
+    assert "FAULT" in base.health()["fault"], base.health()
+    refused = run(core, "GOTO 2.4 1.6 1.5708")
+    assert refused.code.value == "HARDWARE_ERROR", refused
+    reset = run(core, "RESET_BASE")
+    assert reset.success, reset.message
+    assert "FAULT" in reset.result["cleared"]
+    moved = run(core, "MOVE_BASE_REL 0.05 0 0")
+    assert moved.success, moved

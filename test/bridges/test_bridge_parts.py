@@ -1,0 +1,118 @@
+"""Device-free parts of the bridges: geometry, mecanum kinematics, configuration errors, the backend table, the
+declarations (units and ranges in HELP), and the frame chain map -> UR base used by the wall commands."""
+import math
+
+import numpy as np
+import pytest
+
+from locem_bridge.bridges import backends, commands_arm, commands_base, commands_compressor, commands_wall
+from locem_bridge.bridges.config import deep_merge, load_robot_config, need
+from locem_bridge.bridges.errors import BridgeConfigError
+from locem_bridge.bridges.geometry import (arm_base_in_footprint, invert, matrix_to_pose, matrix_to_rotvec, planar,
+                                           pose_to_matrix, rotvec_to_matrix, tool_frame_facing)
+from locem_bridge.bridges.mecanum import Mecanum
+from locem_bridge.locem.catalogue import all_specs
+
+from bridge_rigs import ROBOT_YAML
+
+
+@pytest.mark.parametrize("rv", [[0, 0, 0], [0.1, -0.2, 0.3], [0, math.pi, 0], [2.2214, -2.2214, 0], [0, 0, -3.1]])
+def test_rotation_vector_round_trip(rv):
+    m = rotvec_to_matrix(rv)
+    assert np.allclose(m.T.dot(m), np.eye(3), atol=1e-9)
+    assert np.allclose(rotvec_to_matrix(matrix_to_rotvec(m)), m, atol=1e-6)
+
+
+def test_tool_frame_points_into_the_wall_with_a_horizontal_x_axis():
+    f = tool_frame_facing([1.0, 3.6, 1.2], [0.0, -1.0, 0.0])
+    assert np.allclose(f[:3, 2], [0, 1, 0]) and abs(f[2, 0]) < 1e-12
+    with pytest.raises(ValueError):
+        tool_frame_facing([0, 0, 0], [0, 0, 0])
+
+
+def test_map_to_ur_base_chain_matches_the_configured_mount():
+    robot = load_robot_config(ROBOT_YAML)
+    mount = robot["arm"]["mount"]
+    t = planar(2.4, 1.6, math.pi / 2).dot(arm_base_in_footprint(mount["xyz"], mount["rpy"]))
+    # the UR base sits 0.2 m ahead of base_footprint (+y in map when facing +y), 1.05 m up, x axis backwards
+    assert np.allclose(t[:3, 3], [2.4, 1.8, 1.05], atol=1e-9)
+    assert np.allclose(t[:3, 0], [0, -1, 0], atol=1e-9)
+    pose = [0.1, -0.2, 0.3, 0.0, 3.0, 0.0]
+    assert np.allclose(matrix_to_pose(invert(t).dot(t).dot(pose_to_matrix(pose))), pose, atol=1e-9)
+
+
+def test_mecanum_inverse_and_forward_agree_and_limits_scale_the_twist():
+    kin = Mecanum(0.1275, 0.236, 0.2605)
+    for twist in ((0.3, 0.0, 0.0), (0.0, -0.2, 0.0), (0.1, 0.2, 0.5)):
+        assert np.allclose(kin.body(kin.wheels(*twist)), twist)
+    vx, vy, wz = kin.scale_to_limit(5.0, 0.0, 0.0, 20.0)
+    assert max(abs(w) for w in kin.wheels(vx, vy, wz)) == pytest.approx(20.0)
+    assert vy == 0.0 and wz == 0.0
+
+
+def test_config_errors_name_the_key_and_the_allowed_values(tmp_path):
+    robot = load_robot_config(ROBOT_YAML, {"compressor": {"port": 5021}})
+    assert robot["compressor"]["port"] == 5021 and robot["compressor"]["host"] == "127.0.0.1"
+    with pytest.raises(BridgeConfigError, match=r"robot.compressor.timeout = 'slow' must be a finite number"):
+        need({"timeout": "slow"}, "timeout", float, where="robot.compressor")
+    with pytest.raises(BridgeConfigError, match=r"robot.arm.controller.host is missing"):
+        need({"controller": {}}, "controller.host", str, where="robot.arm")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("robot: [1, 2]\n")
+    with pytest.raises(BridgeConfigError, match="must hold a mapping with a 'robot' section"):
+        load_robot_config(str(bad))
+    assert deep_merge({"a": {"b": 1, "c": 2}}, {"a": {"b": 3}}) == {"a": {"b": 3, "c": 2}}
+
+
+def test_backend_table_names_what_exists():
+    assert backends.backend_class("compressor", "modbus_tcp").__name__ == "ModbusCompressor"
+    with pytest.raises(BridgeConfigError, match="no arm backend named 'kuka'; known: ur_rtde"):
+        backends.backend_class("arm", "kuka")
+    with pytest.raises(BridgeConfigError, match="unknown device kind 'lidar'"):
+        backends.backend_class("lidar", "x")
+
+
+def test_every_bridge_command_is_declared_once_with_units_and_ranges():
+    specs = all_specs()
+    names = [s.name for s in specs]
+    assert len(names) == len(set(names))
+    bridge = [s for m in (commands_arm, commands_base, commands_compressor, commands_wall) for s in m.SPECS]
+    for spec in bridge:
+        assert spec.name in names
+        for arg in spec.args:
+            if arg.type.value == "float":
+                assert arg.minimum is not None and arg.maximum is not None, (spec.name, arg.name)
+    expected = {"MOVE_J", "MOVE_L", "MOVE_PATH", "MOVE_HOME", "STOP_ARM", "GET_JOINTS", "GET_TCP_POSE", "SET_TCP",
+                "SET_PAYLOAD", "TOOL_OUTPUT", "RESET_ARM", "COMPRESSOR_ON", "COMPRESSOR_OFF", "SET_PRESSURE",
+                "GET_PRESSURE", "SPRAY_ON", "SPRAY_OFF", "GOTO", "GOTO_TAG", "MOVE_BASE_REL", "STOP_BASE", "GET_POSE",
+                "SCAN", "MOUNT_TOOL", "APPLY_TAPE_START", "APPLY_TAPE", "SPRAY_AREA", "SAND_AREA", "HOME"}
+    assert expected <= set(names)
+
+
+def test_help_and_bad_input_for_bridge_commands_without_hardware(core):
+    from locem_bridge.bridges.commands_arm import SPECS
+    for spec in SPECS:
+        core.registry.declare(spec)
+    r = core.dispatcher.execute("HELP MOVE_L")
+    assert r.success and "a number from 0.001 to 1 m/s" in r.message
+    r = core.dispatcher.execute("MOVE_L 0.4 0.1 0.5 0 3.14 0 speed=2")
+    assert r.code.value == "INVALID_ARGUMENT" and "speed" in r.message
+    r = core.dispatcher.execute("MOVE_L 0.4 0.1 nan 0 3.14 0")
+    assert r.code.value == "INVALID_ARGUMENT" and "'z'" in r.message
+    r = core.dispatcher.execute("MOVE_L 0.4 0.1 0.5 0 3.14 0")
+    assert r.code.value == "NOT_READY"          # declared, no arm on this LOCEM
+    spec = commands_arm.MOVE_J
+    bound = core.dispatcher.bind("MOVE_J 0 0 0 0 0 0 speed=0.5 accel=1")
+    assert bound.timeout == pytest.approx(spec.deadline(bound.values)) and bound.timeout > 2 * math.pi / 0.5
+    assert commands_wall.APPLY_TAPE.deadline({"x0": 0, "y0": 0, "z0": 0, "x1": 1.2, "y1": 0, "z1": 0,
+                                              "speed": 0.1}) == pytest.approx(72.0)
+
+
+def test_move_path_waypoints_are_checked():
+    from locem_bridge.bridges.errors import BadRequest
+    pts = commands_arm.parse_waypoints("0.5:0.2:0.4:0:3.14:0/0.5:0.3:0.4:0:3.14:0")
+    assert len(pts) == 2 and pts[1][1] == 0.3
+    with pytest.raises(BadRequest, match="waypoint 2 'x' must be 6 numbers"):
+        commands_arm.parse_waypoints("0.5:0.2:0.4:0:3.14:0/x")
+    with pytest.raises(BadRequest, match="position out of range"):
+        commands_arm.parse_waypoints("5:0.2:0.4:0:3.14:0")

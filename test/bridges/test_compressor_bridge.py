@@ -1,0 +1,101 @@
+"""The compressor bridge (pymodbus client) against the compressor stand-in (pymodbus server + pressure model)."""
+import time
+
+import pytest
+
+from locem_bridge.bridges.commands_compressor import CompressorCommands
+from locem_bridge.bridges.modbus_compressor import ModbusCompressor
+
+from bridge_rigs import wait_until
+
+
+@pytest.fixture
+def bridge(compressor_rig, core):
+    backend = ModbusCompressor(compressor_rig.cfg)
+    backend.start()
+    core.install(CompressorCommands(backend))
+    assert backend.wait_ready(5.0), backend.health()
+    yield backend
+    backend.close()
+
+
+def run(core, text):
+    return core.dispatcher.execute(text)
+
+
+def test_pressure_is_reached_and_reported_like_the_device_measures_it(bridge, core, compressor_rig):
+    assert run(core, "COMPRESSOR_ON").success
+    r = run(core, "SET_PRESSURE 3.0 tolerance=0.1")
+    assert r.success, r.message
+    truth = compressor_rig.model.snapshot()
+    assert abs(truth["pressure"] - 3.0) <= 0.12
+    assert truth["setpoint"] == pytest.approx(3.0)
+    g = run(core, "GET_PRESSURE")
+    assert g.success
+    assert g.result["pressure"] == pytest.approx(compressor_rig.model.snapshot()["pressure"], abs=0.05)
+    assert g.result["setpoint"] == pytest.approx(3.0) and g.result["motor_running"] is True
+    assert run(core, "SPRAY_ON").success
+    assert compressor_rig.model.snapshot()["valve_open"] is True
+    assert run(core, "COMPRESSOR_OFF").success
+    truth = compressor_rig.model.snapshot()
+    assert truth["valve_open"] is False and truth["motor_on"] is False
+
+
+def test_spray_valve_stays_closed_without_pressure(bridge, core, compressor_rig):
+    r = run(core, "SPRAY_ON")
+    assert r.code.value == "NOT_READY" and "working band" in r.message
+    assert compressor_rig.model.snapshot()["valve_open"] is False
+
+
+def test_out_of_range_setpoint_never_reaches_the_device(bridge, core, compressor_rig):
+    before = compressor_rig.server.requests
+    r = run(core, "SET_PRESSURE 12")
+    assert r.code.value == "INVALID_ARGUMENT" and "pressure" in r.message and "0 to 10" in r.message
+    assert compressor_rig.model.snapshot()["setpoint"] == 0.0
+    time.sleep(0.2)
+    # only the 15 Hz polls (2 reads each) reached the server, no write
+    assert compressor_rig.server.requests - before <= 10
+
+
+@pytest.mark.parametrize("mode", ["close", "silent"])
+def test_link_loss_fails_commands_and_the_valve_is_closed_when_the_link_returns(bridge, core, compressor_rig, mode):
+    assert run(core, "COMPRESSOR_ON").success
+    assert run(core, "SET_PRESSURE 3.0").success
+    assert run(core, "SPRAY_ON").success
+    compressor_rig.server.drop_link(duration=None, mode=mode)
+    t0 = time.monotonic()
+    assert wait_until(lambda: bridge.health()["link"] == "down", timeout=2.0)
+    detected = time.monotonic() - t0
+    assert detected < 1.0, "link loss noticed after %.2f s" % detected
+    r = run(core, "SPRAY_OFF")
+    assert r.code.value == "HARDWARE_ERROR" and "link" in r.message
+    assert "compressor" in run(core, "STATUS").result["health"]
+    assert run(core, "STATUS").result["health"]["compressor"]["link"] == "down"
+    # the device still sprays (nobody could reach it) ...
+    assert compressor_rig.model.snapshot()["valve_open"] is True
+    compressor_rig.server.restore_link()
+    # ... until the link returns: the bridge closes the valve by itself
+    assert wait_until(lambda: compressor_rig.model.snapshot()["valve_open"] is False, timeout=3.0)
+    assert wait_until(lambda: bridge.health()["link"] == "up", timeout=3.0)
+    assert run(core, "COMPRESSOR_OFF").success
+    assert compressor_rig.model.snapshot()["motor_on"] is False
+
+
+def test_stop_closes_the_valve_and_stops_the_motor(bridge, core, compressor_rig):
+    assert run(core, "COMPRESSOR_ON").success
+    assert run(core, "SET_PRESSURE 3.0").success
+    assert run(core, "SPRAY_ON").success
+    assert run(core, "STOP").success
+    truth = compressor_rig.model.snapshot()
+    assert truth["valve_open"] is False and truth["motor_on"] is False
+
+
+def test_set_pressure_is_cancelled_by_stop(bridge, core, compressor_rig):
+    assert run(core, "COMPRESSOR_ON").success
+    execution = core.dispatcher.submit("SET_PRESSURE 9.5 tolerance=0.01", interface=__import__(
+        "locem_bridge.locem.registry", fromlist=["Interface"]).Interface.SERVICE)
+    time.sleep(0.1)
+    assert run(core, "STOP").success
+    r = execution.wait(3.0)
+    assert r is not None and r.code.value == "ABORTED"
+    assert compressor_rig.model.snapshot()["motor_on"] is False

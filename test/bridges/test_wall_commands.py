@@ -1,0 +1,144 @@
+"""The composed plasterboard commands through LOCEM with every bridge (RTDE arm, Modbus compressor, CAN base)
+against the stand-ins, with the PyBullet world measuring tape and spray on the wall."""
+import time
+
+import pytest
+
+from locem_bridge.bridges.robot import build_robot
+from locem_bridge.locem.registry import Interface
+
+from bridge_rigs import WorksiteRig, wait_until
+
+pytest.importorskip("rtde_control")
+pytestmark = pytest.mark.slow
+
+JOINT = "wall_1_joint_1"      # the horizontal joint at z = 1.25 m, x 1.8 .. 3.0, y = 3.6
+NORMAL = "0 -1 0"
+
+
+@pytest.fixture
+def site(robot):
+    rig = WorksiteRig(robot)
+    built = build_robot(rig.robot, site=rig.site_path, initial_pose=tuple(rig.world.base_pose()))
+    built.start()
+    yield rig, built
+    built.close()
+    rig.close()
+
+
+@pytest.fixture
+def wall(site, core):
+    rig, built = site
+    for command_set in built.command_sets:
+        core.install(command_set)
+    for kind in ("arm", "compressor", "base"):
+        assert built.get(kind).wait_ready(20.0), (kind, built.get(kind).health())
+    return rig, built
+
+
+def run(core, text):
+    return core.dispatcher.execute(text)
+
+
+def test_scan_reports_the_joint_and_area_in_the_contract_shape(wall, core):
+    r = run(core, "SCAN")
+    assert r.success, r.message
+    joints = {j["id"]: j for j in r.result["joints"]}
+    assert JOINT in joints and joints[JOINT]["kind"] == "horizontal"
+    assert joints[JOINT]["start"][2] == pytest.approx(1.25, abs=1e-6)
+    assert [a["id"] for a in r.result["areas"]] == ["wall_1_area_1"]
+
+
+def test_apply_tape_along_the_joint_covers_it(wall, core):
+    rig, _ = wall
+    assert run(core, "APPLY_TAPE 1.8 3.6 1.25 3.0 3.6 1.25 %s" % NORMAL).code.value == "NOT_READY"
+    rig.world.mount_tool("taping_tool")
+    r = run(core, "MOUNT_TOOL taping_tool")
+    assert r.success, r.message
+    assert rig.standin.get_tcp_offset()[2] == pytest.approx(0.22)
+    r = run(core, "APPLY_TAPE_START 1.8 3.6 1.25 3.0 3.6 1.25 %s" % NORMAL)
+    assert r.success, r.message
+    time.sleep(0.1)
+    pos, z = rig.world.tcp_pose()
+    assert abs(pos[0] - 1.8) < 0.002 and abs(pos[1] - (3.6 - 0.05)) < 0.002 and abs(pos[2] - 1.25) < 0.002
+    assert rig.world.outcome.joint_coverage(JOINT) == 0.0          # judging the start lays no tape
+    r = run(core, "APPLY_TAPE 1.8 3.6 1.25 3.0 3.6 1.25 %s speed=0.1" % NORMAL)
+    assert r.success, r.message
+    time.sleep(0.2)
+    coverage = rig.world.outcome.joint_coverage(JOINT)
+    assert coverage >= 0.99, coverage
+    assert rig.world.outcome.tape_off_joint < 0.02
+    assert rig.nothing_running()
+
+
+def test_spray_area_covers_the_area_and_leaves_the_valve_closed(wall, core):
+    rig, _ = wall
+    rig.world.mount_tool("spray_gun")
+    assert run(core, "MOUNT_TOOL spray_gun").success
+    # the gun needs room: the base backs off to 1.1 m from the wall (the arm base then stands 0.9 m from it)
+    assert run(core, "GOTO 2.4 2.5 1.5708").success
+    r = run(core, "SPRAY_AREA 2.0 3.6 0.9 1 0 0 0.8 0.6 %s spacing=0.1 standoff=0.3 speed=0.1 pressure=3.5" % NORMAL)
+    assert r.success, r.message
+    time.sleep(0.2)
+    coverage = rig.area_coverage("wall_1", (0.2, 1.0), (0.9, 1.5))
+    assert coverage >= 0.98, coverage
+    assert rig.nothing_running()
+
+
+def test_compressor_link_lost_mid_spray_area_fails_within_1s_and_closes_the_valve_on_return(wall, core):
+    rig, built = wall
+    rig.world.mount_tool("spray_gun")
+    assert run(core, "MOUNT_TOOL spray_gun").success
+    assert run(core, "GOTO 2.4 2.5 1.5708").success
+    execution = core.dispatcher.submit(
+        "SPRAY_AREA 2.0 3.6 0.9 1 0 0 0.8 0.6 %s spacing=0.1 speed=0.1 pressure=3.5" % NORMAL, Interface.ACTION)
+    assert wait_until(lambda: rig.model.snapshot()["valve_open"], timeout=30.0)
+    rig.server.drop_link(duration=None, mode="silent")
+    t0 = time.monotonic()
+    r = execution.wait(5.0)
+    took = time.monotonic() - t0
+    assert r is not None and r.code.value == "HARDWARE_ERROR" and "compressor" in r.message, r
+    assert took < 1.0, "answered %.2f s after the link loss" % took
+    assert wait_until(lambda: not rig.standin.get_state()["moving"], timeout=2.0)
+    rig.server.restore_link()
+    assert wait_until(lambda: not rig.model.snapshot()["valve_open"], timeout=3.0)
+    assert wait_until(rig.nothing_running, timeout=3.0)
+
+
+def test_home_switches_outputs_off_and_parks_the_arm(wall, core):
+    rig, built = wall
+    assert run(core, "TOOL_OUTPUT 1 true").success
+    r = run(core, "HOME")
+    assert r.success, r.message
+    assert rig.nothing_running()
+    home = built.get("arm").named_pose("home")
+    assert max(abs(a - b) for a, b in zip(rig.standin.get_joint_positions(), home)) < 1e-3
+
+
+def test_sand_area_sands_the_area_in_contact(wall, core):
+    rig, _ = wall
+    rig.world.mount_tool("sander")
+    assert run(core, "MOUNT_TOOL sander").success
+    assert run(core, "GOTO 2.4 2.6 1.5708").success
+    r = run(core, "SAND_AREA 2.0 3.6 0.9 1 0 0 0.8 0.6 %s spacing=0.1 speed=0.15" % NORMAL)
+    assert r.success, r.message
+    time.sleep(0.2)
+    m = rig.world.outcome.maps["wall_1"]
+    cells = m.sanded[(m.tc >= 0.9) & (m.tc <= 1.5)][:, (m.sc >= 0.2) & (m.sc <= 1.0)]
+    assert cells.mean() >= 0.98, cells.mean()
+    assert rig.nothing_running()
+
+
+def test_stop_is_not_delayed_by_a_silent_compressor(wall, core):
+    rig, _ = wall
+    rig.server.drop_link(duration=None, mode="silent")
+    time.sleep(0.6)
+    execution = core.dispatcher.submit("GOTO 2.4 1.2 1.5708 speed=0.8", Interface.SERVICE)
+    assert wait_until(lambda: abs(rig.drives.wheel_speeds()[0]) > 3.0, timeout=10.0)
+    t0 = rig.clock.now()
+    assert run(core, "STOP").success
+    assert wait_until(lambda: all(abs(v) < 1e-9 for v in rig.drives.wheel_speeds()), timeout=2.0, period=0.002)
+    took = rig.clock.now() - t0
+    assert took < 0.2 * 4, "base still %.3f s sim after STOP" % took   # time scale 4: 200 ms wall
+    assert execution.wait(2.0).code.value == "ABORTED"
+    rig.server.restore_link()
