@@ -8,7 +8,8 @@ Modules (ROS-free; the ROS node ``sim_worksite`` wraps :class:`locem_bridge.sim.
 * :mod:`.outcome`       tape per joint, spray thickness map, sanded map, wall pictures
 * :mod:`.perception`    SCAN stand-in: visible features with configurable noise
 * :mod:`.compressor`    pressure model + Modbus register map (plain Python)
-* :mod:`.modbus_server` pymodbus 3.16 TCP server of the compressor, link-drop faults
+* :mod:`.modbus_server` compressor Modbus TCP server for the installed pymodbus (3.16 or 3.6), link-drop faults
+* :mod:`.modbus_base` shared lifecycle and link faults; :mod:`.modbus_legacy` the pymodbus 3.6 adapter (Python 3.8 / Noetic)
 * :mod:`.drives`        four CiA 402 drives (canopen LocalNode) on a python-can bus, faults
 * :mod:`.mecanum`       mecanum kinematics
 * :mod:`.arm_source`    where the world gets the arm state (UR stand-in adapter, scripted arm)

@@ -1,59 +1,66 @@
-"""Modbus TCP server of the compressor stand-in (pymodbus 3.16 adapter around :mod:`.compressor`).
+"""Modbus TCP server of the compressor stand-in, for the installed pymodbus line (chosen at import time).
 
-Lifecycle: ``CompressorServer(model, host, port, device_id)`` -> :meth:`start` (binds, serves from its own
-asyncio thread; returns once listening) -> :meth:`stop`. Every request passes through a ``SimDevice`` action
-callback that reads/writes the :class:`~locem_bridge.sim.compressor.CompressorRegisterMap`; refused requests are
-answered with the Modbus exception code and logged (``refused`` counts them).
+``CompressorServer`` is the public class (the worksite and the bridge tests use it); it is
 
-Link faults (:meth:`drop_link`): ``mode="close"`` closes the listening socket and every connection (clients get
-connection errors) and re-opens it after ``duration`` wall seconds; ``mode="silent"`` keeps the connections but
-answers nothing until the link returns (clients time out). ``duration=None`` keeps the link down until
-:meth:`restore_link`.
+* :class:`Pymodbus316CompressorServer` (below) with pymodbus >= 3.16 (Python >= 3.10), built on the 3.16
+  ``SimDevice`` datastore whose ``action`` callback sees every read and write;
+* :class:`~locem_bridge.sim.modbus_legacy.LegacyCompressorServer` with pymodbus 3.6.x, the last line for
+  Python 3.8 (ROS Noetic on Ubuntu 20.04), built on a custom ``ModbusBaseSlaveContext``.
 
-Bit reads that start inside the map but run past its end return 0 for the missing bits (pymodbus packs bits
-into 16-bit words and does not pass the bit count to the device); every other address outside the map is
-refused with exception 2.
+Both call the same :class:`~locem_bridge.sim.compressor.CompressorRegisterMap` and share lifecycle, link faults
+and refusal accounting (:class:`~locem_bridge.sim.modbus_base.CompressorServerBase`), so a client sees the same
+device on both lines: same values, exception 2 for addresses outside the map, exception 3 for set-points out of
+range, exception 4 for any other unit id, same ``close`` / ``silent`` link drops. Other pymodbus versions are
+refused at import with an ImportError naming the supported ranges.
+
+Lifecycle: ``CompressorServer(model, host, port, device_id)`` -> :meth:`start` (binds, serves from its own asyncio
+thread; returns once listening) -> :meth:`stop`. Link faults: :meth:`drop_link` (``close`` / ``silent``,
+optional ``duration``), :meth:`restore_link`; see :mod:`.modbus_base`.
+
+Bit reads that start inside the map but run past its end return 0 for the missing bits (pymodbus 3.16 packs bits
+into 16-bit words and does not pass the bit count to the device; the 3.6 adapter answers the same way); every other
+address outside the map is refused with exception 2.
 """
 from __future__ import annotations
 
-import asyncio
-import logging
-import threading
 from typing import Any, List, Optional
 
-from pymodbus.constants import ExcCodes
-from pymodbus.server import ModbusTcpServer
-from pymodbus.simulator import DataType, SimData, SimDevice
+import pymodbus
 
-from .compressor import (COILS, DISCRETE_INPUTS, HOLDING_REGISTERS, INPUT_REGISTERS, CompressorModel,
-                         CompressorRegisterMap, RegisterAccessError)
+from .compressor import COILS, DISCRETE_INPUTS, HOLDING_REGISTERS, INPUT_REGISTERS, CompressorModel, RegisterAccessError
 from .errors import DeviceStandInError
+from .modbus_base import CompressorServerBase, parse_version
 
-log = logging.getLogger(__name__)
+#: installed pymodbus version as (major, minor, patch)
+PYMODBUS_VERSION = parse_version(getattr(pymodbus, "__version__", "0"))
+#: True when the installed pymodbus has the 3.6 datastore API (slave contexts, ``slave=`` on clients)
+LEGACY_API = (3, 6) <= PYMODBUS_VERSION[:2] < (3, 7)
 
-_BIT_READ = {1: "coils", 2: "discrete_inputs"}
-_REG_READ = {3: "holding", 4: "input"}
+if not LEGACY_API and PYMODBUS_VERSION[:2] < (3, 16):
+    raise ImportError("locem_bridge.sim.modbus_server: pymodbus %s is not supported; install pymodbus>=3.6.9,<3.7 "
+                      "(Python 3.8) or pymodbus>=3.16,<3.17 (Python >= 3.10), see requirements.txt"
+                      % getattr(pymodbus, "__version__", "?"))
+
+if not LEGACY_API:
+    from pymodbus.constants import ExcCodes
+    from pymodbus.server import ModbusTcpServer
+    from pymodbus.simulator import DataType, SimData, SimDevice
 
 
 def _exc(code: int) -> Any:
     return ExcCodes.ILLEGAL_VALUE if code == 3 else ExcCodes.ILLEGAL_ADDRESS
 
 
-class CompressorServer:
-    """pymodbus TCP server bound to a :class:`CompressorModel`."""
+class Pymodbus316CompressorServer(CompressorServerBase):
+    """pymodbus 3.16 TCP server bound to a :class:`CompressorModel` (``SimDevice`` action callback)."""
+
+    pymodbus_line = "3.16"
 
     def __init__(self, model: CompressorModel, host: str = "127.0.0.1", port: int = 5020, device_id: int = 1) -> None:
-        self.model = model
-        self.map = CompressorRegisterMap(model)
-        self.host, self.port, self.device_id = host, int(port), int(device_id)
-        self.refused = 0
-        self.requests = 0
-        self._loop: Optional[asyncio.AbstractEventLoop] = None
-        self._thread: Optional[threading.Thread] = None
-        self._server: Optional[ModbusTcpServer] = None
-        self._link_up: Optional[asyncio.Event] = None
-        self._restore_handle: Optional[asyncio.TimerHandle] = None
-        self.link_state = "down"
+        if LEGACY_API:
+            raise DeviceStandInError("the pymodbus 3.16 adapter cannot run on the installed pymodbus %s; use "
+                                     "locem_bridge.sim.modbus_server.CompressorServer" % pymodbus.__version__)
+        super().__init__(model, host, port, device_id)
 
     # -- pymodbus glue -------------------------------------------------------------------------------------
     def _device(self) -> SimDevice:
@@ -69,8 +76,7 @@ class CompressorServer:
 
     async def _action(self, function_code: int, start_address: int, address: int, count: int,
                       current_registers: List[int], set_values: Optional[List[Any]]) -> Any:
-        if self._link_up is not None and not self._link_up.is_set():
-            await self._link_up.wait()          # silent link drop: hold the answer
+        await self._gate()                      # silent link drop: hold the answer
         self.requests += 1
         try:
             if set_values is not None:
@@ -98,102 +104,20 @@ class CompressorServer:
             current_registers[0] = sum(1 << i for i, b in enumerate(bits) if b)
             return None
         except RegisterAccessError as exc:
-            self.refused += 1
-            log.warning("compressor %s:%d refused fc=%d address=%d: %s (exception %d)",
-                        self.host, self.port, function_code, address, exc, exc.exception_code)
-            return _exc(exc.exception_code)
+            return _exc(self._refused(function_code, address, exc))
 
-    async def _open(self) -> None:
-        self._server = ModbusTcpServer(self._device(), address=(self.host, self.port))
-        await self._server.serve_forever(background=True)
-        self.link_state = "up"
+    async def _listen(self) -> Any:
+        server = ModbusTcpServer(self._device(), address=(self.host, self.port))
+        await server.serve_forever(background=True)
+        return server
 
-    async def _close(self) -> None:
-        if self._server is not None:
-            await self._server.shutdown()
-            self._server = None
+    async def _shutdown(self, server: Any) -> None:
+        await server.shutdown()
 
-    # -- lifecycle -----------------------------------------------------------------------------------------
-    def _run(self, started: threading.Event, box: List[BaseException]) -> None:
-        asyncio.set_event_loop(self._loop)
-        try:
-            self._link_up = asyncio.Event()
-            self._link_up.set()
-            self._loop.run_until_complete(self._open())
-        except BaseException as exc:  # report bind errors to start()
-            box.append(exc)
-            started.set()
-            return
-        started.set()
-        self._loop.run_forever()
-        self._loop.run_until_complete(self._close())
-        self._loop.close()
 
-    def start(self, timeout: float = 5.0) -> None:
-        """Bind and serve; raises DeviceStandInError when the address cannot be bound."""
-        if self._thread is not None:
-            raise DeviceStandInError("compressor server already started")
-        self._loop = asyncio.new_event_loop()
-        started = threading.Event()
-        box: List[BaseException] = []
-        self._thread = threading.Thread(target=self._run, args=(started, box), name="compressor-modbus", daemon=True)
-        self._thread.start()
-        if not started.wait(timeout) or box:
-            self._thread.join(1.0)
-            self._thread = None
-            raise DeviceStandInError("compressor Modbus server could not listen on %s:%d: %s"
-                                     % (self.host, self.port, box[0] if box else "timeout"))
-        log.info("compressor Modbus TCP stand-in listening on %s:%d (device id %d)", self.host, self.port,
-                 self.device_id)
+if LEGACY_API:
+    from .modbus_legacy import LegacyCompressorServer as CompressorServer
+else:
+    CompressorServer = Pymodbus316CompressorServer  # type: ignore[misc]
 
-    def stop(self) -> None:
-        """Close all connections and stop the thread (idempotent)."""
-        if self._thread is None:
-            return
-        loop = self._loop
-
-        def _halt() -> None:
-            if self._link_up is not None:
-                self._link_up.set()
-            loop.stop()
-        loop.call_soon_threadsafe(_halt)
-        self._thread.join(5.0)
-        self._thread = None
-        self.link_state = "down"
-
-    # -- link faults ---------------------------------------------------------------------------------------
-    def _call(self, coro_fn: Any) -> None:
-        if self._loop is None or self._thread is None:
-            raise DeviceStandInError("compressor server is not running")
-        fut = asyncio.run_coroutine_threadsafe(coro_fn(), self._loop)
-        fut.result(5.0)
-
-    def drop_link(self, duration: Optional[float] = None, mode: str = "close") -> None:
-        """Take the link down (``close`` or ``silent``) for ``duration`` wall seconds (None = until restored)."""
-        if mode not in ("close", "silent"):
-            raise DeviceStandInError("drop_link mode %r not allowed, allowed: close, silent" % mode)
-
-        async def _drop() -> None:
-            if mode == "close":
-                await self._close()
-            else:
-                self._link_up.clear()
-            self.link_state = "dropped_" + mode
-            log.warning("compressor link dropped (%s)%s", mode, "" if duration is None else " for %.2f s" % duration)
-            if duration is not None:
-                self._restore_handle = self._loop.call_later(duration, lambda: self._loop.create_task(self._restore()))
-        self._call(_drop)
-
-    async def _restore(self) -> None:
-        if self._restore_handle is not None:
-            self._restore_handle.cancel()
-            self._restore_handle = None
-        if self._server is None:
-            await self._open()
-        self._link_up.set()
-        self.link_state = "up"
-        log.warning("compressor link restored")
-
-    def restore_link(self) -> None:
-        """Bring a dropped link back now."""
-        self._call(self._restore)
+__all__ = ["CompressorServer", "LEGACY_API", "PYMODBUS_VERSION", "Pymodbus316CompressorServer"]
