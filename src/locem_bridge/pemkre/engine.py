@@ -1,0 +1,584 @@
+"""The PEMKRE process engine: abstract processes in, next actions out, the execution log written as it goes.
+
+Lifecycle: ``ProcessEngine(store, ontology_files)`` loads and checks the ontologies (materialising the schema
+closure once per ontology version, cached in the store), compiles the process models, prepares every query,
+and finds the process that was running when the store was last used. Then, from any number of threads:
+
+* :meth:`ProcessEngine.start_process` creates a *specific process* realizing an abstract one;
+* :meth:`ProcessEngine.next_action` walks the flow chart from where the token is -- evaluating branch conditions
+  against the world state, binding task parameters to world instances -- and returns the next task (its action
+  type, IRI and parameters as N-Triples), or ``ended`` / ``failed``. Asking again before the task is reported
+  returns the same task: the answer is stored before it is returned, so a restart never repeats or skips a task;
+* :meth:`ProcessEngine.set_task_status` records ``in_progress`` / ``succeeded`` / ``failed`` with timestamps and
+  applies the task type's semantic effects (and, for SCAN tasks, merges the SCAN result into the world);
+* :meth:`ProcessEngine.query` runs a predefined query of the ontology with values passed as bindings.
+
+Every state change is one atomic :meth:`TripleStore.apply` holding the asserted triples and the inferred triples
+that follow from them (:class:`IncrementalReasoner`), so the store is consistent after any crash. Errors leave the
+store untouched and name the culprit (see :mod:`locem_bridge.pemkre.errors`). The engine does not own the store.
+"""
+import datetime
+import logging
+import re
+import secrets
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+
+from rdflib import BNode, Graph, Literal, Namespace, URIRef
+from rdflib.namespace import RDF, XSD
+from rdflib.term import Node
+
+from .errors import (BindingError, ConditionError, InvalidParameterError, InvalidStatusError, OntologyError,
+                     ProcessModelError, QueryError, TaskStateError, UnknownProcessError, UnknownQueryError,
+                     UnknownTaskError)
+from .ontology import (AbstractProcess, FlowNode, ProcessModel, Transition, compile_model, default_ontology_files,
+                       load_files)
+from .reasoning import IncrementalReasoner, SchemaRules, bounded_closure, inferred_part
+from .store import (G_LOG, G_META, G_ONTOLOGY, G_SCHEMA_INFERRED, G_WORLD, ChangeSet, QueryResult, TripleStore)
+from .terms import check_iri, local_name, ntriples, parameters_from_ntriples, to_term
+from .vocab import BASE, LOG, PROC, SITE
+from .world import scan_changes
+
+_log = logging.getLogger(__name__)
+
+# Vocabulary terms as plain URIRefs: attribute access on a DefinedNamespace is slow on the per-decision path.
+_RDF_TYPE = URIRef(str(RDF) + "type")
+_P_ScanResultJson = URIRef(str(PROC) + 'ScanResultJson')
+_P_SpecificProcess = URIRef(str(PROC) + 'SpecificProcess')
+_P_currentNode = URIRef(str(PROC) + 'currentNode')
+_P_currentTask = URIRef(str(PROC) + 'currentTask')
+_P_detail = URIRef(str(PROC) + 'detail')
+_P_durationSeconds = URIRef(str(PROC) + 'durationSeconds')
+_P_endedAt = URIRef(str(PROC) + 'endedAt')
+_P_executes = URIRef(str(PROC) + 'executes')
+_P_issuedAt = URIRef(str(PROC) + 'issuedAt')
+_P_partOfProcess = URIRef(str(PROC) + 'partOfProcess')
+_P_realizes = URIRef(str(PROC) + 'realizes')
+_P_sequenceNumber = URIRef(str(PROC) + 'sequenceNumber')
+_P_startedAt = URIRef(str(PROC) + 'startedAt')
+_P_status = URIRef(str(PROC) + 'status')
+_P_taskCount = URIRef(str(PROC) + 'taskCount')
+
+META = Namespace(BASE + "meta#")
+TASK_STATUSES = ("in_progress", "succeeded", "failed")
+MAX_DETAIL_CHARS = 1_000_000
+_STORED_DETAIL_CHARS = 2000
+#: Schema closures by ontology hash, shared by the engines of one process (a closure is never modified).
+_CLOSURE_CACHE: Dict[str, Graph] = {}
+
+
+@dataclass
+class NextAction:
+    """The answer of :meth:`ProcessEngine.next_action` (docs/contracts.md, "PEMKRE next action")."""
+
+    status: str                      # action | ended | failed
+    process: str = ""
+    task: str = ""
+    action_type: str = ""
+    parameters: str = ""             # N-Triples, subject = task
+    task_status: str = ""            # issued | in_progress (a repeated answer)
+    message: str = ""
+
+    def params(self) -> Dict[str, object]:
+        """``{name: local name or Python value}``, as HICEM puts them on its blackboard (``param_<name>``)."""
+        return parameters_from_ntriples(self.parameters) if self.parameters else {}
+
+
+@dataclass
+class TaskStatusReport:
+    task: str
+    status: str
+    process: str
+    effects_applied: int = 0
+    world_triples_changed: int = 0
+
+
+@dataclass
+class _State:
+    sp: URIRef
+    abstract: URIRef
+    status: str
+    node: URIRef
+    task: Optional[URIRef]
+    task_count: int
+
+
+def _now_literal(t: float) -> Literal:
+    return Literal(datetime.datetime.fromtimestamp(t, tz=datetime.timezone.utc).isoformat(), datatype=XSD.dateTime)
+
+
+def _time_of(lit: Optional[Node]) -> Optional[float]:
+    if not isinstance(lit, Literal):
+        return None
+    v = lit.toPython()
+    if isinstance(v, datetime.datetime):
+        if v.tzinfo is None:
+            v = v.replace(tzinfo=datetime.timezone.utc)
+        return v.timestamp()
+    return None
+
+
+class ProcessEngine:
+    """See the module docstring. All public methods are thread-safe (one lock)."""
+
+    def __init__(self, store: TripleStore, ontology_files: Optional[Sequence[str]] = None, *,
+                 site_namespace: Optional[str] = None, log_namespace: Optional[str] = None,
+                 clock: Callable[[], float] = time.time, reasoning_max_seconds: float = 5.0,
+                 reasoning_max_triples: int = 500_000, schema_max_seconds: float = 300.0,
+                 schema_max_triples: int = 2_000_000, max_walk_steps: int = 10_000,
+                 allow_unsupported_owl: bool = False) -> None:
+        self.store = store
+        self.site = Namespace(str(check_iri(site_namespace, "site namespace"))) if site_namespace else SITE
+        self.log_ns = Namespace(str(check_iri(log_namespace, "log namespace"))) if log_namespace else LOG
+        self.clock = clock
+        self.max_walk_steps = max_walk_steps
+        self._lock = threading.RLock()
+        files = list(ontology_files) if ontology_files is not None else default_ontology_files()
+        loaded = load_files(files)
+        self.prefixes = loaded.prefixes
+        stored_hash = store.value(META.ontology, META.schemaHash, (G_META,))
+        if stored_hash is None or str(stored_hash) != loaded.schema_hash:
+            closed = _CLOSURE_CACHE.get(loaded.schema_hash)
+            if closed is None:
+                closed = bounded_closure(loaded.schema, schema_max_seconds, schema_max_triples)
+                _CLOSURE_CACHE.clear()
+                _CLOSURE_CACHE[loaded.schema_hash] = closed
+            rules = SchemaRules(closed, loaded.schema)
+            self._check_unsupported(rules, allow_unsupported_owl)
+            model = compile_model(closed, store, self.prefixes)  # before any write: a bad model changes nothing
+            store.replace_graph(G_ONTOLOGY, loaded.schema)
+            store.replace_graph(G_SCHEMA_INFERRED, inferred_part(loaded.schema, closed))
+            self.reasoner = IncrementalReasoner(rules, reasoning_max_seconds, reasoning_max_triples)
+            cs = self.reasoner.recompute_all(store, max_seconds=schema_max_seconds, max_triples=schema_max_triples)
+            cs.remove += [(s, p, o, G_META) for s, p, o, _ in store.quads(META.ontology, META.schemaHash, None, (G_META,))]
+            cs.add.append((META.ontology, META.schemaHash, Literal(loaded.schema_hash), G_META))
+            store.apply(cs)
+        else:
+            closed = Graph()
+            for s, p, o, _ in store.quads(None, None, None, (G_ONTOLOGY, G_SCHEMA_INFERRED)):
+                closed.add((s, p, o))
+            rules = SchemaRules(closed, loaded.schema)
+            self._check_unsupported(rules, allow_unsupported_owl)
+            model = compile_model(closed, store, self.prefixes)
+            self.reasoner = IncrementalReasoner(rules, reasoning_max_seconds, reasoning_max_triples)
+        self.model: ProcessModel = model
+        self.rules = rules
+        seed_hash = store.value(META.ontology, META.seedHash, (G_META,))
+        if len(loaded.seed) and (seed_hash is None or str(seed_hash) != loaded.seed_hash):
+            cs = ChangeSet()
+            for s, p, o in loaded.seed:
+                if isinstance(s, BNode) or isinstance(o, BNode):
+                    raise OntologyError("world seed files may not contain blank nodes (found in %s); "
+                                        "give the instance an IRI" % ((s, p, o),))
+                cs.add.append((s, p, o, G_WORLD))
+            cs = self.reasoner.infer(store, cs, max_seconds=schema_max_seconds, max_triples=schema_max_triples)
+            cs.remove += [(s, p, o, G_META) for s, p, o, _ in store.quads(META.ontology, META.seedHash, None, (G_META,))]
+            cs.add.append((META.ontology, META.seedHash, Literal(loaded.seed_hash), G_META))
+            store.apply(cs)
+        self._active: Optional[URIRef] = self._find_running()
+
+    @staticmethod
+    def _check_unsupported(rules: SchemaRules, allow: bool) -> None:
+        if rules.unsupported and not allow:
+            raise OntologyError("the ontologies use OWL constructs the incremental reasoner does not support for "
+                                "individuals: %s (pass allow_unsupported_owl=True to accept answers that may differ "
+                                "from a full OWL 2 RL closure)" % ", ".join(rules.unsupported))
+
+    # ================================================================= state helpers
+    def _v(self, s: Node, p: URIRef, graphs=(G_LOG,)) -> Optional[Node]:
+        return self.store.value(s, p, graphs)
+
+    def _find_running(self) -> Optional[URIRef]:
+        """The running specific process, else the one started last (None on a fresh store)."""
+        best: Optional[Tuple[int, float, URIRef]] = None
+        running = self.model.status_iri["running"]
+        for sp, _, _, _ in self.store.quads(None, _RDF_TYPE, _P_SpecificProcess, (G_LOG,)):
+            t = _time_of(self._v(sp, _P_startedAt)) or 0.0
+            key = (1 if self._v(sp, _P_status) == running else 0, t, sp)
+            if best is None or key[:2] > best[:2]:
+                best = key  # type: ignore[assignment]
+        return best[2] if best else None
+
+    def _state(self, sp: URIRef) -> _State:
+        abstract = self._v(sp, _P_realizes)
+        if abstract is None:
+            raise UnknownProcessError("<%s> is not a specific process started by start_process" % sp)
+        st = self._v(sp, _P_status)
+        node = self._v(sp, _P_currentNode)
+        task = self._v(sp, _P_currentTask)
+        count = self._v(sp, _P_taskCount)
+        return _State(sp, abstract, self.model.status_name.get(st, str(st)), node, task,  # type: ignore[arg-type]
+                      int(count.toPython()) if isinstance(count, Literal) else 0)
+
+    def _commit(self, cs: ChangeSet, max_seconds: Optional[float] = None) -> None:
+        full = self.reasoner.infer(self.store, cs, max_seconds=max_seconds)
+        self.store.apply(full)
+        self.store.maintain()  # index housekeeping when enough triples were removed (rare, see the store)
+
+    def _replace(self, cs: ChangeSet, s: URIRef, p: URIRef, o: Optional[Node], graph: URIRef = G_LOG) -> None:
+        for s2, p2, o2, _ in self.store.quads(s, p, None, (graph,)):
+            if o2 != o:
+                cs.remove.append((s2, p2, o2, graph))
+        if o is not None and not any(True for _ in self.store.quads(s, p, o, (graph,))):
+            cs.add.append((s, p, o, graph))
+
+    # ================================================================= public API
+    def processes(self) -> List[str]:
+        """IRIs of the abstract processes the ontologies define."""
+        return sorted(str(p) for p in self.model.processes)
+
+    def active_process(self) -> Optional[str]:
+        """The running specific process, if any."""
+        with self._lock:
+            if self._active is None or self._state(self._active).status != "running":
+                return None
+            return str(self._active)
+
+    def current_process(self) -> Optional[str]:
+        """The specific process ``next_action()`` talks about: the running one, else the last one started."""
+        with self._lock:
+            return str(self._active) if self._active is not None else None
+
+    def start_process(self, process: str, options: Optional[Mapping[str, Any]] = None, *,
+                      abort_running: bool = False) -> str:
+        """Create a specific process realizing the abstract ``process``; return its IRI.
+
+        ``options`` maps option names declared by the process (e.g. ``validateLines``) to values. A process that
+        is still running makes this fail unless ``abort_running`` (then it is marked failed first).
+        """
+        with self._lock:
+            iri = check_iri(process, "process IRI")
+            ap = self.model.processes.get(iri)
+            if ap is None:
+                raise UnknownProcessError("<%s> is not an abstract process; known processes: %s"
+                                          % (iri, ", ".join(self.processes()) or "none"))
+            opt_values = self._option_values(ap, options or {})
+            cs = ChangeSet()
+            if self._active is not None and self._state(self._active).status == "running":
+                if not abort_running:
+                    raise TaskStateError("process <%s> is still running; finish it (next_action until ended) or "
+                                         "start with abort_running=True" % self._active)
+                cs.extend(self._fail_changes(self._state(self._active), "aborted by start_process of <%s>" % iri))
+            now = self.clock()
+            sp = self.log_ns["%s_%s_%s" % (local_name(iri), time.strftime("%Y%m%dT%H%M%S", time.gmtime(now)),
+                                           secrets.token_hex(3))]
+            st = self.model.status_iri
+            cs.add += [(sp, _RDF_TYPE, _P_SpecificProcess, G_LOG), (sp, _P_realizes, iri, G_LOG),
+                       (sp, _P_status, st["running"], G_LOG), (sp, _P_startedAt, _now_literal(now), G_LOG),
+                       (sp, _P_currentNode, ap.start, G_LOG), (sp, _P_taskCount, Literal(0), G_LOG)]
+            for prop, value in opt_values:
+                cs.add.append((sp, prop, value, G_LOG))
+            self._commit(cs)
+            self._active = sp
+            return str(sp)
+
+    def _option_values(self, ap: AbstractProcess, options: Mapping[str, Any]) -> List[Tuple[URIRef, Node]]:
+        if not isinstance(options, Mapping):
+            raise InvalidParameterError("options must be a mapping of option name to value")
+        for name in options:
+            if name not in ap.options:
+                raise InvalidParameterError("unknown option %r for <%s>; allowed: %s"
+                                            % (name, ap.iri, ", ".join(sorted(ap.options)) or "none"))
+        out = []
+        for name, opt in sorted(ap.options.items()):
+            value = options.get(name, None)
+            default = opt.default
+            if value is None:
+                if default is None:
+                    continue
+                out.append((opt.prop, default))
+                continue
+            if isinstance(default, Literal) and default.datatype == XSD.boolean:
+                if isinstance(value, str) and value.lower() in ("true", "false", "1", "0"):
+                    value = value.lower() in ("true", "1")
+                if not isinstance(value, bool):
+                    raise InvalidParameterError("option %r must be a boolean (true/false), got %r" % (name, value))
+            out.append((opt.prop, to_term(value, "option %r" % name)))
+        return out
+
+    def next_action(self, process: Optional[str] = None) -> NextAction:
+        """The next high-level action of ``process`` (default: the running one); see the module docstring."""
+        with self._lock:
+            sp = check_iri(process, "process IRI") if process else self._active
+            if sp is None:
+                raise TaskStateError("no process has been started; call start_process first")
+            state = self._state(sp)
+            if state.status == "ended":
+                return NextAction("ended", str(sp), message=self._outcome(state))
+            if state.status == "failed":
+                return NextAction("failed", str(sp), message=str(self._v(sp, _P_detail) or "process failed"))
+            leaving = False
+            if state.task is not None and state.node in self.model.task_node_index:
+                tstatus = self.model.status_name.get(self._v(state.task, _P_status), "")
+                if tstatus in ("issued", "in_progress"):
+                    return self._describe(state.task, state, tstatus)
+                if tstatus == "succeeded":
+                    leaving = True
+                else:
+                    return NextAction("failed", str(sp), message="task <%s> is %s" % (state.task, tstatus))
+            ap = self.model.processes[state.abstract]
+            node = ap.nodes.get(state.node)
+            if node is None:
+                raise ProcessModelError("specific process <%s> sits at <%s>, which is not a node of <%s> "
+                                        "(ontology changed under a running process?)" % (sp, state.node, ap.iri))
+            for _ in range(self.max_walk_steps):
+                if not leaving:
+                    if node.kind == "task":
+                        return self._issue(state, ap, node)
+                    if node.kind == "end":
+                        return self._end(state, node)
+                leaving = False
+                node = ap.nodes[self._choose(node, sp).target]
+            raise ProcessModelError("process <%s> walked %d control nodes without reaching a task or an end "
+                                    "(loop without a task around <%s>)" % (ap.iri, self.max_walk_steps, node.iri))
+
+    def _choose(self, node: FlowNode, sp: URIRef) -> Transition:
+        for tr in node.outgoing:
+            if tr.condition is None:
+                return tr
+            binds = {"process": sp} if tr.condition.bindable("process") else None
+            try:
+                if self.store.ask(tr.condition, binds):
+                    return tr
+            except QueryError as exc:
+                raise ConditionError("condition of transition <%s> (from <%s>) failed: %s"
+                                     % (tr.iri, node.iri, exc), str(tr.iri)) from None
+        raise ProcessModelError("no transition applies at <%s>: every condition is false and there is no transition "
+                                "without condition (%s)" % (node.iri, ", ".join("<%s>" % t.iri for t in node.outgoing)))
+
+    def _issue(self, state: _State, ap: AbstractProcess, node: FlowNode) -> NextAction:
+        sp = state.sp
+        seq = state.task_count + 1
+        task = URIRef("%s_task_%d" % (sp, seq))
+        params: List[Tuple[URIRef, URIRef, Node]] = []
+        for prm in node.parameters:
+            binds = {k: v for k, v in (("process", sp), ("task", task)) if prm.query.bindable(k)}
+            try:
+                rows = self.store.select(prm.query, binds)
+            except QueryError as exc:
+                raise BindingError("binding query of parameter %r (<%s>) of task node <%s> failed: %s"
+                                   % (prm.name, prm.iri, node.iri, exc), str(prm.iri)) from None
+            value = rows[0].get("value") if rows else None
+            if value is None:
+                if prm.required:
+                    raise BindingError("parameter %r of task node <%s> has no value: its binding query <%s> "
+                                       "returned no ?value in the current world state" % (prm.name, node.iri, prm.iri),
+                                       str(prm.iri))
+                continue
+            if isinstance(value, BNode):
+                raise BindingError("binding query <%s> returned a blank node; parameters must be IRIs or literals"
+                                   % prm.iri, str(prm.iri))
+            params.append((task, prm.prop, value))
+        now = self.clock()
+        tt = node.task_type
+        assert tt is not None
+        cs = ChangeSet()
+        cs.add += [(task, _RDF_TYPE, tt.iri, G_LOG), (task, _P_executes, node.iri, G_LOG),
+                   (task, _P_partOfProcess, sp, G_LOG), (task, _P_status, self.model.status_iri["issued"], G_LOG),
+                   (task, _P_issuedAt, _now_literal(now), G_LOG), (task, _P_sequenceNumber, Literal(seq), G_LOG)]
+        cs.add += [(s, p, o, G_LOG) for s, p, o in params]
+        self._replace(cs, sp, _P_currentNode, node.iri)
+        self._replace(cs, sp, _P_currentTask, task)
+        self._replace(cs, sp, _P_taskCount, Literal(seq))
+        self._commit(cs)
+        return NextAction("action", str(sp), str(task), tt.action_type, ntriples(sorted(params)), "issued")
+
+    def _describe(self, task: URIRef, state: _State, tstatus: str) -> NextAction:
+        proc_iri, node = self.model.task_node_index[state.node]
+        tt = node.task_type
+        assert tt is not None
+        params = []
+        for prm in node.parameters:
+            v = self._v(task, prm.prop)
+            if v is not None:
+                params.append((task, prm.prop, v))
+        return NextAction("action", str(state.sp), str(task), tt.action_type, ntriples(sorted(params)), tstatus)
+
+    def _end(self, state: _State, node: FlowNode) -> NextAction:
+        now = self.clock()
+        cs = ChangeSet()
+        self._replace(cs, state.sp, _P_currentNode, node.iri)
+        self._replace(cs, state.sp, _P_status, self.model.status_iri["ended"])
+        cs.add.append((state.sp, _P_endedAt, _now_literal(now), G_LOG))
+        started = _time_of(self._v(state.sp, _P_startedAt))
+        if started is not None:
+            cs.add.append((state.sp, _P_durationSeconds, Literal(max(0.0, now - started), datatype=XSD.double), G_LOG))
+        self._commit(cs)
+        return NextAction("ended", str(state.sp), message=node.end_outcome or "ended")
+
+    def _outcome(self, state: _State) -> str:
+        ap = self.model.processes.get(state.abstract)
+        node = ap.nodes.get(state.node) if ap else None
+        return (node.end_outcome if node is not None else None) or "ended"
+
+    def _fail_changes(self, state: _State, message: str) -> ChangeSet:
+        now = self.clock()
+        cs = ChangeSet()
+        self._replace(cs, state.sp, _P_status, self.model.status_iri["failed"])
+        cs.add.append((state.sp, _P_endedAt, _now_literal(now), G_LOG))
+        cs.add.append((state.sp, _P_detail, Literal(message[:_STORED_DETAIL_CHARS]), G_LOG))
+        if state.task is not None:  # an open task of an aborted process fails with it
+            tstatus = self.model.status_name.get(self._v(state.task, _P_status), "")
+            if tstatus in ("issued", "in_progress"):
+                self._replace(cs, state.task, _P_status, self.model.status_iri["failed"])
+                cs.add.append((state.task, _P_endedAt, _now_literal(now), G_LOG))
+                if self._v(state.task, _P_detail) is None:
+                    cs.add.append((state.task, _P_detail, Literal(message[:_STORED_DETAIL_CHARS]), G_LOG))
+        started = _time_of(self._v(state.sp, _P_startedAt))
+        if started is not None:
+            cs.add.append((state.sp, _P_durationSeconds, Literal(max(0.0, now - started), datatype=XSD.double), G_LOG))
+        return cs
+
+    def set_task_status(self, task: str, status: str, detail: str = "") -> TaskStatusReport:
+        """Record a task status reported by HICEM and apply the task's semantic effects (see module docstring)."""
+        with self._lock:
+            if status not in TASK_STATUSES:
+                raise InvalidStatusError("task status %r is not allowed; use one of %s" % (status, ", ".join(TASK_STATUSES)))
+            t = check_iri(task, "task IRI")
+            if detail is None:
+                detail = ""
+            if not isinstance(detail, str):
+                raise InvalidParameterError("detail must be text, got %s" % type(detail).__name__)
+            if len(detail) > MAX_DETAIL_CHARS:
+                raise InvalidParameterError("detail is %d characters long; at most %d are allowed"
+                                            % (len(detail), MAX_DETAIL_CHARS))
+            sp = self._v(t, _P_partOfProcess)
+            if sp is None:
+                raise UnknownTaskError("no task <%s> is known; task IRIs come from next_action" % t)
+            state = self._state(sp)  # type: ignore[arg-type]
+            current = self.model.status_name.get(self._v(t, _P_status), "")
+            if state.status != "running" or state.task != t or current not in ("issued", "in_progress"):
+                raise TaskStateError("task <%s> is not running (its status is %s, its process <%s> is %s, the "
+                                     "process's current task is %s); only the current issued/in_progress task "
+                                     "takes a status" % (t, current or "unknown", sp, state.status,
+                                                         "<%s>" % state.task if state.task else "none"))
+            if current == "in_progress" and status == "in_progress":
+                raise TaskStateError("task <%s> is already in_progress; report succeeded or failed" % t)
+            _, node = self.model.task_node_index[state.node]
+            tt = node.task_type
+            assert tt is not None
+            now = self.clock()
+            cs = ChangeSet()
+            self._replace(cs, t, _P_status, self.model.status_iri[status])
+            effects_applied, world_changed = 0, 0
+            if status == "in_progress":
+                cs.add.append((t, _P_startedAt, _now_literal(now), G_LOG))
+            else:
+                cs.add.append((t, _P_endedAt, _now_literal(now), G_LOG))
+                begin = _time_of(self._v(t, _P_startedAt)) or _time_of(self._v(t, _P_issuedAt))
+                if begin is not None:
+                    cs.add.append((t, _P_durationSeconds, Literal(max(0.0, now - begin), datatype=XSD.double), G_LOG))
+                stored_detail = detail
+                world = ChangeSet()
+                if status == "succeeded" and tt.result_format == _P_ScanResultJson and detail.strip():
+                    world = scan_changes(detail, self.store, self.site)
+                    stored_detail = "scan result: %d world triples added, %d removed" % (len(world.add), len(world.remove))
+                    world_changed = len(world.add) + len(world.remove)
+                if stored_detail:
+                    cs.add.append((t, _P_detail, Literal(stored_detail[:_STORED_DETAIL_CHARS]), G_LOG))
+                effects = [e for e in node.all_effects() if e.on_status == status]
+                conditional = [e for e in effects if e.on_detail is not None]
+                if conditional and not any(e.on_detail == detail for e in conditional):
+                    raise InvalidStatusError("a %s %s task needs detail %s, got %r"
+                                             % (status, tt.action_type,
+                                                " or ".join(sorted(repr(e.on_detail) for e in conditional)), detail[:100]))
+                for e in effects:
+                    if e.on_detail is not None and e.on_detail != detail:
+                        continue
+                    subj = e.subject_node if e.subject_node is not None else self._param(t, node, e.subject_param)
+                    value = e.value_node if e.value_node is not None else self._param(t, node, e.value_param)
+                    if subj is None or value is None:
+                        raise ProcessModelError("effect <%s> of task <%s> cannot be applied: parameter %r has no "
+                                                "value" % (e.iri, t, e.subject_param or e.value_param))
+                    for s2, p2, o2, _ in self.store.quads(subj, e.prop, None, (G_WORLD,)):
+                        if o2 != value:
+                            cs.remove.append((s2, p2, o2, G_WORLD))
+                    cs.add.append((subj, e.prop, value, G_WORLD))  # type: ignore[arg-type]
+                    effects_applied += 1
+                cs.extend(world)
+                if status == "failed":
+                    cs.extend(self._fail_changes(state, "task <%s> (%s) failed: %s" % (t, tt.action_type, detail)))
+            self._commit(cs, max_seconds=None)
+            return TaskStatusReport(str(t), status, str(sp), effects_applied, world_changed)
+
+    def _param(self, task: URIRef, node: FlowNode, name: Optional[str]) -> Optional[Node]:
+        for prm in node.parameters:
+            if prm.name == name:
+                return self._v(task, prm.prop)
+        return None
+
+    def update_world(self, scan: Union[str, bytes, Mapping[str, Any]], max_seconds: Optional[float] = None) -> int:
+        """Merge a SCAN result (docs/contracts.md) into the world state; returns the number of triples changed."""
+        with self._lock:
+            cs = scan_changes(scan, self.store, self.site)
+            n = len(cs.add) + len(cs.remove)
+            self._commit(cs, max_seconds=max_seconds)
+            return n
+
+    def query(self, name: str, bindings: Optional[Mapping[str, Any]] = None) -> QueryResult:
+        """Run the named query of the ontology with ``bindings`` (variable name -> IRI/literal/Python value)."""
+        with self._lock:
+            nq = self.model.queries.get(name) if isinstance(name, str) else None
+            if nq is None:
+                raise UnknownQueryError("no predefined query is named %r; known: %s"
+                                        % (name, ", ".join(sorted(self.model.queries))))
+            terms: Dict[str, Node] = {}
+            for var, value in (bindings or {}).items():
+                if var not in nq.variables:
+                    raise InvalidParameterError("query %r takes no binding %r; it accepts %s"
+                                                % (name, var, ", ".join(nq.variables) or "no bindings"))
+                terms[var] = to_term(value, "binding %r" % var)
+            return self.store.run(nq.query, terms)
+
+    def abort_process(self, process: Optional[str] = None, reason: str = "aborted") -> None:
+        """Mark a running specific process failed (operator abort)."""
+        with self._lock:
+            sp = check_iri(process, "process IRI") if process else self._active
+            if sp is None:
+                raise TaskStateError("no process is running")
+            state = self._state(sp)
+            if state.status != "running":
+                raise TaskStateError("process <%s> is %s, not running" % (sp, state.status))
+            self._commit(self._fail_changes(state, reason))
+
+    # ================================================================= checks
+    def check_consistency(self, full_inference: bool = False) -> List[str]:
+        """Problems found in the store (empty list = consistent); ``full_inference`` also re-derives all inferences."""
+        with self._lock:
+            problems: List[str] = []
+            st = self.model.status_name
+            running = []
+            for sp, _, _, _ in self.store.quads(None, _RDF_TYPE, _P_SpecificProcess, (G_LOG,)):
+                statuses = self.store.objects(sp, _P_status, (G_LOG,))
+                if len(statuses) != 1:
+                    problems.append("process <%s> has %d statuses" % (sp, len(statuses)))
+                    continue
+                status = st.get(statuses[0], "?")
+                nodes = self.store.objects(sp, _P_currentNode, (G_LOG,))
+                if len(nodes) != 1:
+                    problems.append("process <%s> has %d current nodes" % (sp, len(nodes)))
+                if status == "running":
+                    running.append(sp)
+                count = self._v(sp, _P_taskCount)
+                tasks = [s for s, _, _, _ in self.store.quads(None, _P_partOfProcess, sp, (G_LOG,))]
+                if count is None or int(count.toPython()) != len(tasks):  # type: ignore[union-attr]
+                    problems.append("process <%s>: taskCount %s but %d tasks" % (sp, count, len(tasks)))
+                cur = self._v(sp, _P_currentTask)
+                for t in tasks:
+                    ts = self.store.objects(t, _P_status, (G_LOG,))
+                    if len(ts) != 1:
+                        problems.append("task <%s> has %d statuses" % (t, len(ts)))
+                        continue
+                    name = st.get(ts[0], "?")
+                    if name in ("issued", "in_progress") and (t != cur or status != "running"):
+                        problems.append("task <%s> is %s but is not the current task of a running process" % (t, name))
+            if len(running) > 1:
+                problems.append("%d processes are running: %s" % (len(running), running))
+            if full_inference:
+                drift = self.reasoner.recompute_all(self.store, max_seconds=600.0, max_triples=10 ** 9)
+                if drift:
+                    problems.append("inferred graph differs from a full recompute: %d to add, %d to remove (e.g. %s)"
+                                    % (len(drift.add), len(drift.remove), (drift.add or drift.remove)[:3]))
+            return problems

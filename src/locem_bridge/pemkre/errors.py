@@ -1,0 +1,116 @@
+"""The PEMKRE exception hierarchy: one base class, one subclass per kind of failure.
+
+Every message names the culprit (the IRI, file, query or value) and, where there is one, what is allowed.
+"""
+from typing import Optional
+
+
+class PemkreError(Exception):
+    """Base class of every error raised by :mod:`locem_bridge.pemkre`."""
+
+    code = "PEMKRE_ERROR"
+
+
+class MalformedIriError(PemkreError, ValueError):
+    """A string that should be an absolute IRI is not one (or contains characters IRIs may not hold)."""
+
+    code = "MALFORMED_IRI"
+
+
+class UnknownProcessError(PemkreError, LookupError):
+    """The IRI does not name an abstract process in the loaded ontologies."""
+
+    code = "UNKNOWN_PROCESS"
+
+
+class UnknownTaskError(PemkreError, LookupError):
+    """The IRI does not name a task execution of any specific process."""
+
+    code = "UNKNOWN_TASK"
+
+
+class TaskStateError(PemkreError):
+    """A status report for a task that is not in a state that admits it (e.g. not running)."""
+
+    code = "TASK_STATE"
+
+
+class InvalidStatusError(PemkreError, ValueError):
+    """A task status or detail outside the allowed set."""
+
+    code = "INVALID_STATUS"
+
+
+class InvalidParameterError(PemkreError, ValueError):
+    """A query binding, option or term that is malformed or not allowed."""
+
+    code = "INVALID_PARAMETER"
+
+
+class UnknownQueryError(PemkreError, LookupError):
+    """No predefined query of that name exists in the ontologies."""
+
+    code = "UNKNOWN_QUERY"
+
+
+class OntologyError(PemkreError):
+    """An ontology file cannot be used (missing, syntax error, inconsistent process model)."""
+
+    code = "ONTOLOGY_ERROR"
+
+    def __init__(self, message: str, source: Optional[str] = None, line: Optional[int] = None) -> None:
+        super().__init__(message)
+        self.source = source
+        self.line = line
+
+
+class OntologySyntaxError(OntologyError):
+    """A Turtle file has a syntax error; the message names the file and, when known, the line."""
+
+    code = "ONTOLOGY_SYNTAX"
+
+
+class ProcessModelError(OntologyError):
+    """An abstract process is structurally wrong (dangling transition, node without exit, ...)."""
+
+    code = "PROCESS_MODEL"
+
+
+class QueryError(PemkreError):
+    """A SPARQL query stored in the ontology failed to parse or to evaluate; names the query's IRI."""
+
+    code = "QUERY_ERROR"
+
+    def __init__(self, message: str, query_iri: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.query_iri = query_iri
+
+
+class ConditionError(QueryError):
+    """A branch condition (transition guard) failed; no transition was taken."""
+
+    code = "CONDITION_ERROR"
+
+
+class BindingError(QueryError):
+    """A task parameter's binding query failed or returned no value for a required parameter."""
+
+    code = "BINDING_ERROR"
+
+
+class ReasoningBoundError(PemkreError):
+    """A closure hit its time or size bound; the store keeps the last good state."""
+
+    code = "REASONING_BOUND"
+
+
+class StoreError(PemkreError):
+    """The triplestore failed (I/O, lock held by another process, corrupted data)."""
+
+    code = "STORE_ERROR"
+
+
+class WorldUpdateError(PemkreError, ValueError):
+    """A world-state update (e.g. a SCAN result) does not have the contracts.md shape."""
+
+    code = "WORLD_UPDATE"

@@ -1,0 +1,193 @@
+"""The triplestore interface the engine talks to, and the value types that cross it.
+
+Lifecycle: a concrete store (:class:`~locem_bridge.pemkre.oxigraph_store.OxigraphStore`, persistent, the default;
+:class:`~locem_bridge.pemkre.rdflib_store.RdflibStore`, in memory) is created, handed to the engine, and closed
+by whoever created it. Every write goes through :meth:`TripleStore.apply` and is atomic: either the whole
+:class:`ChangeSet` is stored or none of it. When ``apply`` returns on a persistent store the change survives a
+``kill -9`` of the process.
+
+Queries are prepared once (:meth:`TripleStore.prepare`, with the vocabulary prefixes as ``initNs``) and run with
+*bindings*: values are handed to the query engine as RDF terms (SPARQL substitution / rdflib ``initBindings``),
+never spliced into query text. Terms at this interface are rdflib terms, so people script against rdflib.
+
+A remote SPARQL 1.1 store can be added later by implementing this class (``prepare`` keeps the text,
+bindings become a ``VALUES`` block of serialized terms, ``apply`` one ``DELETE DATA; INSERT DATA`` request).
+"""
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
+
+from rdflib import BNode, Literal, URIRef
+from rdflib.term import Node
+
+from .vocab import GRAPHS
+
+Term = Union[URIRef, BNode, Literal]
+Triple = Tuple[Node, Node, Node]
+Quad = Tuple[Node, Node, Node, URIRef]
+Row = Dict[str, Node]
+
+#: Asserted ontology files (TBox and process models), replaced as a whole when the files change.
+G_ONTOLOGY = GRAPHS.ontology
+#: The OWL 2 RL closure of the ontology graph, materialised once.
+G_SCHEMA_INFERRED = GRAPHS["schema-inferred"]
+#: Asserted world state (scan results, semantic effects).
+G_WORLD = GRAPHS.world
+#: Specific processes and task executions: the execution log.
+G_LOG = GRAPHS.log
+#: Inferences about world and log instances, maintained incrementally.
+G_ABOX_INFERRED = GRAPHS["abox-inferred"]
+#: Bookkeeping (ontology hash, counters).
+G_META = GRAPHS.meta
+
+ASSERTED_GRAPHS: Tuple[URIRef, ...] = (G_ONTOLOGY, G_WORLD, G_LOG)
+INFERRED_GRAPHS: Tuple[URIRef, ...] = (G_SCHEMA_INFERRED, G_ABOX_INFERRED)
+
+
+@dataclass
+class ChangeSet:
+    """Quads to remove, then quads to add, applied atomically by :meth:`TripleStore.apply`."""
+
+    remove: List[Quad] = field(default_factory=list)
+    add: List[Quad] = field(default_factory=list)
+
+    def __bool__(self) -> bool:
+        return bool(self.remove or self.add)
+
+    def extend(self, other: "ChangeSet") -> None:
+        self.remove.extend(other.remove)
+        self.add.extend(other.add)
+
+
+@dataclass(frozen=True)
+class PreparedQuery:
+    """A query parsed once; ``kind`` is ``ASK``, ``SELECT`` or ``CONSTRUCT``; ``name`` identifies it in errors."""
+
+    name: str
+    text: str
+    kind: str
+    variables: Tuple[str, ...]
+    compiled: object = field(default=None, compare=False, repr=False)
+    #: SELECT: the projected variables (bindable ones must be among them: SPARQL substitution, SEP-0007)
+    projected: Tuple[str, ...] = ()
+
+    def bindable(self, name: str) -> bool:
+        """Can ``name`` be given a value? (it occurs in the query and, for SELECT, is projected)"""
+        return name in self.variables and (self.kind != "SELECT" or name in self.projected)
+
+
+@dataclass
+class QueryResult:
+    """An ASK answer (``boolean``) or SELECT rows (``variables`` + ``rows``)."""
+
+    kind: str
+    variables: List[str] = field(default_factory=list)
+    rows: List[Row] = field(default_factory=list)
+    boolean: Optional[bool] = None
+
+    def to_sparql_json(self) -> Dict[str, object]:
+        """The W3C SPARQL 1.1 Query Results JSON form."""
+        if self.kind == "ASK":
+            return {"head": {}, "boolean": bool(self.boolean)}
+        bindings = []
+        for row in self.rows:
+            out: Dict[str, object] = {}
+            for name, term in row.items():
+                if term is None:
+                    continue
+                if isinstance(term, URIRef):
+                    out[name] = {"type": "uri", "value": str(term)}
+                elif isinstance(term, BNode):
+                    out[name] = {"type": "bnode", "value": str(term)}
+                else:
+                    entry: Dict[str, str] = {"type": "literal", "value": str(term)}
+                    if term.language:
+                        entry["xml:lang"] = term.language
+                    elif term.datatype is not None:
+                        entry["datatype"] = str(term.datatype)
+                    out[name] = entry
+            bindings.append(out)
+        return {"head": {"vars": list(self.variables)}, "results": {"bindings": bindings}}
+
+
+class TripleStore(ABC):
+    """One small interface over an RDF dataset with named graphs; see the module docstring."""
+
+    #: True when an applied change survives a crash and a restart.
+    persistent: bool = False
+
+    @abstractmethod
+    def prepare(self, text: str, name: str, prefixes: Mapping[str, str]) -> PreparedQuery:
+        """Parse ``text`` once; raise :class:`~locem_bridge.pemkre.errors.QueryError` naming ``name`` if invalid."""
+
+    @abstractmethod
+    def run(self, query: PreparedQuery, bindings: Optional[Mapping[str, Node]] = None) -> QueryResult:
+        """Evaluate over the union of all graphs with ``bindings`` substituted as terms."""
+
+    @staticmethod
+    def _check_bindings(query: PreparedQuery, bindings: Optional[Mapping[str, Node]]) -> None:
+        from .errors import QueryError
+
+        for name in bindings or {}:
+            if not query.bindable(name):
+                raise QueryError("query %s cannot take a value for ?%s: %s" % (
+                    query.name, name, "it does not use it" if name not in query.variables else
+                    "SELECT queries must project the variables they are given values for (add ?%s to the "
+                    "SELECT clause)" % name), query.name)
+
+    def ask(self, query: PreparedQuery, bindings: Optional[Mapping[str, Node]] = None) -> bool:
+        result = self.run(query, bindings)
+        if result.kind == "ASK":
+            return bool(result.boolean)
+        return bool(result.rows)
+
+    def select(self, query: PreparedQuery, bindings: Optional[Mapping[str, Node]] = None) -> List[Row]:
+        return self.run(query, bindings).rows
+
+    @abstractmethod
+    def quads(self, s: Optional[Node] = None, p: Optional[Node] = None, o: Optional[Node] = None,
+              graphs: Optional[Sequence[URIRef]] = None) -> Iterator[Quad]:
+        """Quads matching the pattern (``None`` = any) in ``graphs`` (``None`` = every graph)."""
+
+    def objects(self, s: Node, p: Node, graphs: Optional[Sequence[URIRef]] = None) -> List[Node]:
+        seen: List[Node] = []
+        for _, _, o, _ in self.quads(s, p, None, graphs):
+            if o not in seen:
+                seen.append(o)
+        return seen
+
+    def value(self, s: Node, p: Node, graphs: Optional[Sequence[URIRef]] = None) -> Optional[Node]:
+        for _, _, o, _ in self.quads(s, p, None, graphs):
+            return o
+        return None
+
+    @abstractmethod
+    def apply(self, changes: ChangeSet) -> None:
+        """Remove then add, atomically; blank nodes are not allowed in a change set."""
+
+    @abstractmethod
+    def replace_graph(self, graph: URIRef, triples: Iterable[Triple]) -> None:
+        """Replace a whole graph (blank nodes kept as given). Not atomic: callers mark completion in G_META."""
+
+    @abstractmethod
+    def count(self, graph: Optional[URIRef] = None) -> int:
+        """Number of quads in ``graph`` (``None``: all graphs)."""
+
+    def close(self) -> None:
+        """Release files and locks; the store must not be used afterwards."""
+
+    def flush(self) -> None:
+        """Push buffered writes to disk (no-op for stores that never buffer)."""
+
+    def maintain(self) -> None:
+        """Housekeeping when due (cheap to call often; the engine calls it after each change): drop what removed
+        triples left behind in the indexes, so lookups do not slow down over a long life. No-op by default."""
+
+    def snapshot(self, graphs: Optional[Sequence[URIRef]] = None):
+        """An rdflib ``Dataset`` copy of ``graphs`` (default: all) for scripting and reference reasoning."""
+        from rdflib import Dataset
+
+        ds = Dataset()
+        for s, p, o, g in self.quads(None, None, None, graphs):
+            ds.graph(g).add((s, p, o))
+        return ds

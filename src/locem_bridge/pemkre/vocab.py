@@ -1,0 +1,308 @@
+"""The PEMKRE vocabularies as rdflib :class:`DefinedNamespace` classes (typos fail at import time).
+
+Each class mirrors one Turtle file under ``ontologies/``; ``test_vocab.py`` checks that both list the same terms.
+``PREFIXES`` is the ``initNs`` every prepared query gets.
+"""
+from typing import Dict
+
+from rdflib import Namespace, URIRef
+from rdflib.namespace import OWL, RDF, RDFS, XSD, DefinedNamespace
+
+BASE = "https://locem-bridge.example.org/"
+#: Default namespace of world instances (scanned features, the robot, tools, locations).
+SITE = Namespace(BASE + "site/")
+#: Default namespace of specific processes and their task executions (the execution log).
+LOG = Namespace(BASE + "log/")
+#: Named graphs the store keeps apart (asserted vs inferred, schema vs world vs log).
+GRAPHS = Namespace(BASE + "graph/")
+
+
+class PROC(DefinedNamespace):
+    """Process vocabulary: abstract/specific processes, flow nodes, transitions, tasks, parameters, effects, named queries (ontologies/process.ttl)."""
+
+    _fail = True
+    _NS = Namespace("https://locem-bridge.example.org/ont/process#")
+
+    AbstractProcess: URIRef
+    ControlNode: URIRef
+    DecisionNode: URIRef
+    Effect: URIRef
+    EndNode: URIRef
+    FlowNode: URIRef
+    MergeNode: URIRef
+    NamedQuery: URIRef
+    Parameter: URIRef
+    ProcessOption: URIRef
+    ProcessStatus: URIRef
+    ResultFormat: URIRef
+    ScanResultJson: URIRef
+    SpecificProcess: URIRef
+    StartNode: URIRef
+    Status: URIRef
+    TaskExecution: URIRef
+    TaskNode: URIRef
+    TaskStatus: URIRef
+    Transition: URIRef
+    actionType: URIRef
+    bindingQuery: URIRef
+    condition: URIRef
+    currentNode: URIRef
+    currentTask: URIRef
+    defaultValue: URIRef
+    detail: URIRef
+    durationSeconds: URIRef
+    effectProperty: URIRef
+    effectSubject: URIRef
+    effectValue: URIRef
+    endOutcome: URIRef
+    ended: URIRef
+    endedAt: URIRef
+    executes: URIRef
+    failed: URIRef
+    hasEffect: URIRef
+    hasNode: URIRef
+    hasOption: URIRef
+    hasParameter: URIRef
+    hasParameterLiteral: URIRef
+    hasParameterValue: URIRef
+    hasTask: URIRef
+    in_progress: URIRef
+    incoming: URIRef
+    involvesOperator: URIRef
+    isManualFallback: URIRef
+    issued: URIRef
+    isWorldSeed: URIRef
+    issuedAt: URIRef
+    kpiByProcess: URIRef
+    kpiByTaskType: URIRef
+    nodeOf: URIRef
+    onDetail: URIRef
+    onStatus: URIRef
+    optionName: URIRef
+    optionProperty: URIRef
+    outgoing: URIRef
+    parameterProperty: URIRef
+    partOfProcess: URIRef
+    priority: URIRef
+    queryName: URIRef
+    queryText: URIRef
+    queryVariable: URIRef
+    realizes: URIRef
+    required: URIRef
+    resultFormat: URIRef
+    running: URIRef
+    sequenceNumber: URIRef
+    source: URIRef
+    startNode: URIRef
+    startedAt: URIRef
+    status: URIRef
+    statusName: URIRef
+    subjectParameter: URIRef
+    succeeded: URIRef
+    target: URIRef
+    taskCount: URIRef
+    taskLog: URIRef
+    taskType: URIRef
+    valueParameter: URIRef
+
+
+class PPR(DefinedNamespace):
+    """PPR world-state vocabulary: walls, joint lines, areas, robot, tools, locations, processing states (ontologies/ppr.ttl)."""
+
+    _fail = True
+    _NS = Namespace("https://locem-bridge.example.org/ont/ppr#")
+
+    HomeLocation: URIRef
+    HorizontalJointLine: URIRef
+    JointLine: URIRef
+    Location: URIRef
+    ProcessingState: URIRef
+    Product: URIRef
+    Resource: URIRef
+    Robot: URIRef
+    Sander: URIRef
+    SandingPending: URIRef
+    SandingReady: URIRef
+    SprayGun: URIRef
+    Sprayed: URIRef
+    SprayingPending: URIRef
+    TapingPending: URIRef
+    TapingTool: URIRef
+    Tool: URIRef
+    VerticalJointLine: URIRef
+    Wall: URIRef
+    WallArea: URIRef
+    WallFeature: URIRef
+    atLocation: URIRef
+    featureId: URIRef
+    geometry: URIRef
+    hasFeature: URIRef
+    height: URIRef
+    kind: URIRef
+    lastScannedAt: URIRef
+    manualRequired: URIRef
+    mountedTool: URIRef
+    onWall: URIRef
+    processed: URIRef
+    processedManually: URIRef
+    processingStatus: URIRef
+    sandingStatus: URIRef
+    scanOrder: URIRef
+    sprayingStatus: URIRef
+    tapingStatus: URIRef
+    thickness: URIRef
+    unprocessed: URIRef
+    validated: URIRef
+    width: URIRef
+
+
+class PLB(DefinedNamespace):
+    """The plasterboard use case: task types, parameters, effects, the taping/spraying/sanding processes (ontologies/plasterboard.ttl)."""
+
+    _fail = True
+    _NS = Namespace("https://locem-bridge.example.org/ont/plasterboard#")
+
+    GetToolTask: URIRef
+    GoHomeTask: URIRef
+    ManualTapingTask: URIRef
+    SandAreaTask: URIRef
+    SandingProcess: URIRef
+    ScanTask: URIRef
+    SprayAreaTask: URIRef
+    SprayingProcess: URIRef
+    TapeLineTask: URIRef
+    TapingProcess: URIRef
+    ValidateTapeLineTask: URIRef
+    area: URIRef
+    effect_areaSanded: URIRef
+    effect_areaSprayed: URIRef
+    effect_atHome: URIRef
+    effect_lineInvalid: URIRef
+    effect_lineTaped: URIRef
+    effect_lineTapedManually: URIRef
+    effect_lineValid: URIRef
+    effect_toolMounted: URIRef
+    line: URIRef
+    location: URIRef
+    opt_validateLines: URIRef
+    p_home: URIRef
+    p_manualLine: URIRef
+    p_nextPendingLine: URIRef
+    p_nextSandArea: URIRef
+    p_nextSprayArea: URIRef
+    p_robot: URIRef
+    p_sander: URIRef
+    p_sprayGun: URIRef
+    p_tapingTool: URIRef
+    p_validatedLine: URIRef
+    q_featureById: URIRef
+    q_featureCounts: URIRef
+    q_featureStatus: URIRef
+    q_hasPending: URIRef
+    q_pendingJointLines: URIRef
+    q_robotState: URIRef
+    robot: URIRef
+    sanding_afterScan: URIRef
+    sanding_anyPending: URIRef
+    sanding_end: URIRef
+    sanding_endEarly: URIRef
+    sanding_getTool: URIRef
+    sanding_goHome: URIRef
+    sanding_goHomeEarly: URIRef
+    sanding_loop: URIRef
+    sanding_morePending: URIRef
+    sanding_sand: URIRef
+    sanding_scan: URIRef
+    sanding_start: URIRef
+    sanding_t01: URIRef
+    sanding_t02: URIRef
+    sanding_t03: URIRef
+    sanding_t04: URIRef
+    sanding_t05: URIRef
+    sanding_t06: URIRef
+    sanding_t07: URIRef
+    sanding_t08: URIRef
+    sanding_t09: URIRef
+    sanding_t10: URIRef
+    sanding_t11: URIRef
+    sanding_t12: URIRef
+    sanding_t13: URIRef
+    spraying_afterScan: URIRef
+    spraying_anyPending: URIRef
+    spraying_end: URIRef
+    spraying_endEarly: URIRef
+    spraying_getTool: URIRef
+    spraying_goHome: URIRef
+    spraying_goHomeEarly: URIRef
+    spraying_loop: URIRef
+    spraying_morePending: URIRef
+    spraying_scan: URIRef
+    spraying_spray: URIRef
+    spraying_start: URIRef
+    spraying_t01: URIRef
+    spraying_t02: URIRef
+    spraying_t03: URIRef
+    spraying_t04: URIRef
+    spraying_t05: URIRef
+    spraying_t06: URIRef
+    spraying_t07: URIRef
+    spraying_t08: URIRef
+    spraying_t09: URIRef
+    spraying_t10: URIRef
+    spraying_t11: URIRef
+    spraying_t12: URIRef
+    spraying_t13: URIRef
+    taping_afterScan: URIRef
+    taping_anyPending: URIRef
+    taping_end: URIRef
+    taping_endEarly: URIRef
+    taping_getTool: URIRef
+    taping_goHome: URIRef
+    taping_goHomeEarly: URIRef
+    taping_loop: URIRef
+    taping_manual: URIRef
+    taping_morePending: URIRef
+    taping_scan: URIRef
+    taping_start: URIRef
+    taping_t01: URIRef
+    taping_t02: URIRef
+    taping_t03: URIRef
+    taping_t04: URIRef
+    taping_t05: URIRef
+    taping_t06: URIRef
+    taping_t07: URIRef
+    taping_t08: URIRef
+    taping_t09: URIRef
+    taping_t10: URIRef
+    taping_t11: URIRef
+    taping_t12: URIRef
+    taping_t13: URIRef
+    taping_t14: URIRef
+    taping_t15: URIRef
+    taping_t16: URIRef
+    taping_t17: URIRef
+    taping_t18: URIRef
+    taping_t19: URIRef
+    taping_t20: URIRef
+    taping_tape: URIRef
+    taping_tapeValidated: URIRef
+    taping_validResult: URIRef
+    taping_validate: URIRef
+    taping_validateOption: URIRef
+    tool: URIRef
+    validateLines: URIRef
+
+
+GEO = Namespace("http://www.opengis.net/ont/geosparql#")
+
+PREFIXES: Dict[str, Namespace] = {
+    "rdf": Namespace(str(RDF)),
+    "rdfs": Namespace(str(RDFS)),
+    "owl": Namespace(str(OWL)),
+    "xsd": Namespace(str(XSD)),
+    "proc": Namespace(str(PROC)),
+    "ppr": Namespace(str(PPR)),
+    "plb": Namespace(str(PLB)),
+    "geo": GEO,
+    "site": SITE,
+}

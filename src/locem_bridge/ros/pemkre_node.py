@@ -1,0 +1,174 @@
+"""The PEMKRE ROS node: the process engine (ROS-free core) exposed as services.
+
+=====================  ==============================  =====================================
+service                name (node name ``pemkre``)     type
+=====================  ==============================  =====================================
+start a process        ``~start_process``              ``locem_bridge/PemkreStartProcess``
+next action            ``~next_action``                ``locem_bridge/PemkreNextAction``
+report a task status   ``~set_task_status``            ``locem_bridge/PemkreSetTaskStatus``
+predefined query       ``~query``                      ``locem_bridge/PemkreQuery``
+world update (SCAN)    ``~update_world``               ``locem_bridge/PemkreUpdateWorld``
+=====================  ==============================  =====================================
+
+Lifecycle: ``main()`` inits the node, then :meth:`PemkreNode.start` opens the store and loads the ontologies
+(connecting late: nothing is advertised before the engine is ready, so ``wait_for_service`` is the readiness
+signal) and advertises the services; ``shutdown`` closes the store. Every reply carries ``success``, ``code``
+(``OK`` or the PEMKRE error code) and ``message``; a refused call changes nothing.
+
+Parameters: ``~store_path`` (directory of the persistent store; default ``$ROS_HOME/pemkre_store``),
+``~store`` (``journal`` default, ``rocksdb``, ``memory``), ``~fsync`` (journal: flush each change to disk),
+``~ontology_dir`` (default: the package's ``ontologies/``), ``~site_namespace``, ``~log_namespace``,
+``~reasoning_max_seconds``, ``~fresh`` (delete the store first: tests and demos only).
+"""
+import gc
+import json
+import os
+import shutil
+import threading
+from typing import Any, Callable, Optional
+
+import rospy
+
+from locem_bridge.pemkre import JournaledStore, OxigraphStore, ProcessEngine
+from locem_bridge.pemkre.errors import PemkreError
+from locem_bridge.pemkre.store import TripleStore
+from locem_bridge.pemkre.terms import bindings_from_strings
+from locem_bridge.srv import (PemkreNextAction, PemkreNextActionResponse, PemkreQuery, PemkreQueryResponse,
+                              PemkreSetTaskStatus, PemkreSetTaskStatusResponse, PemkreStartProcess,
+                              PemkreStartProcessResponse, PemkreUpdateWorld, PemkreUpdateWorldResponse)
+
+
+def _guard(response_cls: Callable[[], Any], body: Callable[[Any, Any], None]) -> Callable[[Any], Any]:
+    """Run ``body(request, response)``; turn PEMKRE errors into ``success=False`` with their code."""
+    def handler(req: Any) -> Any:
+        resp = response_cls()
+        try:
+            body(req, resp)
+            resp.success, resp.code = True, "OK"
+        except PemkreError as exc:
+            resp.success, resp.code, resp.message = False, exc.code, str(exc)
+        except Exception as exc:  # a bug must not kill the node; it is reported to the caller
+            rospy.logerr("PEMKRE internal error: %r", exc)
+            resp.success, resp.code, resp.message = False, "INTERNAL_ERROR", "%s: %s" % (type(exc).__name__, exc)
+        return resp
+    return handler
+
+
+class PemkreNode:
+    """Adapter around a :class:`ProcessEngine` built by ``engine_factory`` (called in :meth:`start`)."""
+
+    def __init__(self, engine_factory: Callable[[], ProcessEngine]) -> None:
+        self._factory = engine_factory
+        self.engine: Optional[ProcessEngine] = None
+        self._services: list = []
+        self._lock = threading.Lock()
+
+    def start(self) -> None:
+        self.engine = self._factory()
+        self._services = [
+            rospy.Service("~start_process", PemkreStartProcess, _guard(PemkreStartProcessResponse, self._start)),
+            rospy.Service("~next_action", PemkreNextAction, _guard(PemkreNextActionResponse, self._next)),
+            rospy.Service("~set_task_status", PemkreSetTaskStatus,
+                          _guard(PemkreSetTaskStatusResponse, self._status)),
+            rospy.Service("~query", PemkreQuery, _guard(PemkreQueryResponse, self._query)),
+            rospy.Service("~update_world", PemkreUpdateWorld, _guard(PemkreUpdateWorldResponse, self._world)),
+        ]
+
+    # ---------------------------------------------------------------- handlers
+    def _start(self, req: Any, resp: Any) -> None:
+        from locem_bridge.pemkre.errors import InvalidParameterError
+
+        options = {}
+        if req.options.strip():
+            try:
+                options = json.loads(req.options)
+            except ValueError as exc:
+                raise InvalidParameterError("options must be a JSON object: %s" % exc) from None
+            if not isinstance(options, dict):
+                raise InvalidParameterError("options must be a JSON object, got %s" % type(options).__name__)
+        assert self.engine is not None
+        resp.specific_process = self.engine.start_process(req.process, options, abort_running=req.abort_running)
+        resp.message = "started %s" % resp.specific_process
+
+    def _next(self, req: Any, resp: Any) -> None:
+        assert self.engine is not None
+        a = self.engine.next_action(req.process or None)
+        resp.status, resp.process, resp.task = a.status, a.process, a.task
+        resp.action_type, resp.parameters, resp.task_status, resp.message = \
+            a.action_type, a.parameters, a.task_status, a.message
+
+    def _status(self, req: Any, resp: Any) -> None:
+        assert self.engine is not None
+        r = self.engine.set_task_status(req.task, req.status, req.detail)
+        resp.message = "%s is %s (%d effect(s) applied, %d world triple(s) changed)" % (
+            r.task, r.status, r.effects_applied, r.world_triples_changed)
+
+    def _query(self, req: Any, resp: Any) -> None:
+        assert self.engine is not None
+        bindings = bindings_from_strings(req.binding_names, req.binding_values)
+        result = self.engine.query(req.name, bindings)
+        resp.results = json.dumps(result.to_sparql_json())
+        resp.message = "%d row(s)" % len(result.rows) if result.kind != "ASK" else str(result.boolean).lower()
+
+    def _world(self, req: Any, resp: Any) -> None:
+        assert self.engine is not None
+        resp.changed = self.engine.update_world(req.scan)
+        resp.message = "%d world triple(s) changed" % resp.changed
+
+    def shutdown(self) -> None:
+        for s in self._services:
+            s.shutdown()
+        if self.engine is not None:
+            self.engine.store.close()
+
+
+def open_store(kind: str, path: str, fsync: bool = False, fresh: bool = False) -> TripleStore:
+    """The store named by the ``~store`` parameter."""
+    if kind == "memory":
+        return OxigraphStore(None)
+    if fresh and os.path.isdir(path):
+        shutil.rmtree(path)
+    if kind == "journal":
+        return JournaledStore(path, fsync=fsync)
+    if kind == "rocksdb":
+        return OxigraphStore(path)
+    raise ValueError("~store must be journal, rocksdb or memory, got %r" % kind)
+
+
+def main() -> None:
+    """Entry point of ``rosrun locem_bridge pemkre_node``."""
+    rospy.init_node("pemkre")
+    ros_home = os.environ.get("ROS_HOME") or os.path.join(os.path.expanduser("~"), ".ros")
+    path = str(rospy.get_param("~store_path", "") or os.path.join(ros_home, "pemkre_store"))
+    kind = str(rospy.get_param("~store", "journal"))
+    onto_dir = str(rospy.get_param("~ontology_dir", ""))
+    if not onto_dir:
+        try:
+            import rospkg
+            onto_dir = os.path.join(rospkg.RosPack().get_path("locem_bridge"), "ontologies")
+        except Exception:
+            onto_dir = ""
+    files = sorted(os.path.join(onto_dir, f) for f in os.listdir(onto_dir) if f.endswith(".ttl")) if onto_dir else None
+
+    def factory() -> ProcessEngine:
+        store = open_store(kind, path, bool(rospy.get_param("~fsync", False)), bool(rospy.get_param("~fresh", False)))
+        try:
+            return ProcessEngine(store, files,
+                                 site_namespace=rospy.get_param("~site_namespace", "") or None,
+                                 log_namespace=rospy.get_param("~log_namespace", "") or None,
+                                 reasoning_max_seconds=float(rospy.get_param("~reasoning_max_seconds", 5.0)))
+        except Exception:
+            store.close()
+            raise
+
+    node = PemkreNode(factory)
+    node.start()
+    rospy.on_shutdown(node.shutdown)
+    # The ontologies, compiled model and caches live as long as the node: move them out of the cyclic garbage
+    # collector's reach so a full collection does not pause a decision (measured in bench/bench_pemkre.py).
+    gc.collect()
+    gc.freeze()
+    assert node.engine is not None
+    rospy.loginfo("PEMKRE ready on %s (store %s at %s): processes %s; running: %s", rospy.resolve_name("~next_action"),
+                  kind, path, ", ".join(node.engine.processes()), node.engine.active_process() or "none")
+    rospy.spin()

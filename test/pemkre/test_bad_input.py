@@ -1,0 +1,218 @@
+"""Every bad input of the issue: a clear error naming the culprit, and the store unchanged and consistent."""
+import os
+import shutil
+
+import pytest
+from pemkre_testkit import json_dumps, quads_snapshot, scan_result
+from rdflib import Literal, URIRef
+
+from locem_bridge.pemkre import PLB, JournaledStore, ProcessEngine
+from locem_bridge.pemkre.errors import (BindingError, ConditionError, InvalidParameterError, InvalidStatusError,
+                                        MalformedIriError, OntologySyntaxError, ProcessModelError, QueryError,
+                                        TaskStateError, UnknownProcessError, UnknownQueryError, UnknownTaskError,
+                                        WorldUpdateError)
+from locem_bridge.pemkre.ontology import default_ontology_files
+from locem_bridge.pemkre.terms import bindings_from_strings, parse_term
+
+TAPING = str(PLB.TapingProcess)
+
+
+@pytest.fixture
+def engine(make_engine):
+    e = make_engine()
+    e.update_world(scan_result(joints_per_wall=2))
+    e.start_process(TAPING, {"validateLines": True})
+    a = e.next_action()
+    e.set_task_status(a.task, "succeeded")   # GET_TOOL done
+    return e
+
+
+def _rejected(e, call, exc, *fragments):
+    """``call`` raises ``exc`` whose message holds every fragment; nothing is written; the store is consistent."""
+    before = quads_snapshot(e.store)
+    with pytest.raises(exc) as info:
+        call()
+    msg = str(info.value)
+    for f in fragments:
+        assert f in msg, (f, msg)
+    assert quads_snapshot(e.store) == before
+    assert e.check_consistency(full_inference=True) == []
+    return msg
+
+
+def test_unknown_process_iri(engine):
+    msg = _rejected(engine, lambda: engine.start_process("https://example.org/NoSuchProcess", abort_running=True),
+                    UnknownProcessError, "https://example.org/NoSuchProcess", "known processes", "TapingProcess")
+    assert "SandingProcess" in msg
+    _rejected(engine, lambda: engine.next_action("https://example.org/NoSuchProcess"), UnknownProcessError,
+              "NoSuchProcess")
+
+
+@pytest.mark.parametrize("bad", ["", "not an iri", "TapingProcess", "http://exa mple.org/x", "<http://a>b>",
+                                 "https://example.org/x>\" . <a> <b> <c", "urn:x:{}"])
+def test_malformed_iris(engine, bad):
+    _rejected(engine, lambda: engine.start_process(bad, abort_running=True), MalformedIriError, "IRI")
+    _rejected(engine, lambda: engine.set_task_status(bad, "succeeded"), MalformedIriError, "task IRI")
+
+
+def test_statuses_for_tasks_that_are_not_running(engine):
+    a = engine.next_action()                                   # VALIDATE_TAPE_LINE, issued
+    old = URIRef(a.task.replace("_task_2", "_task_1"))          # the GET_TOOL task, already succeeded
+    _rejected(engine, lambda: engine.set_task_status(str(old), "succeeded"), TaskStateError,
+              str(old), "succeeded", "not running")
+    _rejected(engine, lambda: engine.set_task_status(a.task + "_nope", "succeeded"), UnknownTaskError,
+              a.task + "_nope", "next_action")
+    _rejected(engine, lambda: engine.set_task_status(a.task, "done"), InvalidStatusError,
+              "'done'", "in_progress, succeeded, failed")
+    engine.set_task_status(a.task, "in_progress")
+    _rejected(engine, lambda: engine.set_task_status(a.task, "in_progress"), TaskStateError, "already in_progress")
+    # the operator's answer must be valid/invalid
+    _rejected(engine, lambda: engine.set_task_status(a.task, "succeeded", "maybe"), InvalidStatusError,
+              "'valid'", "'invalid'", "maybe")
+    engine.abort_process(reason="test")
+    _rejected(engine, lambda: engine.set_task_status(a.task, "succeeded", "valid"), TaskStateError, "failed")
+
+
+def test_metacharacters_in_parameters_are_values_not_query_text(engine):
+    nasty = ['"} ; DROP ALL ; {"', "wall_1_joint_1> . ?x ?y ?z", "' OR 1=1 --", "\\\" } UNION { ?s ?p ?o }",
+             "<https://locem-bridge.example.org/site/wall_1_joint_1>", "\n.\n", "?feature"]
+    for value in nasty:
+        before = quads_snapshot(engine.store)
+        res = engine.query("feature_by_id", {"id": value})      # a literal id: no such feature, no injection
+        assert res.rows == []
+        assert quads_snapshot(engine.store) == before
+    # the same id as a proper literal finds the feature
+    rows = engine.query("feature_by_id", {"id": "wall_1_joint_1"}).rows
+    assert {str(r["feature"]).rsplit("/", 1)[1] for r in rows} == {"wall_1_joint_1"}
+    assert {str(r["class"]).rsplit("#", 1)[1] for r in rows} >= {"VerticalJointLine", "JointLine", "WallFeature",
+                                                                  "TapingPending"}  # asserted + inferred
+    _rejected(engine, lambda: engine.query("feature_by_id", {"feature": "x"}), InvalidParameterError,
+              "'feature'", "accepts id")
+    _rejected(engine, lambda: engine.query("no_such_query"), UnknownQueryError, "no_such_query", "pending_joint_lines")
+    _rejected(engine, lambda: engine.query("feature_by_id", {"id": float("nan")}), InvalidParameterError, "finite")
+    # N-Triples terms (the ROS form of bindings) are parsed by an RDF parser; junk is refused, naming the binding
+    for junk in ['"abc', "<a b>", '"x" . <s> <p> <o>', "_:b1", "?x", "<https://ok.example/x> <https://ok.example/y>"]:
+        with pytest.raises(InvalidParameterError, match="N-Triples term|blank nodes|exactly one"):
+            bindings_from_strings(["id"], [junk])
+    assert parse_term('"a \\"quoted\\" } ; DROP ALL"') == Literal('a "quoted" } ; DROP ALL')
+    # an option with metacharacters is refused (it is a boolean)
+    _rejected(engine, lambda: engine.start_process(TAPING, {"validateLines": 'true" } ; DROP ALL'}, abort_running=True),
+              InvalidParameterError, "validateLines", "boolean")
+    _rejected(engine, lambda: engine.start_process(TAPING, {"validate": True}, abort_running=True),
+              InvalidParameterError, "'validate'", "validateLines")
+
+
+def test_bad_scan_results_name_the_path(engine):
+    s = scan_result()
+    s["joints"][0]["start"] = [1.0, "x", 0.0]
+    _rejected(engine, lambda: engine.update_world(s), WorldUpdateError, "joints[0].start[1]", "number")
+    s = scan_result()
+    s["joints"][1]["id"] = "1bad id"
+    _rejected(engine, lambda: engine.update_world(s), WorldUpdateError, "joints[1].id", "[A-Za-z]")
+    s = scan_result()
+    s["areas"][0]["wall"] = "wall_9"
+    _rejected(engine, lambda: engine.update_world(s), WorldUpdateError, "areas[0].wall", "wall_9")
+    s = scan_result()
+    s["joints"][0]["kind"] = "diagonal"
+    _rejected(engine, lambda: engine.update_world(s), WorldUpdateError, "joints[0].kind", "horizontal", "vertical")
+    _rejected(engine, lambda: engine.update_world("{not json"), WorldUpdateError, "not valid JSON")
+    s = scan_result()
+    s["walls"][0]["height"] = float("inf")
+    _rejected(engine, lambda: engine.update_world(json_dumps(s).replace("Infinity", "1e999")), WorldUpdateError,
+              "walls[0].height", "finite")
+
+
+def _copy_ontologies(tmp_path):
+    d = tmp_path / "onto"
+    d.mkdir()
+    for f in default_ontology_files():
+        shutil.copy(f, d)
+    return d
+
+
+def test_ontology_file_with_a_syntax_error(tmp_path, make_engine):
+    e = make_engine("db")
+    before = quads_snapshot(e.store)
+    e.store.close()
+    d = _copy_ontologies(tmp_path)
+    bad = d / "plasterboard.ttl"
+    lines = bad.read_text().splitlines()
+    lines[40] = lines[40] + " this is ; not turtle ]"
+    bad.write_text("\n".join(lines) + "\n")
+    store = JournaledStore(str(tmp_path / "db"))
+    try:
+        with pytest.raises(OntologySyntaxError) as info:
+            ProcessEngine(store, sorted(str(p) for p in d.iterdir()))
+        assert "plasterboard.ttl" in str(info.value)
+        assert info.value.source.endswith("plasterboard.ttl")
+        assert quads_snapshot(store) == before
+        e2 = ProcessEngine(store)                        # the shipped files still load on the untouched store
+        assert e2.check_consistency(full_inference=True) == []
+    finally:
+        store.close()
+
+
+def _with_condition(tmp_path, condition: str):
+    d = _copy_ontologies(tmp_path)
+    p = d / "plasterboard.ttl"
+    text = p.read_text()
+    old = 'proc:condition "ASK { ?process plb:validateLines true }"'
+    assert old in text
+    p.write_text(text.replace(old, 'proc:condition "%s"' % condition))
+    return sorted(str(x) for x in d.iterdir())
+
+
+def test_condition_query_that_does_not_parse_is_refused_at_load(tmp_path, make_engine):
+    files = _with_condition(tmp_path, "ASK { ?process plb:validateLines true ")
+    store = JournaledStore(str(tmp_path / "db2"))
+    try:
+        with pytest.raises(QueryError) as info:
+            ProcessEngine(store, files)
+        assert "taping_t12" in str(info.value) and "parse" in str(info.value)
+        assert len(store) == 0 if hasattr(store, "__len__") else store.count() == 0
+    finally:
+        store.close()
+
+
+def test_condition_query_that_fails_at_run_time(tmp_path, make_engine):
+    # SERVICE to a closed port on loopback: parses fine, fails when evaluated
+    files = _with_condition(tmp_path, "ASK { SERVICE <http://127.0.0.1:9/sparql> { ?process ?p ?o } }")
+    e = make_engine("db3", ontology_files=files)
+    e.update_world(scan_result(joints_per_wall=1))
+    e.start_process(TAPING)
+    a = e.next_action()
+    e.set_task_status(a.task, "succeeded")
+    msg = _rejected(e, e.next_action, ConditionError, "taping_t12", "taping_validateOption")
+    assert "failed" in msg
+    assert e.active_process() is not None                # the process is still there, at the same place
+
+
+def test_binding_query_without_a_value(make_engine):
+    e = make_engine()
+    e.update_world(scan_result(joints_per_wall=1))
+    e.start_process(TAPING)
+    # remove the taping tool from the world: GET_TOOL cannot be parameterized
+    from locem_bridge.pemkre.store import G_WORLD, ChangeSet
+    from rdflib.namespace import RDF
+    from locem_bridge.pemkre.vocab import PPR, SITE
+    e.store.apply(e.reasoner.infer(e.store, ChangeSet(remove=[(SITE.taping_tool, RDF.type, PPR.TapingTool, G_WORLD)])))
+    _rejected(e, e.next_action, BindingError, "'tool'", "taping_getTool", "p_tapingTool")
+
+
+def test_process_model_errors_name_the_node(tmp_path):
+    d = _copy_ontologies(tmp_path)
+    p = d / "plasterboard.ttl"
+    text = p.read_text()
+    p.write_text(text.replace("plb:taping_t20 a proc:Transition, owl:NamedIndividual ; proc:source plb:taping_goHome ; "
+                              "proc:target plb:taping_end .", ""))
+    store = JournaledStore(str(tmp_path / "db4"))
+    try:
+        with pytest.raises(ProcessModelError, match="taping_goHome.*no outgoing transition"):
+            ProcessEngine(store, sorted(str(x) for x in d.iterdir()))
+    finally:
+        store.close()
+
+
+def test_second_process_while_one_runs(engine):
+    _rejected(engine, lambda: engine.start_process(str(PLB.SprayingProcess)), TaskStateError,
+              "still running", "abort_running")
