@@ -111,8 +111,10 @@ def test_operator_hmi_node_over_ros(ros, tmp_path):
     assert stale.status == 409 and stale.error["code"] == "prompt_not_open"
 
     assert post(url, "/api/processes/start", {"iri": TAPING}).status == 200
+    before = len(calls(log))
     assert post(url, "/api/stop", {}).status == 200
-    assert calls(log)[-1] == ["stop", "STOP pressed on the operator HMI"]
+    # HICEM got the stop (other traffic, e.g. the periodic wall-picture refresh, may interleave)
+    assert ["stop", "STOP pressed on the operator HMI"] in calls(log)[before:]
     wait_state(url, lambda d: d["snapshot"]["phase"] == "stopped" and not d["prompts"], timeout=10)
 
 
