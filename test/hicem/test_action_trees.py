@@ -46,8 +46,8 @@ def test_spray_area_sections_and_command_arguments():
     gotos = [c for c in locem.sent if c.startswith("GOTO")]
     sprays = [c for c in locem.sent if c.startswith("SPRAY_AREA")]
     assert len(gotos) == 4 and len(sprays) == 4 and locem.sent[0].startswith("GOTO")
-    assert gotos[0] == "GOTO 0.6 2.1 1.570796"  # 0.9 m in front of the first section's middle, facing the wall
-    assert sprays[0] == ("SPRAY_AREA 0 3 0 1 0 0 1.2 2.5 0 -1 0 spacing=0.2 standoff=0.3 speed=0.4 pressure=2.5")
+    assert gotos[0] == "GOTO 0.6 1.9 1.570796"  # 1.1 m in front of the first section's middle, facing the wall
+    assert sprays[0] == ("SPRAY_AREA 0 3 0 1 0 0 1.2 2.5 0 -1 0 spacing=0.1 standoff=0.3 speed=0.1 pressure=3.5")
     assert sprays[3].startswith("SPRAY_AREA 3.6 3 0 ")
     assert hdh.feature("wall_1_area_1")["status"] == "sprayed" and bb.get("task_detail") == "sprayed"
 

@@ -379,6 +379,84 @@ class GetTapePath(Leaf):
         return Status.SUCCESS
 
 
+class GetTapeSegments(Leaf):
+    DESCRIPTION = ("Splits a joint line into pieces taped one after the other, each from its own base pose, for "
+                   "arms that cannot reach a whole joint from one pose. A vertical joint is clipped to the "
+                   "reachable height band [z_min, z_max] and taped outwards from its middle (middle to top, "
+                   "middle to bottom: the approach to mid height is the one free of the wall); a horizontal joint "
+                   "is cut into pieces no longer than segment_length, each approached in front of its middle. "
+                   "Each piece: approach [x, y, theta] at standoff from the wall facing it (plus yaw_offset, "
+                   "shifted along the wall by lateral_offset), start and end points (moved off the wall by "
+                   "surface_offset) and the inward normal. The clipped length is reported as skipped.")
+    PORTS = (
+        input_port("line_id", STRING, None, "", "stored joint id"),
+        input_port("segment_length", FLOAT, "{@cfg.taping.segment_length}", "m",
+                   "longest piece taped from one base pose"),
+        input_port("z_range", FLOAT_LIST, "{@cfg.taping.z_range}", "m",
+                   "z_min;z_max, the height band the arm reaches with the tool facing the wall"),
+        input_port("standoff", FLOAT, "{@cfg.taping.base_standoff}", "m", "base centre distance from the wall"),
+        input_port("lateral_offset", FLOAT, "{@cfg.taping.lateral_offset}", "m", "shift along the wall"),
+        input_port("yaw_offset", FLOAT, "{@cfg.taping.yaw_offset}", "rad", "added to the wall-facing heading"),
+        input_port("surface_offset", FLOAT, "{@cfg.taping.surface_offset}", "m", "tool point off the wall"),
+        output_port("segments", JSON, None, "", "list of {approach, start, end, normal, length}"),
+        output_port("count", INT, None, "", "number of pieces"),
+        output_port("skipped", FLOAT, None, "m", "joint length outside the reachable band (not taped)"),
+    )
+
+    def on_tick(self) -> Status:
+        hdh = self.ctx.require("data_handler", self.name)
+        j = hdh.feature(self.get("line_id"), "joint")
+        t, nrm = _wall_frame(hdh, j["wall"])
+        seg_len = self.get("segment_length")
+        if seg_len <= 0:
+            raise PortError("%s: segment_length must be > 0 m, got %g" % (self.name, seg_len))
+        band = list(self.get("z_range"))
+        if len(band) != 2 or band[0] >= band[1]:
+            raise PortError("%s: z_range must be two heights z_min < z_max, got %s" % (self.name, band))
+        nxy = math.hypot(nrm[0], nrm[1])
+        if nxy < 1e-9:
+            return self.fail("wall '%s' normal has no horizontal part" % j["wall"])
+        nx, ny = nrm[0] / nxy, nrm[1] / nxy
+        d, lat, off = self.get("standoff"), self.get("lateral_offset"), self.get("surface_offset")
+        heading = _facing([nx, ny], self.get("yaw_offset"))
+        start, end = [float(v) for v in j["start"]], [float(v) for v in j["end"]]
+        total = math.dist(start, end)
+        pieces = []  # (a, b, foot) in map, before the surface offset
+        if j["kind"] == "vertical":
+            lo, hi = sorted((start, end), key=lambda p: p[2])
+            z0, z1 = max(lo[2], band[0]), min(hi[2], band[1])
+            if z1 - z0 < 1e-3:
+                return self.fail("joint '%s' (z %.2f..%.2f m) lies outside the reachable band %.2f..%.2f m"
+                                 % (j["id"], lo[2], hi[2], band[0], band[1]))
+
+            def at(z: float) -> List[float]:
+                f = (z - lo[2]) / (hi[2] - lo[2])
+                return [lo[k] + (hi[k] - lo[k]) * f for k in range(3)]
+
+            mid = (z0 + z1) / 2.0
+            for a, b in ((mid, z1), (mid, z0)):
+                n = max(1, int(math.ceil(abs(b - a) / seg_len - 1e-9)))
+                for i in range(n):
+                    za, zb = a + (b - a) * i / n, a + (b - a) * (i + 1) / n
+                    pieces.append((at(za), at(zb), lo))
+        else:
+            n = max(1, int(math.ceil(total / seg_len - 1e-9)))
+            for i in range(n):
+                a = [start[k] + (end[k] - start[k]) * i / n for k in range(3)]
+                b = [start[k] + (end[k] - start[k]) * (i + 1) / n for k in range(3)]
+                pieces.append((a, b, [(a[k] + b[k]) / 2.0 for k in range(3)]))
+        segments = []
+        for a, b, foot in pieces:
+            approach = [foot[0] + nx * d + t[0] * lat, foot[1] + ny * d + t[1] * lat, heading]
+            segments.append({"approach": approach, "start": [a[k] + nrm[k] * off for k in range(3)],
+                             "end": [b[k] + nrm[k] * off for k in range(3)], "normal": list(nrm),
+                             "length": math.dist(a, b)})
+        self.set("segments", segments)
+        self.set("count", len(segments))
+        self.set("skipped", max(0.0, total - sum(s["length"] for s in segments)))
+        return Status.SUCCESS
+
+
 class GetAreaRaster(Leaf):
     DESCRIPTION = ("Splits a wall area into sections no wider than section_width; for each: a base approach pose "
                    "facing the section's middle at base_standoff, and the raster rectangle (origin, u, width, "
@@ -415,4 +493,5 @@ class GetAreaRaster(Leaf):
 
 
 LIBRARY = (CheckHealth, SendLocemCommand, ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual,
-           SelectEntry, IngestScan, MarkFeature, TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetAreaRaster)
+           SelectEntry, IngestScan, MarkFeature, TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments,
+           GetAreaRaster)
