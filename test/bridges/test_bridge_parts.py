@@ -10,7 +10,7 @@ from locem_bridge.bridges.config import deep_merge, load_robot_config, need
 from locem_bridge.bridges.errors import BridgeConfigError
 from locem_bridge.bridges.geometry import (arm_base_in_footprint, invert, matrix_to_pose, matrix_to_rotvec, planar,
                                            pose_to_matrix, rotvec_to_matrix, tool_frame_facing)
-from locem_bridge.bridges.mecanum import Mecanum
+from locem_bridge.mecanum import MecanumKinematics
 from locem_bridge.locem.catalogue import all_specs
 
 from bridge_rigs import ROBOT_YAML
@@ -42,11 +42,11 @@ def test_map_to_ur_base_chain_matches_the_configured_mount():
 
 
 def test_mecanum_inverse_and_forward_agree_and_limits_scale_the_twist():
-    kin = Mecanum(0.1275, 0.236, 0.2605)
+    kin = MecanumKinematics(0.1275, 0.236, 0.2605)
     for twist in ((0.3, 0.0, 0.0), (0.0, -0.2, 0.0), (0.1, 0.2, 0.5)):
-        assert np.allclose(kin.body(kin.wheels(*twist)), twist)
+        assert np.allclose(kin.twist(kin.wheel_speeds(*twist)), twist)
     vx, vy, wz = kin.scale_to_limit(5.0, 0.0, 0.0, 20.0)
-    assert max(abs(w) for w in kin.wheels(vx, vy, wz)) == pytest.approx(20.0)
+    assert max(abs(w) for w in kin.wheel_speeds(vx, vy, wz)) == pytest.approx(20.0)
     assert vy == 0.0 and wz == 0.0
 
 

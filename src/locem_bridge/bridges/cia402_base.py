@@ -26,7 +26,8 @@ from .config import need
 from .errors import BadRequest, DeviceFault, LinkDown, MotionTimeout, NotConnected
 from .geometry import wrap_angle
 from .interfaces import Base, Health, Waiter
-from .mecanum import Mecanum
+from ..mecanum import MecanumKinematics
+from ..rate import FixedRate
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +57,7 @@ class Cia402Base(Base):
         self.stop_decel_units = int(need(drives, "stop_deceleration", float, default=200.0, lo=1.0,
                                          where=w + ".drives") * self.vel_scale)
         wheel = need(cfg, "wheel", dict, where=w)
-        self.kin = Mecanum(need(wheel, "radius", float, where=w + ".wheel"),
+        self.kin = MecanumKinematics(need(wheel, "radius", float, where=w + ".wheel"),
                            need(wheel, "half_wheelbase", float, where=w + ".wheel"),
                            need(wheel, "half_track", float, where=w + ".wheel"))
         limits = need(cfg, "limits", dict, where=w)
@@ -88,7 +89,7 @@ class Cia402Base(Base):
         self._thread: Optional[threading.Thread] = None
         self.cycles = 0
         self.loop_started = 0.0
-        self.late_cycles = 0
+        self._loop_rate: Optional[FixedRate] = None
         self.stop_latency: Optional[float] = None
 
     # -- lifecycle ---------------------------------------------------------------------------------------
@@ -181,29 +182,21 @@ class Cia402Base(Base):
         period = 1.0 / self.rate
         self.loop_started = time.monotonic()
         self.cycles = 0
-        self.late_cycles = 0
-        nxt = self.loop_started
-        while not self._stop.is_set() and self._enabled:
-            now = time.monotonic()
+        rate = self._loop_rate = FixedRate(period, self._stop)
+        while rate.running() and self._enabled:
             try:
-                self._cycle(now, period)
+                self._cycle(time.monotonic(), period)
             except Exception as exc:
                 log.exception("base control cycle failed")
                 self._latch("control cycle failed: %s" % exc)
             self.cycles += 1
-            nxt += period
-            delay = nxt - time.monotonic()
-            if delay < 0:
-                self.late_cycles += 1
-                if delay < -period:
-                    nxt = time.monotonic()
-                    delay = 0.0
-            self._stop.wait(max(0.0, delay))
+            rate.sleep()
 
     def loop_rate(self) -> Dict[str, float]:
         elapsed = time.monotonic() - self.loop_started if self.loop_started else 0.0
         achieved = self.cycles / elapsed if elapsed > 0 else 0.0
-        return {"configured_hz": self.rate, "achieved_hz": achieved, "cycles": self.cycles, "late": self.late_cycles}
+        return {"configured_hz": self.rate, "achieved_hz": achieved, "cycles": self.cycles,
+                "late": self._loop_rate.late if self._loop_rate is not None else 0}
 
     # -- one cycle ---------------------------------------------------------------------------------------
     def _latch(self, why: str, kind: str = "other") -> None:
@@ -241,7 +234,7 @@ class Cia402Base(Base):
         self._odometry()
         # 3. command
         twist = self._command(period)
-        self._send_wheels(self.kin.wheels(*twist))
+        self._send_wheels(self.kin.wheel_speeds(*twist))
 
     def _maybe_recover(self, now: float) -> None:
         """After a heartbeat loss: re-enable once every drive's heartbeat is back (a rebooted drive must be enabled
@@ -261,7 +254,7 @@ class Cia402Base(Base):
         with self._lock:
             if self._last_pos is not None:
                 d = [a - b for a, b in zip(pos, self._last_pos)]
-                dx, dy, dth = self.kin.body(d)
+                dx, dy, dth = self.kin.twist(d)
                 x, y, yaw = self._pose
                 ym = yaw + dth / 2.0
                 self._pose = [x + math.cos(ym) * dx - math.sin(ym) * dy, y + math.sin(ym) * dx + math.cos(ym) * dy,
@@ -271,7 +264,7 @@ class Cia402Base(Base):
             for node, pol in zip(self.nodes, self.polarity):
                 v = node.tpdo_values.get(0x606C)
                 speeds.append(pol * (v or 0) / self.vel_scale)
-            self._twist = list(self.kin.body(speeds))
+            self._twist = list(self.kin.twist(speeds))
 
     def _command(self, period: float) -> List[float]:
         with self._lock:

@@ -20,8 +20,9 @@ import inspect
 import logging
 import threading
 import time
-from typing import Any, Callable, Dict, List, Mapping, Optional
+from typing import Any, Callable, Dict, Mapping, Optional
 
+from ..rate import FixedRate
 from .config import need
 from .errors import DeviceFault, LinkDown
 from .interfaces import Compressor, Health
@@ -134,8 +135,7 @@ class ModbusCompressor(Compressor):
         return state
 
     def _poll_loop(self) -> None:
-        period = 1.0 / self.poll_rate
-        nxt = time.monotonic()
+        rate = FixedRate(1.0 / self.poll_rate, self._stop)
         while not self._stop.is_set():
             try:
                 state = self._read_state()
@@ -161,12 +161,7 @@ class ModbusCompressor(Compressor):
                 self._health.set(link="down", device="unknown", error=exc.message)
             except DeviceFault as exc:
                 self._health.set(error=exc.message)
-            nxt += period
-            delay = nxt - time.monotonic()
-            if delay < -period:
-                nxt = time.monotonic()
-                delay = 0.0
-            self._stop.wait(max(0.0, delay))
+            rate.sleep()
 
     # -- interface ---------------------------------------------------------------------------------------
     def check_link(self) -> None:

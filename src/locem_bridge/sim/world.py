@@ -29,7 +29,6 @@ import shutil
 import sys
 import tempfile
 import threading
-import time
 from collections import deque
 from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
@@ -39,7 +38,8 @@ import pybullet as pb
 from .clock import SimClock
 from .config import TOOL_NAMES
 from .errors import SimConfigError, SimStateError
-from .mecanum import MecanumKinematics
+from ..mecanum import MecanumKinematics
+from ..rate import FixedRate
 from .outcome import OutcomeRecorder
 from .perception import WallScanner
 from .site import Site
@@ -546,19 +546,13 @@ class World:
         self._thread.start()
 
     def _run(self) -> None:
-        period = 1.0 / self.rate
-        nxt = time.monotonic()
-        while not self._stop.is_set():
+        rate = FixedRate(1.0 / self.rate, self._stop)
+        while rate.running():
             try:
                 self.step()
             except Exception:
                 log.exception("world step failed")
-            nxt += period
-            delay = nxt - time.monotonic()
-            if delay < -period:
-                nxt = time.monotonic()
-                delay = 0.0
-            self._stop.wait(max(0.0, delay))
+            rate.sleep()
 
     def stop(self) -> None:
         self._stop.set()

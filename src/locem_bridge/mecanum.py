@@ -4,6 +4,9 @@ Wheel speeds are wheel-shaft angular velocities in rad/s, positive when the whee
 Body twist ``(vx, vy, wz)`` is in the base frame (x forward, y left, z up). ``k = half_wheelbase + half_track``.
 Inverse: ``fl = (vx - vy - k wz)/r``, ``fr = (vx + vy + k wz)/r``, ``rl = (vx + vy - k wz)/r``,
 ``rr = (vx - vy + k wz)/r``; forward is its least-squares inverse.
+
+One module for the robot's geometry: the base bridge commands wheels with it and the simulated worksite moves
+the base with it.
 """
 from __future__ import annotations
 
@@ -30,3 +33,11 @@ class MecanumKinematics:
         fl, fr, rl, rr = w
         r, k = self.r, self.k
         return (r / 4.0 * (fl + fr + rl + rr), r / 4.0 * (-fl + fr + rl - rr), r / (4.0 * k) * (-fl + fr - rl + rr))
+
+    def scale_to_limit(self, vx: float, vy: float, wz: float, max_wheel: float) -> Tuple[float, float, float]:
+        """The twist scaled down (direction kept) so no wheel exceeds ``max_wheel`` rad/s."""
+        peak = max(abs(w) for w in self.wheel_speeds(vx, vy, wz))
+        if peak <= max_wheel or peak == 0.0:
+            return vx, vy, wz
+        s = max_wheel / peak
+        return vx * s, vy * s, wz * s
