@@ -69,13 +69,17 @@ class _Control(Ported, py_trees.composites.Composite):
         py_trees.composites.Composite.stop(self, new_status)
 
 
-class Sequence(_Control):
-    DESCRIPTION = "Ticks children in order; resumes at the RUNNING child; a failure restarts it from the first."
-    _RESET_ON_FAILURE = True
+class _InOrder(_Control):
+    """Ticks children in order, resuming at the RUNNING child. The first child that ends with ``_STOP_ON`` ends
+    the node with that status; when every child ends otherwise, the node ends with the other status.
+    ``_RESET_ON_STOP`` false: after such a stop the next tick resumes at the child that stopped it."""
+
+    _STOP_ON = Status.FAILURE
+    _RESET_ON_STOP = True
 
     def tick(self):  # type: ignore[override]
         if self.status != Status.RUNNING:
-            if self._RESET_ON_FAILURE:
+            if self._RESET_ON_STOP:
                 self._idx = 0
             self.initialise()
         n = len(self.children)
@@ -89,55 +93,38 @@ class Sequence(_Control):
                 self.status = Status.RUNNING
                 yield self
                 return
-            if s == Status.FAILURE:
-                if self._RESET_ON_FAILURE:
-                    self._finish(Status.FAILURE)
+            if s == self._STOP_ON:
+                if self._RESET_ON_STOP:
+                    self._finish(s)
                 else:
                     self._halt_children(self._idx)
-                    self.stop(Status.FAILURE)
+                    self.stop(s)
                 yield self
                 return
             self._idx += 1
-        self._finish(Status.SUCCESS)
+        self._finish(Status.SUCCESS if self._STOP_ON == Status.FAILURE else Status.FAILURE)
         yield self
 
     def stop(self, new_status: Status = Status.INVALID) -> None:
-        if new_status == Status.INVALID and not self._RESET_ON_FAILURE:
+        if new_status == Status.INVALID and not self._RESET_ON_STOP:
             py_trees.composites.Composite.stop(self, new_status)  # keeps its place, as BT.CPP does
             return
         _Control.stop(self, new_status)
 
 
+class Sequence(_InOrder):
+    DESCRIPTION = "Ticks children in order; resumes at the RUNNING child; a failure restarts it from the first."
+    _STOP_ON = Status.FAILURE
+
+
 class SequenceWithMemory(Sequence):
     DESCRIPTION = "Like Sequence, but after a failure the next tick resumes at the failed child."
-    _RESET_ON_FAILURE = False
+    _RESET_ON_STOP = False
 
 
-class Fallback(_Control):
+class Fallback(_InOrder):
     DESCRIPTION = "Ticks children in order until one succeeds; resumes at the RUNNING child."
-
-    def tick(self):  # type: ignore[override]
-        if self.status != Status.RUNNING:
-            self._idx = 0
-            self.initialise()
-        n = len(self.children)
-        while self._idx < n:
-            child = self.children[self._idx]
-            self.current_child = child
-            for node in child.tick():
-                yield node
-            s = child.status
-            if s == Status.RUNNING:
-                self.status = Status.RUNNING
-                yield self
-                return
-            if s == Status.SUCCESS:
-                self._finish(Status.SUCCESS)
-                yield self
-                return
-            self._idx += 1
-        self._finish(Status.FAILURE)
-        yield self
+    _STOP_ON = Status.SUCCESS
 
 
 class _Reactive(_Control):
