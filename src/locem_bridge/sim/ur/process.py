@@ -99,7 +99,7 @@ class StandInProcess:
         cmd = [sys.executable, "-m", "locem_bridge.sim.ur", "--address", self.address, "--time-scale",
                repr(float(self.time_scale)), "--model", self.model, "--stdio", "--log-level", self.log_level]
         if self.q0 is not None:
-            cmd += ["--q0", ",".join(repr(float(v)) for v in self.q0)]
+            cmd.append("--q0=" + ",".join(repr(float(v)) for v in self.q0))  # "=": a value may start with "-"
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env,
                                      universal_newlines=True, bufsize=1)
         line = self._readline()
