@@ -65,6 +65,8 @@ class LocemTopicsTest(unittest.TestCase):
         self.assertTrue(wait_until(lambda: any(e.state == "canceled" for e in self.events_for("WAIT 10 hold=tool")), 5))
         final = [e for e in self.events_for("WAIT 10 hold=tool") if e.state == "canceled"][0]
         self.assertEqual(final.code, "ABORTED")
+        # STOP's own events are published by another thread: wait for its end, then check the whole sequence
+        self.assertTrue(wait_until(lambda: any(e.state == "succeeded" for e in self.events_for("STOP", "service")), 5))
         stop_events = [e.state for e in self.events_for("STOP", "service")]
         self.assertEqual(stop_events, ["running", "succeeded"])
 
