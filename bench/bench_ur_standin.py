@@ -9,8 +9,13 @@
    intervals within [1, 3] ms and the number of controller cycles missing from the stream.
 2. CPU of the stand-in process (percent of one core): no client, idle with receive + control clients, moving.
 3. moveJ latency: from the client's moveJ call until the streamed actual_q changes (real ur_rtde clients).
+4. Path moves (ur_rtde moveL(path)), time scale 1, sampled by a receive interface at 500 Hz: the same three-segment
+   path with two 90 degree corners for blend radii 0 (baseline: stop at each waypoint), 0.01, 0.02, 0.04 m:
+   motion time, time saved against the baseline, closest approach to the corners and TCP speed there, largest
+   distance of the sampled TCP from the ideal geometry (straight segments joined by the tangent circular arcs),
+   end error; and the cost of the script re-upload: moveL(path) call vs a single moveL call (async, both).
 
-Run: /tmp/tv/bin/python bench/bench_ur_standin.py [--seconds 10] [--address 127.62.0.1]
+Run: /tmp/tv/bin/python bench/bench_ur_standin.py [--seconds 10] [--address 127.62.0.1] [--paths-only]
 """
 import argparse
 import os
@@ -168,11 +173,123 @@ def cpu_percent(pid: int, seconds: float, work=None) -> float:
     return 100.0 * (cpu_seconds(pid) - c0) / (time.perf_counter() - t0)
 
 
+def _ideal_pieces(points, r: float) -> list:
+    """The UR blend geometry the stand-in promises: straight segments through ``points`` joined by circular arcs
+    tangent to both segments r before / after each interior point. Pieces: ("line", a, b) and
+    ("arc", centre, radius, e1, e2, phi) with the arc ``centre + radius (-e1 cos th + e2 sin th)``, th in [0, phi]."""
+    pts = [np.asarray(p, dtype=float) for p in points]
+    pieces = []
+    cur = pts[0]
+    for k in range(1, len(pts)):
+        d1 = (pts[k] - pts[k - 1]) / np.linalg.norm(pts[k] - pts[k - 1])
+        if k < len(pts) - 1 and r > 0:
+            d2 = (pts[k + 1] - pts[k]) / np.linalg.norm(pts[k + 1] - pts[k])
+            p_in = pts[k] - r * d1
+            pieces.append(("line", cur, p_in))
+            phi = float(np.arccos(np.clip(np.dot(d1, d2), -1, 1)))
+            radius = r / np.tan(phi / 2)
+            nv = d2 - np.dot(d1, d2) * d1
+            nv /= np.linalg.norm(nv)
+            pieces.append(("arc", p_in + radius * nv, radius, nv, d1, phi))
+            cur = pts[k] + r * d2
+        else:
+            pieces.append(("line", cur, pts[k]))
+            cur = pts[k]
+    return pieces
+
+
+def _distance_to_pieces(p: np.ndarray, pieces: list) -> float:
+    best = float("inf")
+    for pc in pieces:
+        if pc[0] == "line":
+            a, b = pc[1], pc[2]
+            ab = b - a
+            t = float(np.clip(np.dot(p - a, ab) / max(np.dot(ab, ab), 1e-18), 0.0, 1.0))
+            best = min(best, float(np.linalg.norm(p - (a + t * ab))))
+        else:
+            centre, radius, e1, e2, phi = pc[1:]
+            v = p - centre
+            x, y = float(np.dot(v, -e1)), float(np.dot(v, e2))
+            th = float(np.clip(np.arctan2(y, x), 0.0, phi))
+            q = centre + radius * (-e1 * np.cos(th) + e2 * np.sin(th))
+            best = min(best, float(np.linalg.norm(p - q)))
+    return best
+
+
+def path_bench(address: str) -> None:
+    """Section 4 (see the module docstring)."""
+    import rtde_control
+    import rtde_receive
+    print("\n[4] path moves: moveL(path) with blends, time scale 1, v 0.25 m/s, a 1.2 m/s^2")
+    ur = StandInProcess(address, time_scale=1.0).start()
+    try:
+        r = rtde_receive.RTDEReceiveInterface(address)
+        c = rtde_control.RTDEControlInterface(address)
+        p0 = r.getActualTCPPose()
+        corners = [np.add(p0[:3], d) for d in ((0, 0.1, 0), (0, 0.1, 0.1), (0, 0.2, 0.1))]
+        base = None
+        print("  blend r   motion s   saved   closest to corner   speed there   max dev. from ideal   end error")
+        for radius in (0.0, 0.01, 0.02, 0.04):
+            path = [list(p) + list(p0[3:]) + [0.25, 1.2, radius if i < 2 else 0.0] for i, p in enumerate(corners)]
+            assert c.moveL(path, True)
+            samples = []
+            t_end = time.time() + 20
+            started = False
+            while time.time() < t_end:
+                prog = c.getAsyncOperationProgress()
+                samples.append((r.getTimestamp(), r.getActualTCPPose()[:3], r.getActualTCPSpeed()[:3]))
+                started = started or prog >= 0
+                if started and prog < 0:
+                    break
+                time.sleep(0.0003)
+            time.sleep(0.05)
+            pos = np.array([s[1] for s in samples])
+            speed = np.linalg.norm([s[2] for s in samples], axis=1)
+            moving = [s[0] for s in samples if np.linalg.norm(s[2]) > 1e-6]
+            duration = moving[-1] - moving[0]
+            base = duration if base is None else base
+            pieces = _ideal_pieces([p0[:3]] + corners, radius)
+            dev = max(_distance_to_pieces(p, pieces) for p in pos)
+            d = np.linalg.norm(pos - corners[0], axis=1)
+            i = int(np.argmin(d))
+            end_err = float(np.linalg.norm(np.subtract(r.getActualTCPPose()[:3], corners[-1])))
+            print("  %5.3f m   %7.3f   %5.1f %%   %9.2f mm        %6.3f m/s      %8.4f mm        %.1e m"
+                  % (radius, duration, 100.0 * (1 - duration / base), 1e3 * d[i], speed[i], 1e3 * dev, end_err))
+            assert c.moveL(p0, 0.5, 1.2)
+        t_path, t_single = [], []
+        far = list(p0)
+        far[1] += 0.05
+        for i in range(5):
+            t0 = time.perf_counter()
+            c.moveL([far + [0.5, 1.2, 0.0]], True)
+            t_path.append(time.perf_counter() - t0)
+            while c.getAsyncOperationProgress() >= 0:
+                time.sleep(0.002)
+            t0 = time.perf_counter()
+            c.moveL(p0, 0.5, 1.2, True)
+            t_single.append(time.perf_counter() - t0)
+            while c.getAsyncOperationProgress() >= 0:
+                time.sleep(0.002)
+        print("  call until the motion is started: moveL(path) median %.1f ms (stop script, script re-upload, "
+              "command 45) vs moveL(pose) median %.1f ms; ratio %.1f"
+              % (1e3 * np.median(t_path), 1e3 * np.median(t_single), np.median(t_path) / np.median(t_single)))
+        c.stopScript()
+        c.disconnect()
+        r.disconnect()
+    finally:
+        ur.close()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--address", default="127.62.%d.1" % (1 + os.getpid() % 250))
+    ap.add_argument("--paths-only", action="store_true", help="only section 4 (path moves)")
     args = ap.parse_args()
+    path_address = args.address.rsplit(".", 1)[0] + ".2"
+    if args.paths_only:
+        path_bench(path_address)
+        return
     import rtde_control
     import rtde_receive
 
@@ -255,6 +372,7 @@ def main() -> None:
         r.disconnect()
     finally:
         ur.close()
+    path_bench(path_address)
 
 
 if __name__ == "__main__":

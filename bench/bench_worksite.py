@@ -8,6 +8,9 @@ A. CPU of the whole site (``python3 -m locem_bridge.sim``: world + UR stand-in +
 B. Achieved simulation rate vs time scale (in-process site, no UR): sim seconds per wall second, world steps per
    second against ``world_rate``, and the base distance error for a commanded wheel speed.
 
+The worksite together with the LOCEM bridges at time scales 1-20 (heartbeat gaps, CAN frames/s, GOTO and arm
+errors against ground truth) is measured by bench/bench_time_scale.py.
+
 Usage: python3 bench/bench_worksite.py [--seconds 5]
 """
 import argparse

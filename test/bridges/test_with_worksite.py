@@ -48,7 +48,7 @@ def stack():
 
 def test_one_yaml_drives_the_simulated_worksite(stack):
     ws, robot, core = stack
-    goal = (2.6, 1.9, 1.3)
+    goal = (1.7, 1.5, 1.3)
     r = core.dispatcher.execute("GOTO %g %g %g" % goal)
     assert r.success, r.message
     x, y, th = ws.world.base_pose()

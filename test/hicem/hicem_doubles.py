@@ -35,7 +35,7 @@ SITE = {
 }
 
 # name -> number of positional numeric args (None = any count of numbers, key=value allowed)
-GRAMMAR = {"SCAN": 0, "HOME": 0, "STOP": 0, "WAIT": 1, "STATUS": 0, "GOTO": 3, "MOUNT_TOOL": "word",
+GRAMMAR = {"SCAN": 0, "HOME": 0, "GET_POSE": 0, "STOP": 0, "WAIT": 1, "STATUS": 0, "GOTO": 3, "MOUNT_TOOL": "word", "MOVE_HOME": "word", "WALL_READY": 0,
            "APPLY_TAPE_START": 9, "APPLY_TAPE": 9, "SPRAY_AREA": 11, "SAND_AREA": 11}
 
 
@@ -73,6 +73,7 @@ class LocemDouble(LocemClient):
         self.sent: List[str] = []
         self.handles: List[_Handle] = []
         self.fail_next: Dict[str, LocemReply] = {}
+        self.pose = [1.4, 1.4, 0.7854]     # the default site's start (config/sites/default.yaml)
         self.log_path = log_path
         self._lock = threading.Lock()
 
@@ -115,6 +116,10 @@ class LocemDouble(LocemClient):
             reply, dur = self.fail_next.pop(name), self.durations.get(name, 0.0)
         else:
             result = json.loads(json.dumps(self.site)) if name == "SCAN" else {}
+            if name == "GOTO":          # the double's base is where it was last sent
+                self.pose = [float(w) for w in command.split()[1:4]]
+            elif name == "GET_POSE":
+                result = {"pose": list(self.pose), "twist": [0.0, 0.0, 0.0]}
             reply, dur = LocemReply(True, "OK", "", result), self.durations.get(name, 0.0)
         h = _Handle(self, command, reply, dur)
         self.handles.append(h)

@@ -42,13 +42,19 @@ def run(action_type, answers=None, **param_values):
 def test_spray_area_sections_and_command_arguments():
     st, locem, bb, ctx, hdh = run("SPRAY_AREA", area="wall_1_area_1")
     assert st == Status.SUCCESS, ctx.failures
-    # 4.8 m wide area, sections of at most 1.2 m: 4 base poses, one SPRAY_AREA each
+    # 4.8 m wide area, sections of at most 0.6 m: 8 base poses, each reached with the arm in wall_ready
     gotos = [c for c in locem.sent if c.startswith("GOTO")]
     sprays = [c for c in locem.sent if c.startswith("SPRAY_AREA")]
-    assert len(gotos) == 4 and len(sprays) == 4 and locem.sent[0].startswith("GOTO")
-    assert gotos[0] == "GOTO 0.6 1.9 1.570796"  # 1.1 m in front of the first section's middle, facing the wall
-    assert sprays[0] == ("SPRAY_AREA 0 3 0 1 0 0 1.2 2.5 0 -1 0 spacing=0.1 standoff=0.3 speed=0.1 pressure=3.5")
-    assert sprays[3].startswith("SPRAY_AREA 3.6 3 0 ")
+    # from the start pose (facing the room's corner) the base turns towards wall_1 at the transit point first
+    assert len(sprays) == 8 and locem.sent[:3] == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854"]
+    assert gotos[1:3] == ["GOTO 1.4 1.4 1.570796",
+                          "GOTO 0.3 1.7 1.570796"]  # 1.3 m in front of the first section's middle, facing the wall
+    assert len(gotos) == 3 + 7                     # the other sections: along the wall, no turn, no transit
+    # the outer sections reach edge_run_in (0.05 m) beyond the area, inner ones meet exactly (run_in=0)
+    assert sprays[0] == ("SPRAY_AREA -0.05 3 0 1 0 0 0.65 2.5 0 -1 0 spacing=0.15 standoff=0.3 speed=0.5 "
+                         "pressure=3.5 run_in=0")
+    assert sprays[1].startswith("SPRAY_AREA 0.6 3 0 1 0 0 0.6 2.5 ")
+    assert sprays[7].startswith("SPRAY_AREA 4.2 3 0 1 0 0 0.65 2.5 ")
     assert hdh.feature("wall_1_area_1")["status"] == "sprayed" and bb.get("task_detail") == "sprayed"
 
 
@@ -56,24 +62,27 @@ def test_sand_area_uses_the_sanding_parameters():
     st, locem, *_ = run("SAND_AREA", area="wall_1_area_1")
     assert st == Status.SUCCESS
     sands = [c for c in locem.sent if c.startswith("SAND_AREA")]
-    assert len(sands) == 4 and sands[0].endswith("spacing=0.1 speed=0.15 force=20")
+    assert len(sands) == 8 and sands[0].endswith("spacing=0.18 speed=0.25 force=20")
 
 
 def test_tape_line_on_a_horizontal_joint():
     st, locem, bb, *_ = run("TAPE_LINE", line="wall_2_joint_1")
     assert st == Status.SUCCESS
-    assert locem.sent == ["GOTO 4 1.5 0", "APPLY_TAPE 4.8 2.5 1.2 4.8 0.5 1.2 -1 0 0 speed=0.1"]
+    assert locem.sent == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854", "GOTO 1.4 1.4 0", "GOTO 3.75 1.5 0",
+                          "APPLY_TAPE 4.8 2.5 1.2 4.8 0.5 1.2 -1 0 0 speed=0.15"]
 
 
 def test_validate_tape_line_answer_becomes_the_detail():
     st, locem, bb, *_ = run("VALIDATE_TAPE_LINE", answers={"validate_line": "invalid"}, line="wall_1_joint_1")
     assert st == Status.SUCCESS and bb.get("task_detail") == "invalid"
-    assert locem.sent == ["GOTO 1.2 2.2 1.570796", "APPLY_TAPE_START 1.2 3 0 1.2 3 2.5 0 -1 0"]
+    assert locem.sent == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854", "GOTO 1.4 1.4 1.570796",
+                          "GOTO 1.2 1.95 1.570796", "APPLY_TAPE_START 1.2 3 0 1.2 3 2.5 0 -1 0"]
 
 
 def test_go_home_to_a_named_location_and_unknown_location():
     st, locem, *_ = run("GO_HOME", location="home")
-    assert st == Status.SUCCESS and locem.sent == ["HOME", "GOTO 2.4 1.6 1.5708"]
+    # arm in wall_ready while the base drives, home only at the location
+    assert st == Status.SUCCESS and locem.sent == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854", "HOME"]
     st, locem, bb, ctx, _ = run("GO_HOME", location="garage")
     assert st == Status.FAILURE and locem.sent == []
     assert "no entry 'garage'; the table has: home" in ctx.last_failure()[1]
@@ -83,7 +92,9 @@ def test_scan_ingests_features_and_get_tool_asks_the_operator():
     st, locem, bb, ctx, hdh = run("SCAN")
     assert st == Status.SUCCESS and locem.sent == ["SCAN"] and bb.get("new_features") == 0  # already known
     st, locem, bb, ctx, hdh = run("GET_TOOL", answers={"mount_tool": "done"}, tool="spray_gun")
-    assert st == Status.SUCCESS and locem.sent == ["HOME", "MOUNT_TOOL spray_gun"]
+    # the tool is changed at the tool-change location (home), arm home for the operator
+    assert st == Status.SUCCESS and locem.sent == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854", "HOME",
+                                                   "MOUNT_TOOL spray_gun"]
     assert bb.get("task_detail") == "spray_gun"
 
 

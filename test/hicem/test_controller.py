@@ -34,10 +34,11 @@ def test_taping_process_runs_to_the_end_with_numbers_from_the_scan(system):
         ("VALIDATE_TAPE_LINE", "succeeded", "valid"), ("TAPE_LINE", "succeeded", "taped")] * 3 + [
         ("GO_HOME", "succeeded", "")]
     sent = system.locem.sent
-    assert sent[:3] == ["SCAN", "HOME", "MOUNT_TOOL taping_tool"]
-    assert "GOTO 1.2 2.2 1.570796" in sent  # 0.80 m in front of wall_1_joint_1, facing the wall
-    assert "APPLY_TAPE 1.2 3 0 1.2 3 2.5 0 -1 0 speed=0.1" in sent
-    assert sent[-2:] == ["HOME", "GOTO 2.4 1.6 1.5708"]
+    assert sent[:6] == ["SCAN", "WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854", "HOME", "MOUNT_TOOL taping_tool"]
+    assert "GOTO 1.2 1.95 1.570796" in sent  # 1.05 m in front of wall_1_joint_1, facing the wall
+    assert "APPLY_TAPE 1.2 3 0 1.2 3 2.5 0 -1 0 speed=0.15" in sent
+    # home is reached by driving out keeping the heading and turning there, not next to the last wall
+    assert sent[-5:] == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0", "GOTO 1.4 1.4 0.7854", "HOME"]
     assert system.locem.running() == []
     assert system.operator.asked == ["mount_tool"] + ["validate_line"] * 3
     # features and their status are in the HDICT; in_progress was always reported before the outcome

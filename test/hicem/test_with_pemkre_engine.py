@@ -40,7 +40,7 @@ def test_taping_process_with_validation_and_one_rejected_line(tmp_path, engine):
     tapes = [c for c in locem.sent if c.startswith("APPLY_TAPE ")]
     assert len(tapes) == len(SITE["joints"]) - 1 and not any(c.startswith("APPLY_TAPE 2.4") for c in tapes)
     assert op.asked.count("validate_line") == len(SITE["joints"]) and op.asked.count("manual_taping") == 1
-    assert locem.sent[0] == "SCAN" and locem.sent[-1].startswith("GOTO")
+    assert locem.sent[0] == "SCAN" and locem.sent[-2].startswith("GOTO") and locem.sent[-1] == "HOME"
     assert locem.running() == []
 
 

@@ -1,3 +1,4 @@
+import os
 """Fixtures of the worksite tests: free loopback ports and the project configuration files."""
 import socket
 
@@ -21,10 +22,19 @@ def robot_cfg():
     return load_robot()
 
 
+TEST_SITE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sites", "room_4p8.yaml")
+
+
 @pytest.fixture(scope="session")
 def site_cfg():
+    """The simulator tests' own site (test/sim/sites/room_4p8.yaml), independent of the shipped default."""
     from locem_bridge.sim.config import load_site
-    return load_site()
+    return load_site(TEST_SITE)
+
+
+@pytest.fixture(scope="session")
+def test_site_path():
+    return TEST_SITE
 
 
 @pytest.fixture

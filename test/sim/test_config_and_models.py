@@ -22,6 +22,30 @@ def _raw(path):
         return yaml.safe_load(fh)
 
 
+def test_shipped_default_site_keeps_joints_and_areas_above_the_skirting():
+    site = Site(load_site())
+    assert len(site.work_walls) == 2
+    for wall in site.work_walls:
+        vertical = [j for j in wall.joints if j.kind == "vertical"]
+        assert len(vertical) == 3                                            # 3.0 m wall, 0.75 m panels
+        assert all(abs(j.start[2] - 0.1) < 1e-9 and abs(j.end[2] - wall.height) < 1e-9 for j in vertical)
+        assert [(round(a.t0, 6), round(a.t0 + a.height, 6)) for a in wall.areas] == [(0.1, 2.0)]
+
+
+def test_skirting_moves_joint_feet_and_default_areas_and_bounds_horizontal_joints(site_cfg):
+    data = copy.deepcopy(site_cfg)
+    wall = data["site"]["walls"][1]                      # wall_2: no explicit areas
+    wall["skirting"] = 0.2
+    site = Site(validate_site(data))
+    w2 = site.wall("wall_2")
+    assert all(abs(j.start[2] - 0.2) < 1e-9 for j in w2.joints if j.kind == "vertical")
+    assert [(round(a.t0, 6), round(a.height, 6)) for a in w2.areas] == [(0.2, 2.3)]
+    wall["horizontal_joints"] = [0.15]
+    with pytest.raises(SimConfigError) as exc:
+        validate_site(data)
+    assert "above the skirting" in str(exc.value)
+
+
 def test_default_site_has_joints_from_panel_width_and_horizontal_joints(site_cfg):
     site = Site(site_cfg)
     w1 = site.wall("wall_1")
@@ -41,9 +65,8 @@ def test_default_site_has_joints_from_panel_width_and_horizontal_joints(site_cfg
     (lambda d: d["simulation"].update(time_scale="fast"), "simulation.time_scale must be a finite number"),
     (lambda d: d["site"]["walls"][0].update(p1=[0.0, 3.6]), "apart, allowed >= 0.1 m"),
 ])
-def test_bad_site_files_are_refused_with_a_clear_message(mutate, message):
-    from locem_bridge.sim.config import default_site_path
-    data = _raw(default_site_path())
+def test_bad_site_files_are_refused_with_a_clear_message(mutate, message, test_site_path):
+    data = _raw(test_site_path)
     mutate(data)
     with pytest.raises(SimConfigError) as exc:
         validate_site(data)

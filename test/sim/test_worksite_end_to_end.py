@@ -41,15 +41,24 @@ def _address() -> str:
     raise RuntimeError("no free loopback address")
 
 
+def _joint_and_base_pose(site_cfg):
+    """The taped joint (wall_1_joint_2 of the configured site) and a base pose 1.1 m in front of it."""
+    from locem_bridge.sim.site import Site
+    joint = next(j for w in Site(site_cfg).walls for j in w.joints if j.id == "wall_1_joint_2")
+    x, y = float(joint.start[0]), float(joint.start[1])
+    return joint, (x, y - 1.1, 1.5708)
+
+
 @pytest.fixture
-def worksite_process(tmp_path, free_port_factory):
+def worksite_process(tmp_path, free_port_factory, site_cfg):
     faulthandler.dump_traceback_later(150, exit=True)    # ur_rtde may hold the GIL while it blocks
     addr = _address()
     modbus_port, can_port = free_port_factory(), free_port_factory()
     results = tmp_path / "results"
     cmd = [sys.executable, "-m", "locem_bridge.sim", "--host", addr, "--modbus-port", str(modbus_port),
            "--can-interface", "udp_multicast", "--can-channel", "239.74.163.2", "--can-port", str(can_port),
-           "--time-scale", "4", "--base-pose", "2.4", "2.5", "1.5708", "--mount-tool", "taping_tool",
+           "--time-scale", "4", "--base-pose"] + ["%g" % v for v in _joint_and_base_pose(site_cfg)[1]] + [
+           "--mount-tool", "taping_tool",
            "--results", str(results), "--log-level", "WARNING"]
     env = dict(os.environ, PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
@@ -128,16 +137,18 @@ def test_worksite_process_serves_all_devices_and_records_a_taping_pass(worksite_
 
     # targets: TCP poses in the UR base frame, computed from the same configuration
     from locem_bridge.sim.world import World
+    joint, base_pose = _joint_and_base_pose(site_cfg)
+    jx, wy = float(joint.start[0]), float(joint.start[1])
     site = copy.deepcopy(site_cfg)
-    site["site"]["robot_start"] = [2.4, 2.5, 1.5708]
+    site["site"]["robot_start"] = list(base_pose)
     helper = World(site, robot_cfg, gui=False)
     try:
         helper.mount_tool("taping_tool")
         into_wall = [0.0, 1.0, 0.0]
-        approach = helper.tcp_target_in_arm_base([2.4, 3.5, 1.0], into_wall)
-        contact = helper.tcp_target_in_arm_base([2.4, 3.6, 1.0], into_wall)
-        top = helper.tcp_target_in_arm_base([2.4, 3.6, 1.8], into_wall)
-        retract = helper.tcp_target_in_arm_base([2.4, 3.5, 1.8], into_wall)
+        approach = helper.tcp_target_in_arm_base([jx, wy - 0.1, 1.0], into_wall)
+        contact = helper.tcp_target_in_arm_base([jx, wy, 1.0], into_wall)
+        top = helper.tcp_target_in_arm_base([jx, wy, 1.8], into_wall)
+        retract = helper.tcp_target_in_arm_base([jx, wy - 0.1, 1.8], into_wall)
     finally:
         helper.close()
     tcp = robot_cfg["robot"]["tools"]["taping_tool"]["tcp"]
@@ -171,8 +182,8 @@ def test_worksite_process_serves_all_devices_and_records_a_taping_pass(worksite_
     assert "worksite stopped" in out
     outcome = json.loads((info["results"] / "outcome.json").read_text())
     joints = outcome["joints"]
-    assert joints["wall_1_joint_2"]["coverage"] == pytest.approx(0.8 / 2.5, abs=0.03)
-    assert all(v["coverage"] == 0.0 for k, v in joints.items() if k not in ("wall_1_joint_2", "wall_1_joint_4"))
+    assert joints["wall_1_joint_2"]["coverage"] == pytest.approx(0.8 / joint.length, abs=0.03)
+    assert all(v["coverage"] == 0.0 for k, v in joints.items() if k != "wall_1_joint_2")
     assert outcome["collisions"] == 0
     assert sorted(outcome["pictures"]) == ["wall_1.png", "wall_2.png"]
     assert (info["results"] / "wall_1.png").stat().st_size > 1000

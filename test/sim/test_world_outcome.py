@@ -66,6 +66,26 @@ def test_taping_pass_along_joint_with_tool_on_covers_it(rig):
     assert world.collisions == 0
 
 
+def test_joint_above_a_skirting_is_measured_from_its_own_foot(site_cfg, robot_cfg):
+    site = copy.deepcopy(site_cfg)
+    site["site"]["walls"][0]["skirting"] = 0.3             # wall_1: joints from z 0.3 to 2.5 (2.2 m)
+    wall = ManualWall()
+    arm = KinematicArm(robot_cfg["robot"]["arm"]["named_poses"]["wall_ready"])
+    world = World(site, robot_cfg, SimClock(1.0, wall=wall), arm=arm, gui=False)
+    try:
+        world.set_base_pose(1.2, 2.5, np.pi / 2)
+        world.mount_tool("taping_tool")
+        _pass(world, arm, wall, [[1.2, 3.5, 0.3]], [0, 1, 0])
+        arm.set_digital_output(0, True)
+        _pass(world, arm, wall, _vertical(1.2, 3.6, 0.3, 1.4), [0, 1, 0])     # the lower half of the joint
+        j = world.outcome.summary()["joints"]["wall_1_joint_1"]
+        assert j["coverage"] == pytest.approx(1.1 / 2.2, abs=0.02)
+        bins = world.outcome.tape["wall_1_joint_1"]
+        assert bins[:100].all() and not bins[120:].any()   # the taped bins are the bottom ones
+    finally:
+        world.close()
+
+
 def test_taping_pass_with_tool_off_or_off_the_wall_covers_nothing(rig):
     world, arm, comp, wall = rig
     world.set_base_pose(1.2, 2.5, np.pi / 2)
@@ -182,7 +202,7 @@ def test_collisions_of_base_and_arm_with_walls_are_counted_once_per_contact(rig,
     assert world.in_contact == [] and world.collisions == 1
     # base clear of the wall, stretched arm (no tool: tools may touch walls) goes through it
     world.set_base_pose(2.4, 2.9, np.pi / 2)
-    arm.set_joint_positions(poses["wall_ready"])
+    arm.set_joint_positions([0.0, -1.5708, 1.5708, 0.0, 1.5708, 0.0])   # forearm stretched forward, wrist ahead
     world.step()
     assert world.collisions > 1
     assert world.in_contact and all(part.startswith("arm:") for part, _ in world.in_contact)

@@ -62,7 +62,7 @@ def test_world_follows_ur_joint_state_and_tcp_models_agree(site_with_ur, robot_c
 def test_arm_collision_with_wall_triggers_protective_stop(site_with_ur, robot_cfg):
     ws = site_with_ur
     assert ws.ur.get_state()["safety_mode_name"].upper() == "NORMAL"
-    ws.ur.set_joint_positions(robot_cfg["robot"]["arm"]["named_poses"]["wall_ready"])
+    ws.ur.set_joint_positions([0.0, -1.5708, 1.5708, 0.0, 1.5708, 0.0])   # forearm stretched forward
     ws.world.set_base_pose(2.4, 2.9, math.pi / 2)          # stretched arm reaches through wall_1
     assert _wait(lambda: ws.world.collisions > 0)
     assert any(part.startswith("arm:") for part, _ in ws.world.in_contact)

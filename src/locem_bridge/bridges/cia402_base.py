@@ -276,17 +276,27 @@ class Cia402Base(Base):
             else:
                 self._open_loop = None
                 target = [0.0, 0.0, 0.0]
-            # acceleration ramps
+            # acceleration ramps, speeding up only: a slower command is passed on at once and the drives brake
+            # at their own profile deceleration (0x6084/0x6083, on the device's clock). A ramp on this loop's
+            # clock would also stretch braking whenever the devices run faster than it (a time-scaled
+            # simulation, a stalled cycle) and overshoot the goal.
             cmd = list(self._cmd)
-            dv = [target[0] - cmd[0], target[1] - cmd[1]]
-            norm = math.hypot(*dv)
-            step = self.lin_accel * period
-            if norm > step:
-                dv = [dv[0] * step / norm, dv[1] * step / norm]
-            cmd[0] += dv[0]
-            cmd[1] += dv[1]
+            if (math.hypot(target[0], target[1]) <= math.hypot(cmd[0], cmd[1])
+                    and target[0] * cmd[0] + target[1] * cmd[1] >= 0.0):
+                cmd[0], cmd[1] = target[0], target[1]
+            else:
+                dv = [target[0] - cmd[0], target[1] - cmd[1]]
+                norm = math.hypot(*dv)
+                step = self.lin_accel * period
+                if norm > step:
+                    dv = [dv[0] * step / norm, dv[1] * step / norm]
+                cmd[0] += dv[0]
+                cmd[1] += dv[1]
             dw = target[2] - cmd[2]
-            cmd[2] += max(-self.ang_accel * period, min(self.ang_accel * period, dw))
+            if abs(target[2]) <= abs(cmd[2]) and target[2] * cmd[2] >= 0.0:
+                cmd[2] = target[2]
+            else:
+                cmd[2] += max(-self.ang_accel * period, min(self.ang_accel * period, dw))
             cmd = list(self.kin.scale_to_limit(cmd[0], cmd[1], cmd[2], self.max_wheel))
             self._cmd = cmd
             return cmd

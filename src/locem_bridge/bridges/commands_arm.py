@@ -7,18 +7,20 @@ from the actual path length once the start is known; a safety stop answers ``HAR
 """
 
 import math
-from typing import Any, Dict, Iterable, List
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Tuple
 
 from locem_bridge.locem.registry import Arg, CommandSpec
 
 from .errors import BadRequest
-from .ur_arm import MOTION_MARGIN_S, UrRtdeArm, joint_travel_bound
+from .geometry import angle_between
+from .ur_arm import MOTION_MARGIN_S, PATH_UPLOAD_S, ROTATION_WEIGHT, UrRtdeArm, joint_travel_bound
 
 CATEGORY = "arm"
 _ARM = frozenset({"arm"})
 TWO_PI = 2.0 * math.pi
 REACH = 1.5                     # m, bound of TCP coordinates accepted (UR10e reach 1.3 m + tool)
 MAX_PATH_POINTS = 50
+MAX_BLEND = 0.5                 # m, largest blend radius accepted (ur_rtde allows up to 2 m)
 
 
 def _joints() -> tuple:
@@ -55,13 +57,33 @@ MOVE_L = CommandSpec(
     "MOVE_L", "Move the TCP in a straight line to a pose in the arm base frame.", args=_pose("target") + _speed_l(),
     resources=_ARM, category=CATEGORY, result=_MOTION_RESULT,
     deadline=lambda v: 2.0 * REACH / v["speed"] + 2.0 * v["speed"] / v["accel"] + MOTION_MARGIN_S + 1.0)
+
+
+def _path_deadline(v: Mapping[str, Any]) -> float:
+    """Registry deadline of MOVE_PATH: the waypoint-to-waypoint length plus a first leg across the whole reach,
+    one acceleration and stop per waypoint, the script upload and the margin."""
+    speed, accel = v["speed"], v["accel"]
+    try:
+        points = parse_waypoints(v["waypoints"])
+    except BadRequest:           # refused by the handler anyway; any finite deadline will do
+        return 2.0 * REACH / speed + MOTION_MARGIN_S + 1.0
+    length = 2.0 * REACH + sum(math.dist(points[i][:3], points[i + 1][:3])
+                               + ROTATION_WEIGHT * angle_between(points[i], points[i + 1])
+                               for i in range(len(points) - 1))
+    return length / speed + len(points) * 2.0 * speed / accel + MOTION_MARGIN_S + PATH_UPLOAD_S + 1.0
+
+
 MOVE_PATH = CommandSpec(
-    "MOVE_PATH", "Move the TCP in straight lines through waypoints (stops at each; the UR stand-in has no "
-    "blended path moves). Waypoints: x:y:z:rx:ry:rz separated by '/', e.g. 0.5:0.2:0.4:0:3.14:0/0.5:0.3:0.4:0:3.14:0.",
-    args=(Arg.word("waypoints", "up to %d poses x:y:z:rx:ry:rz (m, rad) joined by '/'" % MAX_PATH_POINTS),)
-    + _speed_l(), resources=_ARM, category=CATEGORY, result=_MOTION_RESULT + (("waypoints", "waypoints reached"),),
-    deadline=lambda v: (v["waypoints"].count("/") + 1) * (2.0 * REACH / v["speed"] + 2.0 * v["speed"] / v["accel"]
-                                                          + MOTION_MARGIN_S) + 1.0)
+    "MOVE_PATH", "Move the TCP through waypoints as one controller path: straight segments, each interior waypoint "
+    "rounded on an arc within its blend radius without stopping (blend 0 stops there); the last waypoint is reached "
+    "exactly. Waypoints: x:y:z:rx:ry:rz[:blend] joined by '/', e.g. 0.5:0.2:0.4:0:3.14:0/0.5:0.3:0.4:0:3.14:0 "
+    "blend=0.02. A blend radius may be at most half of either neighbouring segment.",
+    args=(Arg.word("waypoints", "up to %d poses x:y:z:rx:ry:rz (m, rad), each optionally :blend (m, 0..%g, overrides "
+                                "blend), joined by '/'" % (MAX_PATH_POINTS, MAX_BLEND), max_length=1000),)
+    + _speed_l() + (Arg.number("blend", "m", 0.0, MAX_BLEND, "blend radius at the interior waypoints (0 = stop at "
+                                                              "each)", default=0.0, keyword_only=True),),
+    resources=_ARM, category=CATEGORY, result=_MOTION_RESULT + (("waypoints", "waypoints in the path"),),
+    deadline=_path_deadline)
 MOVE_HOME = CommandSpec(
     "MOVE_HOME", "Move the arm to a named joint pose of the robot configuration (default home).",
     args=(Arg.word("pose", "named pose of robot.arm.named_poses", default="home"),) + _speed_j(),
@@ -97,25 +119,40 @@ SPECS = (MOVE_J, MOVE_L, MOVE_PATH, MOVE_HOME, STOP_ARM, GET_JOINTS, GET_TCP_POS
 
 
 def parse_waypoints(text: str) -> List[List[float]]:
-    """``x:y:z:rx:ry:rz/...`` -> poses; BadRequest naming the bad waypoint."""
-    points = []
-    for i, chunk in enumerate(text.split("/")):
+    """``x:y:z:rx:ry:rz[:blend]/...`` -> the poses; BadRequest naming the bad waypoint (see :func:`parse_path`)."""
+    return parse_path(text)[0]
+
+
+def parse_path(text: str) -> Tuple[List[List[float]], List[Optional[float]]]:
+    """``x:y:z:rx:ry:rz[:blend]/...`` -> (poses, per-waypoint blend or None); BadRequest naming the bad waypoint
+    and what is allowed."""
+    chunks = text.split("/")
+    if len(chunks) > MAX_PATH_POINTS:
+        raise BadRequest("MOVE_PATH: %d waypoints, allowed at most %d" % (len(chunks), MAX_PATH_POINTS),
+                         argument="waypoints")
+    points: List[List[float]] = []
+    blends: List[Optional[float]] = []
+    for i, chunk in enumerate(chunks):
         parts = chunk.split(":")
         try:
             values = [float(p) for p in parts]
         except ValueError:
             values = []
-        if len(values) != 6 or not all(math.isfinite(v) for v in values):
-            raise BadRequest("MOVE_PATH: waypoint %d '%s' must be 6 numbers x:y:z:rx:ry:rz" % (i + 1, chunk[:60]),
-                             argument="waypoints")
+        if len(values) not in (6, 7) or not all(math.isfinite(v) for v in values):
+            raise BadRequest("MOVE_PATH: waypoint %d '%s' must be 6 numbers x:y:z:rx:ry:rz, optionally :blend"
+                             % (i + 1, chunk[:60]), argument="waypoints")
         if any(abs(v) > REACH for v in values[:3]):
             raise BadRequest("MOVE_PATH: waypoint %d position out of range; allowed -%g to %g m" % (i + 1, REACH, REACH),
                              argument="waypoints")
-        points.append(values)
-    if len(points) > MAX_PATH_POINTS:
-        raise BadRequest("MOVE_PATH: %d waypoints, allowed at most %d" % (len(points), MAX_PATH_POINTS),
-                         argument="waypoints")
-    return points
+        if any(abs(v) > TWO_PI for v in values[3:6]):
+            raise BadRequest("MOVE_PATH: waypoint %d rotation vector out of range; allowed -%.4f to %.4f rad"
+                             % (i + 1, TWO_PI, TWO_PI), argument="waypoints")
+        if len(values) == 7 and not 0.0 <= values[6] <= MAX_BLEND:
+            raise BadRequest("MOVE_PATH: waypoint %d blend radius %g m out of range; allowed 0 to %g m"
+                             % (i + 1, values[6], MAX_BLEND), argument="waypoints")
+        points.append(values[:6])
+        blends.append(values[6] if len(values) == 7 else None)
+    return points, blends
 
 
 class ArmCommands:
@@ -149,14 +186,10 @@ class ArmCommands:
                accel: float) -> Dict[str, Any]:
         return self.arm.move_linear(ctx, [x, y, z, rx, ry, rz], speed, accel)
 
-    def move_path(self, ctx: Any, waypoints: str, speed: float, accel: float) -> Dict[str, Any]:
-        points = parse_waypoints(waypoints)
-        out: Dict[str, Any] = {}
-        for i, pose in enumerate(points):
-            out = self.arm.move_linear(ctx, pose, speed, accel)
-            ctx.report((i + 1) / len(points), "waypoint %d of %d" % (i + 1, len(points)))
-        out["waypoints"] = len(points)
-        return out
+    def move_path(self, ctx: Any, waypoints: str, speed: float, accel: float, blend: float) -> Dict[str, Any]:
+        points, own = parse_path(waypoints)
+        radii = [blend if b is None else b for b in own]
+        return self.arm.move_path(ctx, points, speed, accel, radii)
 
     def move_home(self, ctx: Any, pose: str, speed: float, accel: float) -> Dict[str, Any]:
         return self.arm.move_joints(ctx, self.arm.named_pose(pose), speed, accel)

@@ -4,8 +4,10 @@ ROS action call"): SCAN, MOUNT_TOOL, APPLY_TAPE_START, APPLY_TAPE, SPRAY_AREA, S
 Every number comes from HICEM (line endpoints, area rectangle, wall normal, offsets, speeds) in the ``map``
 frame; LOCEM never knows feature ids. Geometry: the map point is expressed in the UR ``base`` frame through the
 base odometry pose and ``robot.arm.mount``; the TCP faces the wall (tool z axis against the inward wall
-normal, tool x axis horizontal). Approaches to a wall use a joint move to the controller's IK solution, the
-work itself straight moves (MOVE_L semantics, 1 mm accuracy).
+normal, tool x axis horizontal). Approaches to a wall are straight moves when the tool already faces the way
+the target does (from the ``wall_ready`` pose HICEM drives in), otherwise a joint move to the controller's IK
+solution first; the work itself is straight moves (MOVE_L semantics, 1 mm accuracy). HOME from a wall pose
+passes ``robot.arm.home_via`` first.
 
 Process outputs are switched from ``robot.tools.<tool>.switch``: a UR standard digital output (taping tool,
 sander) or the compressor's spray valve. Whatever ends a command (success, error, cancel, STOP, deadline), the
@@ -23,13 +25,18 @@ from locem_bridge.locem.registry import Arg, CommandSpec
 
 from .commands_compressor import wait_for_pressure
 from .errors import BadRequest, BridgeError
-from .geometry import arm_base_in_footprint, invert, matrix_to_pose, planar, tool_frame_facing
+from .geometry import (angle_between, arm_base_in_footprint, invert, matrix_to_pose, planar, pose_to_matrix,
+                       tool_frame_facing)
 
 CATEGORY = "wall"
 TOOLS = ("taping_tool", "spray_gun", "sander")
 EXT = 100.0
 APPROACH_SPEED = 0.25          # m/s, free moves near the wall
 CONTACT_SPEED = 0.05           # m/s, the last centimetres to the wall
+STRAIGHT_APPROACH_ANGLE = 0.6  # rad, tool re-orientation up to which a wall approach is one straight move
+LANE_ACCEL = 4.0               # m/s^2, raster lanes (short run-up: 3 cm at 0.5 m/s)
+RUNUP_MARGIN = 0.01            # m, constant-speed travel before the tool switches on
+PATH_BLEND = 0.03              # m, blend radius of the turns between raster lanes (one blended path)
 
 
 def _point(prefix: str, doc: str, suffix: str = "") -> tuple:
@@ -47,7 +54,7 @@ def _line_len(v: Mapping[str, Any]) -> float:
 
 def _raster_len(v: Mapping[str, Any]) -> float:
     lanes = math.ceil(v["height"] / v["spacing"]) + 1
-    return lanes * (v["width"] + v["spacing"] + 0.4)
+    return lanes * (v["width"] + 2.0 * v.get("run_in", 0.0) + v["spacing"] + 0.6)
 
 
 _LINE_ARGS = _point("", "line start", "0") + _point("", "line end", "1")
@@ -87,7 +94,10 @@ SPRAY_AREA = CommandSpec(
         Arg.number("spacing", "m", 0.02, 1.0, "distance between lanes", default=0.2, keyword_only=True),
         Arg.number("standoff", "m", 0.05, 1.0, "nozzle to wall", default=0.3, keyword_only=True),
         Arg.number("speed", "m/s", 0.01, 1.0, "speed along a lane", default=0.4, keyword_only=True),
-        Arg.number("pressure", "bar", 0.5, 10.0, "spray pressure", default=2.5, keyword_only=True)),
+        Arg.number("pressure", "bar", 0.5, 10.0, "spray pressure", default=2.5, keyword_only=True),
+        Arg.number("run_in", "m", 0.0, 0.5, "lane length sprayed beyond each end of the area (0 when a "
+                   "neighbouring section continues the lanes: their spray footprints then add up evenly)",
+                   default=0.1, keyword_only=True)),
     resources=frozenset({"arm", "tool", "compressor"}), category=CATEGORY, timeout=600.0, result=_WORK_RESULT
     + (("lanes", "lanes sprayed"),), deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0)
 SAND_AREA = CommandSpec(
@@ -95,15 +105,22 @@ SAND_AREA = CommandSpec(
     args=_AREA_ARGS + _normal() + (
         Arg.number("spacing", "m", 0.02, 1.0, "distance between lanes", default=0.1, keyword_only=True),
         Arg.number("speed", "m/s", 0.01, 0.5, "speed along a lane", default=0.15, keyword_only=True),
-        Arg.number("force", "N", 0.0, 100.0, "contact force set-point (position-controlled contact: the UR "
-                   "stand-in has no force mode)", default=20.0, keyword_only=True)),
+        Arg.number("force", "N", 0.0, 100.0, "contact force set-point along the tool axis (contact=force)",
+                   default=20.0, keyword_only=True),
+        Arg.choice("contact", ("position", "force"), "position: lanes on the wall surface; force: force mode holds "
+                   "the set-point along the tool axis while the lanes run (needs a controller with force control; "
+                   "the UR stand-in needs contact surfaces)", default="position", keyword_only=True)),
     resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=600.0, result=_WORK_RESULT
     + (("lanes", "lanes sanded"),), deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0)
+WALL_READY = CommandSpec(
+    "WALL_READY", "Arm to the named pose 'wall_ready' (tool facing forward, links close to the base) to drive along "
+    "walls: from a wall pose first a straight retract to the pose's TCP point, then the joint move.",
+    resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=60.0, result=(("q", "joint positions"),))
 HOME = CommandSpec(
     "HOME", "Process outputs off, arm to its home pose.", resources=frozenset({"arm", "tool"}), category=CATEGORY,
     timeout=60.0, result=(("q", "joint positions"),))
 
-SPECS = (SCAN, MOUNT_TOOL, APPLY_TAPE_START, APPLY_TAPE, SPRAY_AREA, SAND_AREA, HOME)
+SPECS = (SCAN, MOUNT_TOOL, APPLY_TAPE_START, APPLY_TAPE, SPRAY_AREA, SAND_AREA, WALL_READY, HOME)
 
 
 class GuardedWaiter:
@@ -128,6 +145,77 @@ class GuardedWaiter:
         self._ctx.report(progress, text)
 
 
+class LaneSwitch:
+    """A waiter for one raster lane: on every wait of the arm's motion loop it reads the arm's latest TCP and
+    switches the tool's process output on while the TCP is between ``f_on`` and ``f_off`` of the lane ``a -> b``
+    (fractions of the straight line, arm base frame), off outside. The arm thus accelerates and brakes with the
+    tool off and passes the worked stretch at constant speed: no extra compound or sanding where a lane starts
+    or ends."""
+
+    def __init__(self, ctx: Any, arm: Any, switch: Callable[[bool], None], a: Sequence[float], b: Sequence[float],
+                 f_on: float, f_off: float) -> None:
+        self._ctx, self._arm, self._switch = ctx, arm, switch
+        self._a = np.asarray(a[:3], dtype=float)
+        self._ab = np.asarray(b[:3], dtype=float) - self._a
+        self._len2 = max(float(self._ab.dot(self._ab)), 1e-12)
+        self._f_on, self._f_off = f_on, f_off
+        self.on = False
+        self.switched_on_at: Optional[float] = None
+
+    def _update(self) -> None:
+        tcp = self._arm.cached_state().get("tcp")
+        if not tcp:
+            return
+        f = float((np.asarray(tcp[:3], dtype=float) - self._a).dot(self._ab)) / self._len2
+        want = self._f_on <= f <= self._f_off
+        if want != self.on:
+            self._switch(want)
+            self.on = want
+            if want and self.switched_on_at is None:
+                self.switched_on_at = f
+
+    def sleep(self, seconds: float) -> None:
+        self._ctx.sleep(seconds)
+        self._update()
+
+    def check(self) -> None:
+        self._ctx.check()
+        self._update()
+
+    def on_cancel(self, callback: Callable[[], None]) -> None:
+        self._ctx.on_cancel(callback)
+
+    def report(self, progress: float, text: str = "") -> None:
+        self._ctx.report(progress, text)
+
+
+class RasterSwitch(LaneSwitch):
+    """:class:`LaneSwitch` for a whole raster driven as one blended path: the tool is on while the TCP is on the
+    worked stretch of any lane (fraction 0..1 of the stretch, within ``reach`` of its line)."""
+
+    def __init__(self, ctx: Any, arm: Any, switch: Callable[[bool], None],
+                 stretches: Sequence[Sequence[Sequence[float]]], reach: float) -> None:
+        super().__init__(ctx, arm, switch, stretches[0][0], stretches[0][1], 0.0, 1.0)
+        self._lines = [(np.asarray(a[:3], dtype=float), np.asarray(b[:3], dtype=float) - np.asarray(a[:3], dtype=float))
+                       for a, b in stretches]
+        self._reach = reach
+
+    def _update(self) -> None:
+        tcp = self._arm.cached_state().get("tcp")
+        if not tcp:
+            return
+        p = np.asarray(tcp[:3], dtype=float)
+        want = False
+        for a, ab in self._lines:
+            f = float((p - a).dot(ab)) / max(float(ab.dot(ab)), 1e-12)
+            if 0.0 <= f <= 1.0 and float(np.linalg.norm(p - a - ab * f)) <= self._reach:
+                want = True
+                break
+        if want != self.on:
+            self._switch(want)
+            self.on = want
+
+
 class WallCommands:
     """Composed plasterboard commands over an arm, a base (pose), a compressor and a scanner (any may be None:
     the commands that need a missing one answer NOT_READY)."""
@@ -141,6 +229,10 @@ class WallCommands:
         self.mount = arm_base_in_footprint(mount.get("xyz", [0.0, 0.0, 0.0]), mount.get("rpy", [0.0, 0.0, 0.0]))
         self.arm, self.base, self.compressor, self.scanner = arm, base, compressor, scanner
         self.active_tool: Optional[str] = None
+        arm_cfg = robot_cfg.get("arm", {})
+        self.home_via: Optional[str] = arm_cfg.get("home_via") or None
+        flange = arm_cfg.get("wall_ready_flange")
+        self.ready_flange: Optional[List[float]] = [float(v) for v in flange] if flange else None
 
     def specs(self) -> Iterable[CommandSpec]:
         return SPECS
@@ -148,7 +240,7 @@ class WallCommands:
     def handlers(self) -> Dict[str, Any]:
         return {"SCAN": self.scan, "MOUNT_TOOL": self.mount_tool, "APPLY_TAPE_START": self.apply_tape_start,
                 "APPLY_TAPE": self.apply_tape, "SPRAY_AREA": self.spray_area, "SAND_AREA": self.sand_area,
-                "HOME": self.home}
+                "WALL_READY": self.wall_ready, "HOME": self.home}
 
     def stop(self) -> None:
         self._outputs_off()
@@ -193,11 +285,35 @@ class WallCommands:
                 pass
 
     def _approach(self, ctx: Any, pose: Sequence[float]) -> None:
-        """Joint move to the IK solution of ``pose`` (robust for large re-orientations), then exact MOVE_L."""
+        """Bring the TCP to ``pose``. When the tool already points the way ``pose`` does (within
+        ``STRAIGHT_APPROACH_ANGLE``: the arm comes from ``wall_ready`` or from the previous wall pose) a straight
+        move, which keeps the tool and links in front of the robot; otherwise a joint move to the controller's
+        IK solution (large re-orientation), then an exact straight move."""
         arm = self._need("arm")
+        if angle_between(arm.tcp_pose(), pose) <= STRAIGHT_APPROACH_ANGLE:
+            arm.move_linear(ctx, pose, APPROACH_SPEED, 1.2)
+            return
         q = arm.inverse_kinematics(pose)
         arm.move_joints(ctx, q, 1.0, 2.0)
         arm.move_linear(ctx, pose, APPROACH_SPEED, 1.2)
+
+    def _retract(self, ctx: Any) -> None:
+        """From a wall pose (tool pointing forward): one straight move to the TCP point of 'wall_ready' (its
+        flange point ``robot.arm.wall_ready_flange`` plus the active tool's length), tool still facing forward,
+        so the joint move to 'wall_ready' that may follow is short and away from the wall."""
+        if self.ready_flange is None or not self._facing_forward():
+            return
+        length = float(self.tools.get(self.active_tool or "", {}).get("tcp", [0.0, 0.0, 0.0])[2])
+        point = [self.ready_flange[0] + length, self.ready_flange[1], self.ready_flange[2]]
+        pose = matrix_to_pose(invert(self.mount).dot(tool_frame_facing(point, [-1.0, 0.0, 0.0])))
+        self._need("arm").move_linear(ctx, pose, APPROACH_SPEED, 1.2)
+
+    def _facing_forward(self) -> bool:
+        """True when the tool axis points ahead of the base (the arm is working at or near a wall)."""
+        arm = self._need("arm")
+        rot = pose_to_matrix(arm.tcp_pose())[:3, :3]
+        z_in_footprint = self.mount[:3, :3].dot(rot[:, 2])
+        return float(z_in_footprint[0]) > 0.5
 
     @staticmethod
     def _unit(v: Sequence[float], name: str) -> np.ndarray:
@@ -256,6 +372,7 @@ class WallCommands:
         finally:
             self._switch_off_safely("taping_tool")
         arm.move_linear(ctx, self.to_arm(p1 + n * approach, n), APPROACH_SPEED, 1.2)
+        self._retract(ctx)
         return {"length_m": length, "duration_s": round(time.monotonic() - start, 3)}
 
     def _switch_off_safely(self, tool: str) -> None:
@@ -267,6 +384,10 @@ class WallCommands:
     def _raster(self, ctx: Any, tool: str, origin: Sequence[float], u: Sequence[float], width: float,
                 height: float, normal: Sequence[float], spacing: float, speed: float, offset: float,
                 run_in: float) -> Dict[str, Any]:
+        """Horizontal lanes from the area's bottom to its top, alternating direction. Each lane is one straight
+        move that starts ``run-up`` before the worked stretch [-run_in, width + run_in] and ends as far after
+        it (the distance the arm needs to reach ``speed`` at ``LANE_ACCEL``); the tool is on only over the
+        worked stretch (:class:`LaneSwitch`)."""
         import time
         arm = self._need("arm")
         n = self._unit(normal, "normal")
@@ -275,30 +396,75 @@ class WallCommands:
         o = np.asarray(origin, dtype=float)
         lanes = max(1, int(math.ceil(height / spacing - 1e-9))) + 1
         heights = [height * k / (lanes - 1) for k in range(lanes)] if lanes > 1 else [height / 2.0]
+        runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN
         start = time.monotonic()
+        if hasattr(arm, "move_path") and len(heights) > 1:
+            return self._raster_path(ctx, tool, o, uu, up, n, width, heights, speed, offset, run_in, start)
         total = 0.0
+        s1 = width + run_in
         for k, t in enumerate(heights):
             forward = k % 2 == 0
-            s0, s1 = (-run_in, width + run_in) if forward else (width + run_in, -run_in)
+            w0, w1 = (-run_in, width + run_in) if forward else (width + run_in, -run_in)
+            s0, s1 = (w0 - runup, w1 + runup) if forward else (w0 + runup, w1 - runup)
             a = o + uu * s0 + up * t + n * offset
             b = o + uu * s1 + up * t + n * offset
             if k == 0:
                 self._approach(ctx, self.to_arm(a + n * 0.05, n))
             arm.move_linear(ctx, self.to_arm(a, n), APPROACH_SPEED, 1.2)
+            pa, pb = self.to_arm(a, n), self.to_arm(b, n)
+            span = abs(s1 - s0)
+            lane = LaneSwitch(ctx, arm, lambda on: self._switch(tool, on), pa, pb,
+                              runup / span, 1.0 - runup / span)
             try:
-                self._switch(tool, True)
-                arm.move_linear(ctx, self.to_arm(b, n), speed, 1.2)
+                arm.move_linear(lane, pb, speed, LANE_ACCEL)
             finally:
                 self._switch_off_safely(tool)
-            total += float(np.linalg.norm(b - a))
+            total += abs(w1 - w0)
             ctx.report((k + 1) / len(heights), "lane %d of %d" % (k + 1, len(heights)))
-        last = o + uu * (s1) + up * heights[-1] + n * (offset + 0.05)
+        last = o + uu * s1 + up * heights[-1] + n * (offset + 0.05)
         arm.move_linear(ctx, self.to_arm(last, n), APPROACH_SPEED, 1.2)
+        self._retract(ctx)
+        return {"length_m": round(total, 4), "lanes": len(heights), "duration_s": round(time.monotonic() - start, 3)}
+
+    def _raster_path(self, ctx: Any, tool: str, o: np.ndarray, uu: np.ndarray, up: np.ndarray, n: np.ndarray,
+                     width: float, heights: Sequence[float], speed: float, offset: float, run_in: float,
+                     start: float) -> Dict[str, Any]:
+        """The serpentine as ONE blended controller path (MOVE_PATH semantics): each lane's ends, run-up
+        included, are waypoints; the turns between lanes are rounded (blend within the run-up, so the worked
+        stretches are straight and at speed); the tool is switched by position (:class:`RasterSwitch`)."""
+        import time
+        arm = self._need("arm")
+        spacing = abs(heights[1] - heights[0])
+        blend = min(PATH_BLEND, 0.45 * spacing)
+        runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN + blend
+        points, stretches = [], []
+        for k, t in enumerate(heights):
+            forward = k % 2 == 0
+            w0, w1 = (-run_in, width + run_in) if forward else (width + run_in, -run_in)
+            sign = 1.0 if forward else -1.0
+            a = o + uu * (w0 - sign * runup) + up * t + n * offset
+            b = o + uu * (w1 + sign * runup) + up * t + n * offset
+            points += [a, b]
+            stretches.append((self.to_arm(o + uu * w0 + up * t + n * offset, n),
+                              self.to_arm(o + uu * w1 + up * t + n * offset, n)))
+        self._approach(ctx, self.to_arm(points[0] + n * 0.05, n))
+        arm.move_linear(ctx, self.to_arm(points[0], n), APPROACH_SPEED, 1.2)
+        poses = [self.to_arm(p, n) for p in points[1:]]
+        blends = [blend] * (len(poses) - 1) + [0.0]          # every turn blended, the path ends at rest
+        switch = RasterSwitch(ctx, arm, lambda on: self._switch(tool, on), stretches, reach=0.25 * spacing)
+        try:
+            arm.move_path(switch, poses, speed, LANE_ACCEL, blends)
+        finally:
+            self._switch_off_safely(tool)
+        last = points[-1] + n * 0.05
+        arm.move_linear(ctx, self.to_arm(last, n), APPROACH_SPEED, 1.2)
+        self._retract(ctx)
+        total = len(heights) * (width + 2.0 * run_in)
         return {"length_m": round(total, 4), "lanes": len(heights), "duration_s": round(time.monotonic() - start, 3)}
 
     def spray_area(self, ctx: Any, ox: float, oy: float, oz: float, ux: float, uy: float, uz: float, width: float,
                    height: float, nx: float, ny: float, nz: float, spacing: float, standoff: float, speed: float,
-                   pressure: float) -> Dict[str, Any]:
+                   pressure: float, run_in: float = 0.1) -> Dict[str, Any]:
         self._need_tool("spray_gun")
         comp = self._need("compressor")
         lo, hi = comp.pressure_range
@@ -313,24 +479,86 @@ class WallCommands:
             comp.set_setpoint(pressure)
             wait_for_pressure(comp, guarded, pressure, 0.2, timeout=30.0)
             out = self._raster(guarded, "spray_gun", [ox, oy, oz], [ux, uy, uz], width, height, [nx, ny, nz],
-                               spacing, speed, standoff, run_in=0.1)
+                               spacing, speed, standoff, run_in=run_in)
         finally:
             self._switch_off_safely("spray_gun")
         return out
 
     def sand_area(self, ctx: Any, ox: float, oy: float, oz: float, ux: float, uy: float, uz: float, width: float,
                   height: float, nx: float, ny: float, nz: float, spacing: float, speed: float,
-                  force: float) -> Dict[str, Any]:
+                  force: float, contact: str = "position") -> Dict[str, Any]:
+        """Raster lanes over the area. ``contact=force``: each lane starts ``standoff`` in front of the wall, force
+        mode pushes along the tool axis until the contact force is within tolerance, the sander runs while the
+        lane is followed under force control, then force mode ends and the tool lifts back to the standoff."""
         self._need_tool("sander")
+        arm = self._need("arm")
+        if contact != "force" or not hasattr(arm, "force_mode_start"):
+            try:
+                out = self._raster(ctx, "sander", [ox, oy, oz], [ux, uy, uz], width, height, [nx, ny, nz], spacing,
+                                   speed, 0.0, run_in=0.0)
+            finally:
+                self._switch_off_safely("sander")
+            out["force_n"] = force
+            out["contact"] = "position"
+            return out
+        import time
+        if force <= 0:
+            raise BadRequest("SAND_AREA: contact=force needs force > 0 N", argument="force")
+        standoff, approach_speed, tolerance = 0.01, 0.02, max(1.0, 0.1 * force)     # m, m/s along the axis, N
+        n = self._unit([nx, ny, nz], "normal")
+        uu = self._unit([ux, uy, uz], "u")
+        up = np.array([0.0, 0.0, 1.0])
+        o = np.array([ox, oy, oz], dtype=float)
+        lanes = max(1, int(math.ceil(height / spacing - 1e-9))) + 1
+        heights = [height * k / (lanes - 1) for k in range(lanes)] if lanes > 1 else [height / 2.0]
+        start = time.monotonic()
+        total = 0.0
+        samples: List[float] = []
+        end_pose: Optional[List[float]] = None
         try:
-            out = self._raster(ctx, "sander", [ox, oy, oz], [ux, uy, uz], width, height, [nx, ny, nz], spacing,
-                               speed, 0.0, run_in=0.0)
+            for k, t in enumerate(heights):
+                s0, s1 = (0.0, width) if k % 2 == 0 else (width, 0.0)
+                a = o + uu * s0 + up * t + n * standoff
+                b = o + uu * s1 + up * t + n * standoff
+                if k == 0:
+                    self._approach(ctx, self.to_arm(a + n * 0.05, n))
+                pa, pb = self.to_arm(a, n), self.to_arm(b, n)
+                arm.move_linear(ctx, pa, APPROACH_SPEED, 1.2)
+                arm.force_mode_start(pa, force, approach_speed)
+                arm.wait_for_contact(ctx, tolerance, standoff + 0.01, timeout=standoff / approach_speed * 4 + 5.0)
+                self._switch("sander", True)
+                arm.record_force(True)
+                arm.move_linear(ctx, pb, speed, 1.2)
+                arm.record_force(False)
+                self._switch_off_safely("sander")
+                stats = arm.force_mode_stop()
+                if stats.get("samples"):
+                    samples += [stats["min"], stats["max"]]
+                    total += abs(s1 - s0)
+                arm.move_linear(ctx, pb, APPROACH_SPEED, 1.2)      # lift back to the standoff
+                end_pose = pb
+                ctx.report((k + 1) / len(heights), "lane %d of %d" % (k + 1, len(heights)))
         finally:
             self._switch_off_safely("sander")
-        out["force_n"] = force
-        return out
+            arm.force_mode_stop()
+        if end_pose is not None:
+            last = o + uu * (width if len(heights) % 2 else 0.0) + up * heights[-1] + n * 0.05
+            arm.move_linear(ctx, self.to_arm(last, n), APPROACH_SPEED, 1.2)
+        return {"length_m": round(total, 4), "lanes": len(heights), "duration_s": round(time.monotonic() - start, 3),
+                "force_n": force, "contact": "force",
+                "force_min_n": round(min(samples), 2) if samples else None,
+                "force_max_n": round(max(samples), 2) if samples else None}
+
+    def wall_ready(self, ctx: Any) -> Dict[str, Any]:
+        arm = self._need("arm")
+        q = arm.named_pose("wall_ready")
+        self._retract(ctx)
+        return arm.move_joints(ctx, q, 1.0, 1.4)
 
     def home(self, ctx: Any) -> Dict[str, Any]:
         self._outputs_off()
         arm = self._need("arm")
+        if self.home_via and self._facing_forward():
+            self._retract(ctx)
+            arm.move_joints(ctx, arm.named_pose(self.home_via), 1.0, 1.4)
         return arm.move_joints(ctx, arm.named_pose("home"), 1.0, 1.4)

@@ -6,8 +6,20 @@ lost: a reconnect redoes the whole handshake including the script upload) -> :me
 
 Motions: every move is started asynchronously and watched: it ends when the controller reports the async
 operation finished and the arm stands still at the target; it is stopped (``stopJ`` / ``stopL``) on cancel,
-STOP, STOP_ARM and when it overruns its deadline ``path / speed + 2 speed / accel + margin``
+STOP, STOP_ARM and when it overruns its deadline ``path / speed + stops * 2 speed / accel + margin``
 (:class:`~.errors.MotionTimeout`). Before each command the link and the safety state are checked.
+
+Paths (:meth:`UrRtdeArm.move_path`): one ``moveL(path)`` of ur_rtde, i.e. the control script is re-uploaded with
+the waypoints (speed, acceleration, blend radius each) injected and run as one blended motion; the async progress
+word names the waypoint being approached. The blend radii are checked here first (at most half of either
+neighbouring segment, the first segment starting at the current TCP), so a bad path is refused before anything
+moves; should the controller still refuse it (its control script halts), the script is uploaded again.
+
+Force mode (:meth:`UrRtdeArm.force_mode_start` / :meth:`~UrRtdeArm.force_mode_stop`): ur_rtde ``forceMode`` with
+one compliant axis, the z axis of a task frame (the tool axis for SAND_AREA): the controller pushes with the
+requested force along it, speed-limited, while moves run along the other axes. Meanwhile a move's end check ignores
+the compliant axis, the force along it is recorded (``actual_TCP_force``), and STOP / cancel / any stop of the arm
+end force mode first.
 
 Safety: a protective stop, an emergency stop or any safety mode other than NORMAL / REDUCED is latched as
 :class:`~.errors.SafetyStop` (``HARDWARE_ERROR``) and refuses every motion until :meth:`reset` (``RESET_ARM``),
@@ -29,7 +41,7 @@ from locem_bridge.locem.errors import Aborted
 
 from .config import need
 from .errors import BadRequest, DeviceFault, LinkDown, MotionTimeout, NotConnected, SafetyStop
-from .geometry import angle_between, distance
+from .geometry import angle_between, distance, rotvec_to_matrix
 from .interfaces import Arm, Health, Waiter
 
 log = logging.getLogger(__name__)
@@ -44,6 +56,10 @@ MOTION_MARGIN_S = 2.0
 JOINT_TOL = 2e-3                         # rad, "at the target" for joint moves
 LINEAR_TOL = 1e-3                        # m, "at the target" for linear moves
 REQUEST_TIMEOUT = 3.0
+PATH_UPLOAD_S = 2.0                      # s, budget for ur_rtde's script re-upload before a path starts
+PATH_CALL_TIMEOUT = 10.0                 # s, the movePath request (stop script, upload, wait until it runs)
+ROTATION_WEIGHT = 0.3                    # m per rad when a path length mixes translation and rotation
+FORCE_FREE_SPEED = 2.0                   # m/s, force-mode limit entry of the non-compliant axes (unused by type 2)
 
 
 class UrRtdeArm(Arm):
@@ -70,6 +86,7 @@ class UrRtdeArm(Arm):
         self._thread: Optional[threading.Thread] = None
         self._motion_kind = ""
         self._stop_requested: Optional[str] = None
+        self._force: Optional[Dict[str, Any]] = None    # active force mode: axis (base frame), force, samples
         self.reconnects = 0
         self.connections = 0
 
@@ -175,6 +192,9 @@ class UrRtdeArm(Arm):
         with self._state_lock:
             self._state = st
             self._state["stamp"] = time.time()
+        fm = self._force
+        if fm is not None and fm.get("recording"):
+            fm["samples"].append(-float(sum(a * b for a, b in zip(st["tcp_force"][:3], fm["axis"]))))
         mode = st["safety_mode"]
         if mode not in SAFETY_OK and self._safety is None:
             self._safety = "%s (safety mode %d)" % (SAFETY_NAMES.get(mode, "UNKNOWN").lower().replace("_", " "), mode)
@@ -245,18 +265,54 @@ class UrRtdeArm(Arm):
 
     def move_linear(self, waiter: Waiter, pose: Sequence[float], speed: float, accel: float) -> Dict[str, Any]:
         st = self._ready()
-        travel = distance(pose[:3], st["tcp"][:3]) + 0.3 * angle_between(pose, st["tcp"])
+        travel = distance(pose[:3], st["tcp"][:3]) + ROTATION_WEIGHT * angle_between(pose, st["tcp"])
         return self._motion(waiter, "moveL", list(pose), speed, accel, travel, target_pose=list(pose))
 
-    def _motion(self, waiter: Waiter, op: str, target: List[float], speed: float, accel: float, travel: float,
-                target_q: Optional[List[float]] = None, target_pose: Optional[List[float]] = None) -> Dict[str, Any]:
-        budget = travel / speed + 2.0 * speed / accel + MOTION_MARGIN_S
+    def move_path(self, waiter: Waiter, poses: Sequence[Sequence[float]], speed: float, accel: float,
+                  blends: Sequence[float]) -> Dict[str, Any]:
+        """Straight segments through ``poses`` as ONE controller path: ``blends[i]`` (m) rounds interior waypoint
+        i without stopping (0 stops there); the last waypoint is reached exactly and at rest.
+
+        Raises BadRequest (nothing moves) when a blend radius exceeds half of a neighbouring segment.
+        """
+        if not poses or len(blends) != len(poses):
+            raise BadRequest("MOVE_PATH needs one blend radius per waypoint (%d waypoints, %d radii)"
+                             % (len(poses), len(blends)), device="arm", argument="waypoints")
+        st = self._ready()
+        points = [list(st["tcp"])] + [list(p) for p in poses]
+        seg = [distance(points[i][:3], points[i + 1][:3]) for i in range(len(poses))]
+        radii = [float(b) for b in blends[:-1]] + [0.0]          # the path ends at rest on its last waypoint
+        for i, b in enumerate(radii[:-1]):
+            half = min(seg[i], seg[i + 1]) / 2.0
+            if b > half + 1e-9:
+                raise BadRequest("MOVE_PATH: waypoint %d: blend radius %.4g m is larger than half of a neighbouring "
+                                 "segment (%.4g m %s, %.4g m after); allowed at most %.4g m"
+                                 % (i + 1, b, seg[i], "from the current TCP" if i == 0 else "before", seg[i + 1],
+                                    half), device="arm", argument="waypoints")
+        travel = sum(seg) + ROTATION_WEIGHT * sum(angle_between(points[i], points[i + 1])
+                                                  for i in range(len(poses)))
+        stops = 1 + sum(1 for b in radii[:-1] if b <= 0)
+        rows = [list(p) + [speed, accel, b] for p, b in zip(poses, radii)]
+        return self._motion(waiter, "movePath", [rows], speed, accel, travel, target_pose=list(poses[-1]),
+                            stops=stops, kind="moveL", extra_s=PATH_UPLOAD_S, call_timeout=PATH_CALL_TIMEOUT,
+                            waypoints=len(poses))
+
+    def _motion(self, waiter: Waiter, op: str, target: List[Any], speed: float, accel: float, travel: float,
+                target_q: Optional[List[float]] = None, target_pose: Optional[List[float]] = None,
+                stops: int = 1, kind: Optional[str] = None, extra_s: float = 0.0,
+                call_timeout: float = REQUEST_TIMEOUT, waypoints: int = 0) -> Dict[str, Any]:
+        budget = travel / speed + stops * 2.0 * speed / accel + MOTION_MARGIN_S + extra_s
         self._stop_requested = None
-        self._motion_kind = op
+        self._motion_kind = kind or op
         waiter.on_cancel(lambda: self.stop_motion("cancelled"))
         start = time.monotonic()
-        if not self._call(op, target, speed, accel):
+        args = list(target) if waypoints else [target, speed, accel]     # a path: target = [rows]
+        if not self._call(op, *args, timeout=call_timeout):
             self._raise_if_safety()
+            if waypoints:
+                self._restart_script()
+                raise DeviceFault("UR controller refused the %d-waypoint path and halted its control script "
+                                  "(uploaded again); check reachability and blend radii" % waypoints, device="arm")
             raise DeviceFault("UR controller refused %s to %s" % (op, _fmt(target)), device="arm")
         moving_seen = False
         try:
@@ -271,12 +327,15 @@ class UrRtdeArm(Arm):
                 moving_seen = moving_seen or not still or st["progress"] >= 0
                 if st["progress"] < 0 and still and (moving_seen or elapsed > 0.2):
                     break
-                if travel > 0:
+                if waypoints and st["progress"] >= 0:
+                    waiter.report(min(0.99, st["progress"] / float(waypoints)),
+                                  "waypoint %d of %d" % (st["progress"] + 1, waypoints))
+                elif travel > 0:
                     waiter.report(min(0.99, elapsed / max(budget - MOTION_MARGIN_S, 1e-3)), "%s running" % op)
                 if elapsed > budget:
                     self.stop_motion("deadline")
-                    raise MotionTimeout("%s did not finish within %.2f s (path %.3f, speed %.3f, accel %.3f)"
-                                        % (op, budget, travel, speed, accel), device="arm")
+                    raise MotionTimeout("%s did not finish within %.2f s (path %.3f, speed %.3f, accel %.3f, "
+                                        "stops %d)" % (op, budget, travel, speed, accel, stops), device="arm")
         except BaseException:
             if not self._safety and self._link_up.is_set():
                 self.stop_motion("aborted")
@@ -289,9 +348,27 @@ class UrRtdeArm(Arm):
                 raise DeviceFault("moveJ ended %.4f rad from the target" % err, device="arm")
         if target_pose is not None:
             err = distance(st["tcp"][:3], target_pose[:3])
+            fm = self._force
+            if fm is not None:      # compliant along the force axis: only the error across it counts
+                d = [a - b for a, b in zip(st["tcp"][:3], target_pose[:3])]
+                along = sum(a * b for a, b in zip(d, fm["axis"]))
+                err = math.sqrt(max(0.0, err * err - along * along))
             if err > LINEAR_TOL:
-                raise DeviceFault("moveL ended %.4f m from the target" % err, device="arm")
-        return {"q": st["q"], "tcp_pose": st["tcp"], "duration_s": round(time.monotonic() - start, 3)}
+                raise DeviceFault("%s ended %.4f m from the target" % (op, err), device="arm")
+        out = {"q": st["q"], "tcp_pose": st["tcp"], "duration_s": round(time.monotonic() - start, 3)}
+        if waypoints:
+            out["waypoints"] = waypoints
+        return out
+
+    def _restart_script(self) -> None:
+        """Upload the control script again after the controller halted it (e.g. a refused path)."""
+        try:
+            self._call("reupload", timeout=PATH_CALL_TIMEOUT)
+            end = time.monotonic() + 5.0
+            while not self._poll()["program_running"] and time.monotonic() < end:
+                time.sleep(0.02)
+        except (LinkDown, DeviceFault) as exc:
+            log.warning("UR controller %s: control script not restarted: %s", self.host, exc.message)
 
     def _raise_if_safety(self) -> None:
         if self._safety:
@@ -307,8 +384,10 @@ class UrRtdeArm(Arm):
             raise BadRequest("pose %s is not reachable by the arm: %s" % (_fmt(pose), exc.message), device="arm")
 
     def stop_motion(self, reason: str = "") -> None:
-        """Decelerate now (stopL for a linear move, stopJ otherwise); never raises."""
+        """End force mode, decelerate now (stopL for a linear move, stopJ otherwise); never raises."""
         self._stop_requested = reason or "stop requested"
+        if self._force is not None:
+            self.force_mode_stop()
         try:
             if self._motion_kind == "moveL":
                 self._call("stopL", STOP_DECEL_L, timeout=1.0)
@@ -319,6 +398,73 @@ class UrRtdeArm(Arm):
 
     def stop(self) -> None:
         self.stop_motion("STOP")
+
+    # -- force mode ----------------------------------------------------------------------------------------
+    def force_mode_start(self, task_frame: Sequence[float], force: float, speed_limit: float) -> None:
+        """Zero the force sensor, then push with ``force`` N along the z axis of ``task_frame`` (a pose in the arm
+        base frame), compliant along that axis only, at most ``speed_limit`` m/s along it."""
+        self._ready()
+        if not self._call("zeroFt"):
+            raise DeviceFault("zeroFtSensor refused", device="arm")
+        axis = rotvec_to_matrix(task_frame[3:6])[:, 2].tolist()
+        self._force = {"axis": axis, "force": float(force), "samples": [], "recording": False}
+        ok = self._call("forceMode", list(task_frame), [0, 0, 1, 0, 0, 0], [0.0, 0.0, float(force), 0.0, 0.0, 0.0],
+                        2, [FORCE_FREE_SPEED, FORCE_FREE_SPEED, float(speed_limit), 1.0, 1.0, 1.0])
+        if not ok:
+            self._force = None
+            self._raise_if_safety()
+            raise DeviceFault("UR controller refused forceMode", device="arm")
+
+    def contact_force(self) -> float:
+        """Force (N) the tool applies along the force-mode axis now (0 outside force mode)."""
+        fm = self._force
+        if fm is None:
+            return 0.0
+        f = self._poll()["tcp_force"]
+        return -float(sum(a * b for a, b in zip(f[:3], fm["axis"])))
+
+    def wait_for_contact(self, waiter: Waiter, tolerance: float, max_travel: float, timeout: float) -> float:
+        """Wait until the force along the axis is within ``tolerance`` N of the set-point; DeviceFault naming
+        what happened when the tool travels ``max_travel`` m along the axis first or ``timeout`` s pass."""
+        fm = self._force
+        if fm is None:
+            raise DeviceFault("wait_for_contact outside force mode", device="arm")
+        start = self._poll()["tcp"]
+        end = time.monotonic() + timeout
+        while True:
+            st = self._poll()
+            self._raise_if_safety()
+            f = -float(sum(a * b for a, b in zip(st["tcp_force"][:3], fm["axis"])))
+            if abs(f - fm["force"]) <= tolerance:
+                return f
+            travel = sum((a - b) * c for a, b, c in zip(st["tcp"][:3], start[:3], fm["axis"]))
+            if travel > max_travel:
+                raise DeviceFault("no contact: the tool moved %.1f mm along its axis and feels %.1f N of %.1f N"
+                                  % (travel * 1e3, f, fm["force"]), device="arm")
+            if time.monotonic() > end:
+                raise DeviceFault("contact force %.1f N did not reach %.1f +- %.1f N within %.0f s"
+                                  % (f, fm["force"], tolerance, timeout), device="arm")
+            waiter.sleep(0.01)
+
+    def record_force(self, on: bool) -> None:
+        """Start / stop recording the contact force at every state poll (see :meth:`force_mode_stop`)."""
+        if self._force is not None:
+            self._force["recording"] = bool(on)
+
+    def force_mode_stop(self) -> Dict[str, float]:
+        """Leave force mode (the controller also decelerates any motion); never raises. Returns the recorded
+        force (N) along the axis: samples, mean, min, max."""
+        fm, self._force = self._force, None
+        if fm is not None and not self._safety and self._link_up.is_set():
+            try:
+                self._call("forceModeStop", timeout=2.0)
+            except (LinkDown, DeviceFault, NotConnected) as exc:
+                log.warning("force mode stop: %s", exc.message)
+        samples = fm["samples"] if fm else []
+        if not samples:
+            return {"samples": 0}
+        return {"samples": len(samples), "mean": sum(samples) / len(samples), "min": min(samples),
+                "max": max(samples)}
 
     def named_pose(self, name: str) -> List[float]:
         if name not in self.named_poses:

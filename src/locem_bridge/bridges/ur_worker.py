@@ -42,7 +42,8 @@ def _ops(h: Dict[str, Any]) -> Dict[str, Callable[..., Any]]:
                 "robot_mode": int(r.getRobotMode()), "runtime_state": int(r.getRuntimeState()),
                 "do_bits": int(r.getActualDigitalOutputBits()), "progress": int(c.getAsyncOperationProgress()),
                 "receive_connected": bool(r.isConnected()), "control_connected": bool(c.isConnected()),
-                "program_running": bool(c.isProgramRunning()), "timestamp": float(r.getTimestamp())}
+                "program_running": bool(c.isProgramRunning()), "timestamp": float(r.getTimestamp()),
+                "tcp_force": list(r.getActualTCPForce())}
 
     def dash_cmd(name: str) -> str:
         if not dash.isConnected():
@@ -59,8 +60,16 @@ def _ops(h: Dict[str, Any]) -> Dict[str, Callable[..., Any]]:
         "tcp": lambda: list(r.getActualTCPPose()),
         "moveJ": lambda q, v, a: bool(c.moveJ(list(q), float(v), float(a), True)),
         "moveL": lambda p, v, a: bool(c.moveL(list(p), float(v), float(a), True)),
+        # one path of [x, y, z, rx, ry, rz, speed, accel, blend] rows; ur_rtde re-uploads its control script
+        # with the path injected, then starts it (command 45) asynchronously
+        "movePath": lambda path: bool(c.moveL([[float(v) for v in row] for row in path], True)),
         "stopJ": lambda a: c.stopJ(float(a), False),
         "stopL": lambda a: c.stopL(float(a), False),
+        "forceMode": lambda frame, sel, wrench, typ, limits: bool(c.forceMode(
+            [float(v) for v in frame], [int(v) for v in sel], [float(v) for v in wrench], int(typ),
+            [float(v) for v in limits])),
+        "forceModeStop": lambda: bool(c.forceModeStop()),
+        "zeroFt": lambda: bool(c.zeroFtSensor()),
         "setTcp": lambda p: bool(c.setTcp(list(p))),
         "setPayload": lambda m, cog: bool(c.setPayload(float(m), list(cog))),
         "setDO": lambda i, v: bool(io.setStandardDigitalOut(int(i), bool(v))),

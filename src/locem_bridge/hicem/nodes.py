@@ -466,6 +466,8 @@ class GetAreaRaster(Leaf):
         input_port("section_width", FLOAT, None, "m", "widest strip covered from one base pose"),
         input_port("base_standoff", FLOAT, None, "m", "base centre distance from the wall"),
         input_port("yaw_offset", FLOAT, None, "rad", "added to the wall-facing heading"),
+        input_port("edge_extension", FLOAT, "0.0", "m", "the first and last section reach this far beyond the "
+                   "area's ends (spray run-in at the outer edges; sections meet exactly in between)"),
         output_port("sections", JSON, None, "", "list of {approach, origin, u, width, height, normal}"),
         output_port("count", INT, None, "", "number of sections"),
     )
@@ -481,17 +483,58 @@ class GetAreaRaster(Leaf):
         w = a["width"] / count
         nxy = math.hypot(n[0], n[1]) or 1.0
         heading = _facing([n[0] / nxy, n[1] / nxy], self.get("yaw_offset"))
+        ext = self.get("edge_extension")
+        if ext < 0:
+            raise PortError("%s: edge_extension must be >= 0 m, got %g" % (self.name, ext))
         sections = []
         for i in range(count):
             o = [a["origin"][k] + a["u"][k] * w * i for k in range(3)]
             mx, my = o[0] + a["u"][0] * w / 2.0, o[1] + a["u"][1] * w / 2.0
+            s0 = -ext if i == 0 else 0.0                   # along u, relative to the section's own start
+            s1 = w + ext if i == count - 1 else w
+            o = [o[k] + a["u"][k] * s0 for k in range(3)]
             sections.append({"approach": [mx + n[0] / nxy * bs, my + n[1] / nxy * bs, heading], "origin": o,
-                             "u": list(a["u"]), "width": w, "height": a["height"], "normal": n, "index": i})
+                             "u": list(a["u"]), "width": s1 - s0, "height": a["height"], "normal": n, "index": i})
         self.set("sections", sections)
         self.set("count", count)
         return Status.SUCCESS
 
 
+class PlanTransit(Leaf):
+    DESCRIPTION = ("Base waypoints from the current pose to goal [x, y, theta] (map). A turn larger than max_turn "
+                   "is not made next to a wall, where the corners of the turning base would sweep into it: the "
+                   "base first drives to the transit point keeping its heading, turns there, then drives to the "
+                   "goal. Otherwise the goal alone.")
+    PORTS = (
+        input_port("here", ANY, None, "m, m, rad", "current pose: [x, y, theta] or GET_POSE's result"),
+        input_port("goal", FLOAT_LIST, None, "m, m, rad", "x y theta to reach"),
+        input_port("transit", FLOAT_LIST, "{@cfg.site.locations.home}", "m", "x y (theta ignored) with room "
+                   "to turn"),
+        input_port("max_turn", FLOAT, "{@cfg.site.max_turn_near_walls}", "rad", "largest turn made on the way"),
+        output_port("waypoints", JSON, None, "", "list of [x, y, theta] poses for GOTO, in order"),
+    )
+
+    def on_tick(self) -> Status:
+        here = self.get("here")
+        if isinstance(here, dict):
+            here = here.get("pose")
+        goal, transit = list(self.get("goal")), list(self.get("transit"))
+        if not isinstance(here, (list, tuple)) or len(here) != 3 or len(goal) != 3 or len(transit) < 2:
+            raise PortError("%s: here and goal must be [x, y, theta] and transit [x, y, ...], got %r, %r, %r"
+                            % (self.name, here, goal, transit))
+        turn = abs(_norm_angle(float(goal[2]) - float(here[2])))
+        if turn <= self.get("max_turn"):
+            waypoints = [goal]
+        else:
+            waypoints = [[transit[0], transit[1], float(here[2])], [transit[0], transit[1], float(goal[2])], goal]
+        kept = [waypoints[0]]
+        for w in waypoints[1:]:       # a goal at the transit point itself is not driven to twice
+            if max(abs(float(a) - float(b)) for a, b in zip(w, kept[-1])) > 1e-6:
+                kept.append(w)
+        self.set("waypoints", kept)
+        return Status.SUCCESS
+
+
 LIBRARY = (CheckHealth, SendLocemCommand, ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual,
            SelectEntry, IngestScan, MarkFeature, TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments,
-           GetAreaRaster)
+           GetAreaRaster, PlanTransit)

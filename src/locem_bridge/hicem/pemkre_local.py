@@ -22,7 +22,9 @@ class EngineClient(PemkreClient):
             raise PemkreError("PEMKRE %s: %s: %s" % (what, type(exc).__name__, exc))
 
     def start_process(self, process_iri: str, options: Optional[Dict[str, Any]] = None) -> str:
-        return str(self._call("start_process", self.engine.start_process, process_iri, options or {}))
+        # as the ROS client: a new start replaces a process left running by a stop before its first task
+        return str(self._call("start_process", lambda: self.engine.start_process(process_iri, options or {},
+                                                                                 abort_running=True)))
 
     def next_action(self) -> Dict[str, Any]:
         a = self._call("next_action", self.engine.next_action)

@@ -70,6 +70,7 @@ class Arg:
     default: Any = _REQUIRED
     choices: Tuple[str, ...] = ()
     keyword_only: bool = False
+    max_length: int = 256          # characters, name arguments (the whole command is capped by the grammar)
 
     # -- constructors that read like the documentation ---------------------------------------------------
     @classmethod
@@ -161,9 +162,9 @@ class Arg:
             hint = difflib.get_close_matches(token.lower(), [c.lower() for c in self.choices], n=1)
             extra = " (did you mean '%s'?)" % hint[0] if hint else ""
             raise self._error(command, "expects %s, got '%s'%s" % (self.allowed(), _clip(token), extra))
-        if not _STRING.match(token) or len(token) > 256:
-            raise self._error(command, "expects %s of at most 256 characters, got '%s'"
-                              % (self.allowed(), _clip(token)))
+        if not _STRING.match(token) or len(token) > self.max_length:
+            raise self._error(command, "expects %s of at most %d characters, got '%s'"
+                              % (self.allowed(), self.max_length, _clip(token)))
         return token
 
     def _error(self, command: str, text: str) -> InvalidArgument:

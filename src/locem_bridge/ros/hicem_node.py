@@ -27,6 +27,7 @@ import rospy
 
 from locem_bridge.hicem.errors import ControllerError, HicemError, OperatorError
 from locem_bridge.hicem.executive import create_executive
+from locem_bridge.job.call_log import instrument_from_env
 from locem_bridge.msg import HicemPrompt, HicemState
 from locem_bridge.srv import (HicemOperatorReply, HicemOperatorReplyResponse, HicemStartProcess,
                               HicemStartProcessResponse, HicemStop, HicemStopResponse)
@@ -68,7 +69,8 @@ class HicemNode:
         hdict = os.path.expanduser(_param("hdict_path", os.path.join(rospkg.get_ros_home(), "hicem_hdict.sqlite")))
         locem_ns = rospy.resolve_name(_param("locem_ns", "locem"))
         self.locem = RosLocemClient(locem_ns)
-        self.pemkre = _pemkre_client(_param("pemkre", "ros"))
+        # times each PEMKRE call into $LOCEM_CALL_LOG when set (bench/bench_job.py); otherwise the client itself
+        self.pemkre = instrument_from_env(_pemkre_client(_param("pemkre", "ros")))
         self.ex = create_executive(self.pemkre, self.locem, hdict,
                                    params_file=params_file, trees_dir=trees_dir)
         self.ctrl = self.ex.controller

@@ -56,7 +56,10 @@ class RosPemkreClient(PemkreClient):
         return resp
 
     def start_process(self, process_iri: str, options: Optional[Dict[str, Any]] = None) -> str:
-        resp = self._call("start_process", process=process_iri, options=json.dumps(options) if options else "")
+        # HICEM is PEMKRE's only executor: a process it starts replaces one left running by a stop before its
+        # first task (PEMKRE marks that one failed), instead of being refused
+        resp = self._call("start_process", process=process_iri, options=json.dumps(options) if options else "",
+                          abort_running=True)
         for f in ("specific_process", "process"):
             if hasattr(resp, f):
                 return str(getattr(resp, f))

@@ -88,9 +88,14 @@ def main() -> None:
             tracker.end(status="timeout" if not rospy.is_shutdown() else "stopped",
                         detail="no end state within %.0f s" % timeout)
             break
-        tracker.end()
+        if tracker.end().status == "stopped":     # the operator pressed STOP: the job ends here
+            break
     pictures_dir = tempfile.mkdtemp(prefix="locem_job_")
-    outcome = _json_call("sim/save_outcome", folder=pictures_dir)
+    try:
+        outcome = _json_call("sim/save_outcome", folder=pictures_dir)
+    except (rospy.ServiceException, rospy.ROSException, RuntimeError) as exc:   # the launch is shutting down
+        print("[job] no outcome from the simulation (%s): report without pictures" % exc, flush=True)
+        outcome = {}
     kpis: List[Dict[str, Any]] = []
     try:
         rospy.wait_for_service("pemkre/query", timeout=2.0)

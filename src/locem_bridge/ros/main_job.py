@@ -1,57 +1,117 @@
-"""The README's main job.
+"""The README's main job: the full simulated plasterboard job, headless, on the embedded defaults.
 
-Today (LOCEM alone): a ROS master (11311, or the one already running), the LOCEM node, and its command
-catalogue printed through the real ``rosservice call /locem/command "command: 'HELP'"``; then LOCEM keeps
-serving until Ctrl-C. ``--once`` (or ``CI`` set in the environment) stops after printing.
+Runs ``roslaunch locem_bridge plasterboard.launch`` (simulated worksite with its RTDE / Modbus / CAN stand-ins,
+LOCEM with its bridges, PEMKRE, HICEM, the automatic operator and the job node) on a private ROS master port,
+shows the job's progress as it goes (process, action, joint n of N), and ends with where the report is and its
+outcome table. Exit status 0 when taping, spraying and sanding all succeeded, 1 otherwise.
+
+    python -m locem_bridge.ros.main_job                      # defaults: results/ in the current folder
+    python -m locem_bridge.ros.main_job --validate-lines --reject wall_1_joint_2
+    python -m locem_bridge.ros.main_job --launch-arg gui:=true
+
+Node output other than the job's goes to the ROS log folder (``--verbose`` shows it).
 """
 
 import argparse
+import json
 import os
+import re
 import subprocess
 import sys
 import time
 from typing import List, Optional
 
-from .processes import RosProcesses
+from .processes import free_port
+
+PROGRESS = re.compile(r"^\[(\d+/\d+ [^\]]+|job)\]")
+
+
+def launch_command(args: argparse.Namespace, port: int) -> List[str]:
+    cmd = ["roslaunch", "-p", str(port), "locem_bridge", "plasterboard.launch",
+           "results_dir:=%s" % os.path.abspath(args.results_dir), "time_scale:=%g" % args.time_scale,
+           "validate_lines:=%s" % ("true" if args.validate_lines else "false"),
+           "reject_lines:=%s" % args.reject, "hmi_port:=%d" % args.hmi_port,
+           "output:=%s" % ("screen" if args.verbose else "log")]
+    if args.site:
+        cmd.append("site:=%s" % os.path.abspath(args.site))
+    return cmd + list(args.launch_arg)
+
+
+def summarise(report_md: str) -> List[str]:
+    """The report's process and outcome tables (what a person wants to see at the end)."""
+    try:
+        with open(report_md, encoding="utf-8") as handle:
+            text = handle.read()
+    except OSError:
+        return []
+    keep, lines = False, []
+    for line in text.splitlines():
+        if line.startswith("## "):
+            keep = line[3:].strip() in ("Processes", "Outcome")
+        if keep and line.strip():
+            lines.append(line)
+    return lines
 
 
 def main(argv: Optional[List[str]] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--once", action="store_true", help="stop after printing the catalogue")
-    parser.add_argument("--port", type=int, default=11311, help="ROS master port (default 11311)")
+    parser.add_argument("--results-dir", default="results", help="folder receiving one subfolder per run")
+    parser.add_argument("--time-scale", type=float, default=5.0, help="sim seconds per wall second (default 5)")
+    parser.add_argument("--validate-lines", action="store_true", help="the operator validates every joint first")
+    parser.add_argument("--reject", default="", help="comma list of joint ids the automatic operator rejects")
+    parser.add_argument("--site", default="", help="site YAML (default: config/sites/default.yaml)")
+    parser.add_argument("--hmi-port", type=int, default=0, help="operator web page port (default: a free one)")
+    parser.add_argument("--port", type=int, default=0, help="ROS master port (default: a free one)")
+    parser.add_argument("--timeout", type=float, default=900.0, help="wall seconds before the run is abandoned")
+    parser.add_argument("--launch-arg", action="append", default=[], help="extra roslaunch arg name:=value")
+    parser.add_argument("--verbose", action="store_true", help="show every node's output")
     args = parser.parse_args(argv)
-    once = args.once or bool(os.environ.get("CI"))
-    with RosProcesses(port=args.port, log_dir=os.path.join(os.environ.get("ROS_HOME", os.path.expanduser("~/.ros")),
-                                                           "locem_main")) as ros:
-        print("[main] ROS master at %s" % ros.env["ROS_MASTER_URI"], flush=True)
-        ros.start_master()
-        print("[main] starting LOCEM (roslaunch locem_bridge locem.launch)", flush=True)
-        ros.spawn(["roslaunch", "--wait", "locem_bridge", "locem.launch"], "locem")
-        ros.wait_for_service("/locem/command", timeout=60)
-        print('[main] rosservice call /locem/command "command: \'HELP\'"', flush=True)
-        reply = subprocess.run(["rosservice", "call", "/locem/command", "command: 'HELP'"], env=ros.env,
-                               capture_output=True, text=True, timeout=60)
-        if reply.returncode != 0:
-            print(reply.stdout + reply.stderr, file=sys.stderr)
-            return 1
-        import yaml
-
-        answer = yaml.safe_load(reply.stdout)
-        print(answer["message"], flush=True)
-        if not answer["success"]:
-            return 1
-        if once:
-            print("[main] done (--once)", flush=True)
-            return 0
-        print("[main] LOCEM is serving on %s; try:\n  ROS_MASTER_URI=%s rosservice call /locem/command "
-              "\"command: 'WAIT 1'\"\n[main] Ctrl-C to stop" % ("/locem/command", ros.env["ROS_MASTER_URI"]),
-              flush=True)
-        try:
-            while True:
-                time.sleep(1.0)
-        except KeyboardInterrupt:
-            print("\n[main] stopping", flush=True)
-    return 0
+    args.hmi_port = args.hmi_port or free_port()
+    port = args.port or free_port()
+    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % port, ROS_IP="127.0.0.1")
+    env.pop("ROS_HOSTNAME", None)
+    cmd = launch_command(args, port)
+    print("[main] %s" % " ".join(cmd), flush=True)
+    print("[main] operator page: http://127.0.0.1:%d/" % args.hmi_port, flush=True)
+    started = time.monotonic()
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1,
+                            start_new_session=True)
+    report = ""
+    try:
+        assert proc.stdout is not None
+        for raw in proc.stdout:
+            line = re.sub(r"\x1b\[[0-9;]*m", "", raw.rstrip())
+            if args.verbose or PROGRESS.match(line) or "REQUIRED process" in line or "ERROR" in line:
+                print(line, flush=True)
+            found = re.match(r"^\[job\] report: (.+)$", line)
+            if found:
+                report = found.group(1).strip()
+            if time.monotonic() - started > args.timeout:
+                print("[main] no end after %.0f s: stopping" % args.timeout, flush=True)
+                break
+    except KeyboardInterrupt:
+        print("\n[main] interrupted: stopping", flush=True)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, 2)          # SIGINT: roslaunch stops every node
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, 9)
+                proc.wait()
+    elapsed = time.monotonic() - started
+    if not report:
+        print("[main] the job wrote no report (%.0f s); see the ROS logs (~/.ros/log/latest)" % elapsed, flush=True)
+        return 1
+    for line in summarise(report):
+        print(line)
+    with open(os.path.join(os.path.dirname(report), "report.json"), encoding="utf-8") as handle:
+        data = json.load(handle)
+    statuses = [p.get("status") for p in data.get("processes", [])]
+    ok = bool(statuses) and all(s == "succeeded" for s in statuses)
+    print("[main] %s in %.0f s wall clock; report: %s" % ("job done" if ok else "job NOT completed", elapsed, report),
+          flush=True)
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

@@ -1,7 +1,9 @@
 """Simulation time with a time scale: sim seconds advance ``time_scale`` times faster than wall seconds.
 
 Models (pressure, drives, base, arm motion) advance on :meth:`SimClock.now`; protocol streams (TPDOs,
-heartbeats, RTDE, Modbus answers) keep wall-clock rates. ``time_scale = 1.0`` is hardware-like. The scale can
+heartbeats, RTDE, Modbus answers) keep wall-clock rates: they are the devices' real-time behaviour, and the
+clients' timeouts (e.g. the base bridge's 1.5 x 100 ms heartbeat consumer) are wall-clock facts of the real robot
+(docs/protocol_notes.md, "Time scale and the bus"). ``time_scale = 1.0`` is hardware-like. The scale can
 be changed while running; sim time stays continuous. Thread-safe.
 """
 from __future__ import annotations

@@ -124,11 +124,13 @@ def validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
         if wall["material"] == "plasterboard":
             wall["panel_width"] = get(wall, "panel_width", path, float, lo=0.1, hi=100.0)
             wall["joint_width"] = get(wall, "joint_width", path, float, default=0.05, lo=0.001, hi=0.5)
+            wall["skirting"] = get(wall, "skirting", path, float, default=0.0, lo=0.0, hi=wall["height"] / 2.0)
             hj = get(wall, "horizontal_joints", path, list, default=[])
             for k, h in enumerate(hj):
-                if isinstance(h, bool) or not isinstance(h, (int, float)) or not 0.0 < h < wall["height"]:
-                    raise SimConfigError("%s.horizontal_joints[%d] = %r must be a height in (0, %g)" % (
-                        path, k, h, wall["height"]))
+                if isinstance(h, bool) or not isinstance(h, (int, float)) or not wall["skirting"] < h < wall["height"]:
+                    raise SimConfigError("%s.horizontal_joints[%d] = %r must be a height in (%g, %g) (above the "
+                                         "skirting, below the wall top)" % (path, k, h, wall["skirting"],
+                                                                            wall["height"]))
             wall["horizontal_joints"] = [float(h) for h in hj]
             areas = get(wall, "areas", path, list, default=[])
             for k, area in enumerate(areas):

@@ -20,7 +20,15 @@ Each :class:`Cia402Drive` implements
   drops off the bus: no heartbeat, TPDOs or SDO answers, motor stops) and :meth:`restore` (it reboots).
 Malformed frames addressed to a drive (wrong length NMT/SDO/RPDO) are ignored and logged; ``refused`` counts them.
 
-Motion physics is integrated exactly (piecewise constant acceleration) on sim time ``clock()``.
+Motion physics is integrated exactly (piecewise constant acceleration) on sim time ``clock()``; every change of
+state, mode, target or ramp starts a recorded motion segment, so :meth:`Cia402Drive.angles_at` gives the exact
+wheel angle at any recent sim time (the world integrates the base pose through it).
+
+Timing (see docs/protocol_notes.md, "Time scale and the bus"): the bus protocol is the device's real-time
+behaviour and runs on the wall clock whatever the time scale: heartbeat producer time 0x1017 (sent by a helper
+process, :mod:`.heartbeat`, on ``udp_multicast``/``socketcan``) and TPDO event timer 0x1800 sub 5. The cyclic
+TPDOs of all drives are sampled at one sim instant per cycle and sent back to back (as SYNC-synchronised drives
+would), so a master's odometry gets four wheel positions of the same instant.
 """
 from __future__ import annotations
 
@@ -29,13 +37,15 @@ import math
 import struct
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional
+from collections import deque
+from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
 
 import can
 import canopen
 from canopen.sdo import SdoAbortedError
 
 from .errors import DeviceStandInError
+from .heartbeat import PROCESS_INTERFACES, HeartbeatProcess
 
 log = logging.getLogger(__name__)
 
@@ -60,8 +70,59 @@ NMT_PRE_OPERATIONAL = 127
 FAULT_OVERCURRENT = 0x2310
 
 
+def advance(v: float, angle: float, vt: float, a_up: float, a_down: float, dt: float) -> Tuple[float, float]:
+    """Velocity and angle after ``dt`` of the profiled-velocity ramp from ``v`` toward ``vt``: ``a_up`` while the
+    speed grows in the target's direction, ``a_down`` while it falls (through zero when the sign changes, then
+    ``a_up``). Exact for any ``dt``, so splitting an interval gives the same result as one step."""
+    while dt > 0.0:
+        if v == vt:
+            return v, angle + v * dt
+        if v != 0.0 and (v > 0.0) != (vt > 0.0) and vt != 0.0:
+            goal = 0.0                                 # decelerate to zero first, then speed up the other way
+        else:
+            goal = vt
+        a = a_up if abs(goal) > abs(v) else a_down
+        if a <= 0.0:
+            return vt, angle + vt * dt
+        tr = abs(goal - v) / a
+        s = math.copysign(a, goal - v)
+        if dt < tr:
+            return v + s * dt, angle + v * dt + 0.5 * s * dt * dt
+        angle += 0.5 * (v + goal) * tr
+        v = goal
+        dt -= tr
+    return v, angle
+
+
+class _MotionParameter:
+    """A drive attribute the wheel motion depends on (state, mode, target, ramps): assigning it, from the drive's
+    own handlers or from a test, first advances the motion to ``clock()`` and then starts a new motion segment,
+    so :meth:`Cia402Drive.angles_at` stays exact."""
+
+    def __set_name__(self, owner: Any, name: str) -> None:
+        self.key = "_p_" + name
+
+    def __get__(self, obj: Any, owner: Any = None) -> Any:
+        return self if obj is None else obj.__dict__[self.key]
+
+    def __set__(self, obj: Any, value: Any) -> None:
+        if "_events" not in obj.__dict__:            # during __init__
+            obj.__dict__[self.key] = value
+            return
+        with obj._lock:
+            obj.update()
+            obj.__dict__[self.key] = value
+            obj._mark()
+
+
 class Cia402Drive:
     """One simulated wheel drive (see the module docstring)."""
+
+    state = _MotionParameter()
+    mode = _MotionParameter()
+    target_units = _MotionParameter()
+    accel_units = _MotionParameter()
+    decel_units = _MotionParameter()
 
     def __init__(self, node_id: int, name: str, eds_path: str, cfg: Dict[str, Any], clock: Callable[[], float]) -> None:
         self.node_id = int(node_id)
@@ -84,6 +145,7 @@ class Cia402Drive:
         self.velocity = 0.0           # rad/s at the wheel shaft, drive sign
         self.angle = 0.0              # rad, drive sign
         self._t = clock()
+        self._events: Deque[Tuple[float, float, float, float, float, float]] = deque(maxlen=4096)
         self._last_cw = 0
         self.online = False
         self.refused = 0
@@ -93,6 +155,7 @@ class Cia402Drive:
         self._tpdo_last: Dict[int, float] = {}
         self._tpdo_due: Dict[int, float] = {}
         self._last_sw_sent: Optional[int] = None
+        self._sample: Optional[Tuple[int, Tuple[float, float]]] = None
         od = self.node.data_store
         od.setdefault(0x1017, {})[0] = struct.pack("<H", self.heartbeat_ms)
         for n in (0, 1):
@@ -101,6 +164,7 @@ class Cia402Drive:
         od.setdefault(0x6084, {})[0] = struct.pack("<I", accel_units)
         self.node.add_read_callback(self._on_read)
         self.node.add_write_callback(self._on_write)
+        self._mark()
 
     # -- physics -------------------------------------------------------------------------------------------
     def _target_rad_s(self) -> float:
@@ -113,25 +177,53 @@ class Cia402Drive:
         with self._lock:
             now = self._clock()
             dt = now - self._t
-            self._t = now
             if dt <= 0.0:
                 return
-            vt = self._target_rad_s()
-            speeding_up = abs(vt) > abs(self.velocity) and vt * self.velocity >= 0.0
-            a = (self.accel_units if speeding_up else self.decel_units) / self.vel_scale
-            dv = vt - self.velocity
-            if a <= 0.0:
-                self.velocity = vt
-                self.angle += vt * dt
-                return
-            tr = abs(dv) / a
-            if dt <= tr:
-                s = math.copysign(a, dv)
-                self.angle += self.velocity * dt + 0.5 * s * dt * dt
-                self.velocity += s * dt
-            else:
-                self.angle += 0.5 * (self.velocity + vt) * tr + vt * (dt - tr)
-                self.velocity = vt
+            self._t = now
+            self.velocity, self.angle = advance(self.velocity, self.angle, self._target_rad_s(),
+                                                self.accel_units / self.vel_scale, self.decel_units / self.vel_scale,
+                                                dt)
+
+    def _mark(self) -> None:
+        """Record a motion segment start (call with the lock held, right after ``update()``): everything the
+        trajectory depends on from now on, for :meth:`angles_at`."""
+        self._events.append((self._t, self.angle, self.velocity, self._target_rad_s(),
+                             self.accel_units / self.vel_scale, self.decel_units / self.vel_scale))
+
+    def still_since(self, t: float) -> bool:
+        """True when the wheel has stood still (velocity and target 0) from sim time ``t`` on."""
+        with self._lock:
+            e = self._events[-1]
+            return e[0] <= t and e[2] == 0.0 and e[3] == 0.0
+
+    def angles_at(self, times: List[float]) -> List[float]:
+        """Wheel angle (drive sign) at each of the increasing sim ``times`` (the past since the oldest recorded
+        segment, up to now), from the recorded motion segments: exact, whatever the times (the world integrates
+        the base pose through them)."""
+        return [a for _, a in self.states_at(times)]
+
+    def states_at(self, times: List[float]) -> List[Tuple[float, float]]:
+        """``(velocity, angle)`` at each of the increasing sim ``times`` (see :meth:`angles_at`)."""
+        with self._lock:
+            self.update()
+            now_state = (self._t, self.velocity, self.angle)
+            events = []                                  # the segments from the one in force at times[0] on
+            for e in reversed(self._events):
+                events.append(e)
+                if times and e[0] <= times[0]:
+                    break
+            events.reverse()
+        out = []
+        k = 0
+        for t in times:
+            while k + 1 < len(events) and events[k + 1][0] <= t:
+                k += 1
+            if t >= now_state[0]:
+                out.append(now_state[1:])
+                continue
+            t0, angle, v, vt, a_up, a_down = events[k]
+            out.append(advance(v, angle, vt, a_up, a_down, max(0.0, t - t0)))
+        return out
 
     # -- object dictionary hooks ---------------------------------------------------------------------------
     def statusword(self) -> int:
@@ -147,10 +239,16 @@ class Cia402Drive:
         if index == 0x6061:
             return self.mode
         if index in (0x6064, 0x606C):
-            self.update()
+            sample = self._sample
+            if sample is not None and sample[0] == threading.get_ident():
+                velocity, angle = sample[1]              # cyclic TPDO: the value at the cycle's sample instant
+            else:
+                with self._lock:
+                    self.update()
+                    velocity, angle = self.velocity, self.angle
             if index == 0x6064:
-                return _i32(self.angle * self.pos_scale)
-            return _i32(self.velocity * self.vel_scale)
+                return _i32(angle * self.pos_scale)
+            return _i32(velocity * self.vel_scale)
         if index == 0x603F:
             return self.error_code
         if index == 0x1001:
@@ -235,6 +333,7 @@ class Cia402Drive:
             self.error_code = int(error_code)
             self.velocity = 0.0
             self.target_units = 0
+            self._mark()
         log.warning("drive %d (%s): fault 0x%04X injected", self.node_id, self.name, error_code)
         if self.online and self.network is not None:
             try:
@@ -275,6 +374,7 @@ class Cia402Drive:
             self.target_units = 0
             self.velocity = 0.0
             self._last_cw = 0
+            self._mark()
         self.node.nmt.send_command(0x81)           # INITIALISING: boot-up message
         self.node.nmt.send_command(0x80)           # PRE-OPERATIONAL: starts the heartbeat from 0x1017
         self.online = True
@@ -298,6 +398,7 @@ class Cia402Drive:
             self.state = NOT_READY
             self.target_units = 0
             self.velocity = 0.0
+            self._mark()
         self.node.nmt.stop_heartbeat()
         self._unwire_rpdos()
         self._unguard_handlers()
@@ -423,21 +524,44 @@ class Cia402Drive:
                 self._send_tpdo(n, time.monotonic())
 
     def _send_tpdo(self, n: int, now: float) -> None:
+        frame = self._tpdo_frame(n, now)
+        if frame is not None:
+            self._transmit([frame])
+
+    def _tpdo_frame(self, n: int, now: float) -> Optional[Tuple[int, bytes, int]]:
         cob = self._raw(0x1800 + n, 1)
         if cob & 0x80000000:
-            return
-        data = self._tpdo_data(0x1A00 + n)
-        try:
-            self.network.send_message(cob & 0x7FF, data)
-        except Exception as exc:
-            log.warning("drive %d: TPDO%d not sent: %s", self.node_id, n + 1, exc)
+            return None
         self._tpdo_last[n] = now
+        return cob & 0x7FF, self._tpdo_data(0x1A00 + n), n
 
-    def send_cyclic_tpdos(self, now: float) -> None:
-        """Send every enabled TPDO whose event timer has expired (called by the DriveSet thread)."""
+    def _transmit(self, frames: List[Tuple[int, bytes, int]]) -> None:
+        for cob, data, n in frames:
+            try:
+                self.network.send_message(cob, data)
+            except Exception as exc:
+                log.warning("drive %d: TPDO%d not sent: %s", self.node_id, n + 1, exc)
+
+    def send_cyclic_tpdos(self, now: float, sample_time: Optional[float] = None) -> None:
+        """Send every enabled TPDO whose event timer (wall clock ``now``) has expired."""
+        self._transmit(self.due_tpdo_frames(now, sample_time))
+
+    def due_tpdo_frames(self, now: float, sample_time: Optional[float] = None) -> List[Tuple[int, bytes, int]]:
+        """The ``(cob_id, data, tpdo index)`` of every enabled TPDO whose event timer (wall clock ``now``) has
+        expired, with position and velocity at sim time ``sample_time`` (default: now). The DriveSet samples all
+        four drives at one instant per cycle and sends their frames back to back, as drives synchronised by a
+        SYNC object would: a master's odometry then gets four wheel positions of the same instant."""
         if not self.online or self.network is None or self.node.nmt.state != "OPERATIONAL":
-            return
-        self.update()
+            return []
+        if sample_time is not None:
+            self._sample = (threading.get_ident(), self.states_at([sample_time])[0])
+        try:
+            return self._due_tpdos(now)
+        finally:
+            self._sample = None
+
+    def _due_tpdos(self, now: float) -> List[Tuple[int, bytes, int]]:
+        frames = []
         for n in range(4):
             comm = 0x1800 + n
             if comm not in self.node.object_dictionary:
@@ -447,8 +571,11 @@ class Cia402Drive:
                 continue
             due = self._tpdo_due.get(n, 0.0)
             if now >= due - 0.002:                     # tolerate a loop that wakes up a little early
-                self._send_tpdo(n, now)
+                frame = self._tpdo_frame(n, now)
+                if frame is not None:
+                    frames.append(frame)
                 self._tpdo_due[n] = now + period if now - due > period else due + period
+        return frames
 
     def snapshot(self) -> Dict[str, Any]:
         with self._lock:
@@ -543,10 +670,17 @@ class DriveSet:
     :param eds_path: object dictionary of the drives.
     :param clock: sim time (``SimClock.now``).
     :param bus: an open python-can bus to use instead of opening one from ``drives_cfg['can']``.
+    :param heartbeat_process: send the heartbeats from a helper process (:mod:`.heartbeat`): ``None`` (default)
+        = when the bus comes from configuration and other processes can open it (``udp_multicast``,
+        ``socketcan``); ``False`` = canopen's in-process timer threads; ``True`` = required.
+
+    Timing: the bus protocol runs on the wall clock, as on a real drive (heartbeat producer time 0x1017, TPDO
+    event timer 0x1800 sub 5), the motion on sim time; the CAN frame rate does not change with the time scale.
     """
 
     def __init__(self, drives_cfg: Dict[str, Any], eds_path: str, clock: Callable[[], float],
-                 bus: Optional[can.BusABC] = None, max_wheel_speed: float = 1e9) -> None:
+                 bus: Optional[can.BusABC] = None, max_wheel_speed: float = 1e9,
+                 heartbeat_process: Optional[bool] = None) -> None:
         self.cfg = drives_cfg
         self.clock = clock
         self._bus = bus
@@ -559,6 +693,15 @@ class DriveSet:
         self._thread: Optional[threading.Thread] = None
         self._stop = threading.Event()
         self.period = max(0.001, min(d.tpdo_period_ms for d in self.drives) / 1000.0)
+        iface = drives_cfg["can"]["interface"]
+        if heartbeat_process is None:
+            heartbeat_process = bus is None and iface in PROCESS_INTERFACES
+        if heartbeat_process and iface not in PROCESS_INTERFACES:
+            raise DeviceStandInError("robot.base.drives.can.interface = %r: heartbeats from a helper process need "
+                                     "a bus other processes can open (%s)" % (iface, ", ".join(PROCESS_INTERFACES)))
+        self.use_heartbeat_process = bool(heartbeat_process)
+        self.sync_sampling = True      # cyclic TPDOs of all drives sampled at one sim instant per cycle
+        self.heartbeat_process: Optional[HeartbeatProcess] = None
 
     def start(self) -> None:
         if self.network is not None:
@@ -567,6 +710,17 @@ class DriveSet:
             self._bus = open_bus(self.cfg["can"])
         self.network = canopen.Network(self._bus)
         self.network.NOTIFIER_CYCLE = 0.1      # short receive timeout: quick, clean shutdown
+        if self.use_heartbeat_process:
+            try:
+                self.heartbeat_process = HeartbeatProcess(self.cfg["can"])
+                self.heartbeat_process.start()
+            except DeviceStandInError:
+                if self._own_bus:
+                    self._bus.shutdown()
+                    self._bus = None
+                self.network = None
+                raise
+            self.network.send_periodic = self._send_periodic    # type: ignore[assignment]
         self.network.connect()                 # bus given: only starts the notifier
         for d in self.drives:
             d.attach(self.network)
@@ -576,15 +730,25 @@ class DriveSet:
         log.info("base drives (CiA 402, node ids %s) on CAN %s/%s", [d.node_id for d in self.drives],
                  self.cfg["can"]["interface"], self.cfg["can"]["channel"])
 
+    def _send_periodic(self, can_id: int, data: bytes, period: float, remote: bool = False) -> Any:
+        """``Network.send_periodic`` of the drives' network: heartbeats go to the helper process."""
+        if self.heartbeat_process is not None and not remote and HeartbeatProcess.handles(can_id):
+            return self.heartbeat_process.send_periodic(can_id, data, period)
+        return canopen.network.PeriodicMessageTask(can_id, data, period, self._bus, remote)
+
     def _run(self) -> None:
         nxt = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
+            sample_time = self.clock() if self.sync_sampling else None   # one instant for every drive
+            burst = []
             for d in self.drives:
                 try:
-                    d.send_cyclic_tpdos(now)
+                    burst.append((d, d.due_tpdo_frames(now, sample_time)))
                 except Exception as exc:           # keep the loop alive, say what went wrong
                     log.warning("drive %d: cyclic TPDO failed: %s", d.node_id, exc)
+            for d, frames in burst:                # back to back: the burst is short on the wire
+                d._transmit(frames)
             nxt += self.period
             delay = nxt - time.monotonic()
             if delay < -self.period:
@@ -601,6 +765,9 @@ class DriveSet:
             self._thread = None
         for d in self.drives:
             d.detach()
+        if self.heartbeat_process is not None:
+            self.heartbeat_process.close()
+            self.heartbeat_process = None
         if self.network.notifier is not None:
             self.network.notifier.stop(2.0)
             self.network.notifier = None
@@ -623,6 +790,21 @@ class DriveSet:
                 d.update()
                 out.append(p * d.angle)
         return out
+
+    def wheel_angle_samples(self, t0: float, t1: float, max_step: float) -> List[List[float]]:
+        """Wheel angles [fl, fr, rl, rr] (polarity applied) at sim times evenly spaced in ``(t0, t1]``, at most
+        ``max_step`` apart (at most 4000 samples), computed exactly from each drive's motion segments: the world
+        integrates the base pose through them, so its accuracy does not depend on how often it steps (a higher
+        time scale or a stalled loop means more sim time per step)."""
+        if t1 <= t0:
+            return []
+        if all(d.still_since(t0) for d in self.drives):
+            n = 1                                      # nothing moved: one sample is exact
+        else:
+            n = max(1, min(4000, int(math.ceil((t1 - t0) / max(max_step, 1e-6)))))
+        times = [t0 + (t1 - t0) * k / n for k in range(1, n + 1)]
+        per_drive = [[p * a for a in d.angles_at(times)] for d, p in zip(self.drives, self.polarity)]
+        return [list(row) for row in zip(*per_drive)]
 
     def wheel_speeds(self) -> List[float]:
         out = []

@@ -9,6 +9,8 @@ name, process on/off, segment start/end in map, tool z axis, sim duration) and k
   radius grows with distance (``standoff`` and ``spray_half_angle``), the deposit rate falls with the square of
   the distance and the deposit per pass falls with speed (it is integrated over time);
 - a sanded map (bool): sander on and its pad on the surface (``|d| <= contact_tolerance``).
+Spray and sand coverage, thickness mean and coefficient of variation count the cells of the wall's work areas
+(the areas SCAN reports); deposits outside them are overspray and show only in the pictures.
 Operator actions: :meth:`mark_manual_taping` records a joint taped by hand (reported separately).
 Numbers: :meth:`summary`; pictures: :meth:`save_pictures` (one PNG per wall: joints, thickness, sanded).
 """
@@ -37,6 +39,12 @@ class _WallMaps:
         # cell centres
         self.sc = (np.arange(self.ns) + 0.5) * grid
         self.tc = (np.arange(self.nt) + 0.5) * grid
+        # the cells to be finished: centres inside one of the wall's areas (what SCAN reports as work)
+        self.work = np.zeros((self.nt, self.ns), dtype=bool)
+        for a in wall.areas:
+            ins = (self.sc >= a.s0) & (self.sc <= a.s0 + a.width)
+            int_ = (self.tc >= a.t0) & (self.tc <= a.t0 + a.height)
+            self.work |= int_[:, None] & ins[None, :]
 
 
 class OutcomeRecorder:
@@ -86,7 +94,7 @@ class OutcomeRecorder:
                 for j in wall.joints:
                     if j.kind == "vertical":
                         js = wall.to_wall_coords(j.start)[0]
-                        lateral, along = abs(s - js), t
+                        lateral, along = abs(s - js), t - float(j.start[2])
                     else:
                         lateral, along = abs(t - float(j.start[2])), s - wall.to_wall_coords(j.start)[0]
                     if lateral <= self.lateral_tol and 0 <= along <= j.length:
@@ -167,15 +175,20 @@ class OutcomeRecorder:
         walls = {}
         total_cells = covered_cells = sanded_cells = 0
         for wid, m in self.maps.items():
-            covered = m.thickness >= self.target
+            # coverage and uniformity over the wall's work areas (cells outside them are overspray)
+            cells = int(m.work.sum())
+            covered = (m.thickness >= self.target) & m.work
             vals = m.thickness[covered]
             cv = float(vals.std() / vals.mean()) if vals.size > 1 and vals.mean() > 0 else 0.0
-            walls[wid] = {"spray_coverage": float(covered.mean()), "thickness_mean": float(vals.mean()) if vals.size else 0.0,
+            sanded = m.sanded & m.work
+            walls[wid] = {"spray_coverage": float(covered.sum()) / cells if cells else 0.0,
+                          "thickness_mean": float(vals.mean()) if vals.size else 0.0,
                           "thickness_cv": cv, "thickness_max": float(m.thickness.max()),
-                          "sand_coverage": float(m.sanded.mean())}
-            total_cells += m.thickness.size
+                          "sand_coverage": float(sanded.sum()) / cells if cells else 0.0,
+                          "work_area_m2": cells * m.grid * m.grid}
+            total_cells += cells
             covered_cells += int(covered.sum())
-            sanded_cells += int(m.sanded.sum())
+            sanded_cells += int(sanded.sum())
         n = len(joints)
         taped = sum(1 for j in joints.values() if j["taped"])
         return {
@@ -243,6 +256,10 @@ class OutcomeRecorder:
             simg = Image.fromarray(srgb[::-1]).resize((w_px, h_px), Image.NEAREST)
             img.paste(simg, (panel(2), y0))
             dr.rectangle([panel(2), y0, panel(2) + w_px, y0 + h_px], outline=(0, 0, 0))
+            for k in (1, 2):     # the work areas, outlined
+                for a in wall.areas:
+                    p, q = to_px(a.s0, a.t0 + a.height, panel(k)), to_px(a.s0 + a.width, a.t0, panel(k))
+                    dr.rectangle([p, q], outline=(200, 120, 0))
             path = os.path.join(folder, "%s.png" % wid)
             img.save(path)
             out.append(path)

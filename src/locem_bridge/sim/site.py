@@ -125,13 +125,14 @@ class Site:
     def _make_features(wall: Wall, wc: Dict[str, Any]) -> None:
         k = 1
         pw = wc["panel_width"]
+        low = float(wc.get("skirting", 0.0))       # the strip behind the skirting board is not finished
         n_panels = int(math.floor(wall.length / pw + 1e-9))
         for i in range(1, n_panels + 1):
             s = i * pw
             if s >= wall.length - 1e-6:
                 break
             wall.joints.append(Joint(id="%s_joint_%d" % (wall.id, k), wall=wall.id, kind="vertical",
-                                     start=wall.from_wall_coords(s, 0.0), end=wall.from_wall_coords(s, wall.height),
+                                     start=wall.from_wall_coords(s, low), end=wall.from_wall_coords(s, wall.height),
                                      width=wc["joint_width"]))
             k += 1
         for h in wc.get("horizontal_joints", []):
@@ -139,12 +140,12 @@ class Site:
                                      start=wall.from_wall_coords(0.0, h), end=wall.from_wall_coords(wall.length, h),
                                      width=wc["joint_width"]))
             k += 1
-        areas = wc.get("areas") or [{"id": "%s_area_1" % wall.id, "s": [0.0, wall.length], "t": [0.0, wall.height]}]
+        areas = wc.get("areas") or [{"id": "%s_area_1" % wall.id, "s": [0.0, wall.length], "t": [low, wall.height]}]
         for a in areas:
             s0, s1 = sorted(a["s"])
             t0, t1 = sorted(a["t"])
             s0, s1 = max(0.0, s0), min(wall.length, s1)
-            t0, t1 = max(0.0, t0), min(wall.height, t1)
+            t0, t1 = max(low, t0), min(wall.height, t1)
             wall.areas.append(Area(id=a["id"], wall=wall.id, origin=wall.from_wall_coords(s0, t0), u=wall.u.copy(),
                                    width=s1 - s0, height=t1 - t0, s0=s0, t0=t0))
 

@@ -5,7 +5,9 @@ the same class. Lifecycle: ``Worksite(site_cfg, robot_cfg, **overrides)`` (nothi
 (clock, compressor model + Modbus TCP server, CAN drives, UR controller stand-in, world loop; returns the
 endpoints) -> :meth:`stop` (reverse order, idempotent). Overrides change addresses without editing files:
 ``host`` (one loopback address for the UR stand-in and the Modbus server, e.g. ``127.0.0.2`` for a second
-robot), ``modbus_port``, ``can_interface``, ``can_channel``, ``can_port``, ``time_scale``, ``gui``, ``with_ur``.
+robot), ``modbus_port``, ``can_interface``, ``can_channel``, ``can_port``, ``time_scale``, ``gui``, ``with_ur``,
+``heartbeat_process`` (drive heartbeats from a helper process; default: on ``udp_multicast``/``socketcan``, see
+:mod:`.heartbeat`).
 
 Operator calls (tools are changed by a person on the real site): :meth:`mount_tool`, :meth:`remove_tool`,
 :meth:`mark_manual_taping`. Perception: :meth:`scan`. Results: :meth:`outcome` (numbers) and
@@ -38,7 +40,8 @@ class Worksite:
                  host: Optional[str] = None, modbus_port: Optional[int] = None, can_interface: Optional[str] = None,
                  can_channel: Optional[str] = None, can_port: Optional[int] = None,
                  time_scale: Optional[float] = None, gui: Optional[bool] = None, with_ur: bool = True,
-                 ur_ports: Optional[Dict[str, int]] = None, protective_stop_on_collision: bool = True) -> None:
+                 ur_ports: Optional[Dict[str, int]] = None, protective_stop_on_collision: bool = True,
+                 heartbeat_process: Optional[bool] = None) -> None:
         self.site_cfg = copy.deepcopy(site_cfg if site_cfg is not None else load_site())
         self.robot_cfg = copy.deepcopy(robot_cfg if robot_cfg is not None else load_robot())
         robot = self.robot_cfg["robot"]
@@ -62,6 +65,7 @@ class Worksite:
         self.with_ur = with_ur
         self.ur_ports = ur_ports
         self.protective_stop_on_collision = protective_stop_on_collision
+        self.heartbeat_process = heartbeat_process
         self.clock: Optional[SimClock] = None
         self.compressor: Optional[CompressorModel] = None
         self.modbus: Optional[CompressorServer] = None
@@ -85,7 +89,8 @@ class Worksite:
             self.modbus.start()
             dcfg = robot["base"]["drives"]
             eds = resolve_relative(self.robot_cfg, robot["base"]["eds"])
-            self.drives = DriveSet(dcfg, eds, self.clock.now, max_wheel_speed=robot["base"]["limits"]["max_wheel_speed"])
+            self.drives = DriveSet(dcfg, eds, self.clock.now, max_wheel_speed=robot["base"]["limits"]["max_wheel_speed"],
+                                   heartbeat_process=self.heartbeat_process)
             self.drives.start()
             arm_cfg = robot["arm"]
             q0 = arm_cfg["named_poses"].get("home", [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])

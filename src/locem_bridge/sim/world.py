@@ -7,7 +7,10 @@ lock, so public methods are safe from any thread.
 
 What one step does:
 1. base: wheel angle increments of the CAN drives (:class:`~locem_bridge.sim.drives.DriveSet`) through the
-   mecanum kinematics move ``base_footprint`` in the map frame (kinematic body, no slip);
+   mecanum kinematics move ``base_footprint`` in the map frame (kinematic body, no slip); the increments are
+   taken from the drives' exact motion segments every ``BASE_SUBSTEP`` of sim time since the last step, so the
+   ground truth does not depend on the time scale or on a late step (one world step at time scale 20 covers
+   0.4 s of sim time, and the midpoint rule over such steps drifted by millimetres per GOTO);
 2. arm: joint positions mirrored from the arm source (:mod:`.arm_source`; the UR stand-in when running),
    including every intermediate controller step delivered to the step listener since the last step;
 3. tool: the mounted tool follows ``tool0``; its process state comes from the configured switch (UR standard
@@ -45,6 +48,8 @@ from .perception import WallScanner
 from .site import Site
 
 log = logging.getLogger(__name__)
+
+BASE_SUBSTEP = 0.01    # sim s: the base pose is integrated through wheel angles at most this far apart
 
 
 def find_example_robot_data() -> List[str]:
@@ -451,21 +456,26 @@ class World:
         """Advance the world to ``clock()`` (see the module docstring)."""
         with self._lock:
             now = self.clock.now()
-            dt = max(0.0, now - self._t)
+            t_prev = self._t
+            dt = max(0.0, now - t_prev)
             self._t = now
             self.steps += 1
             moved = False
             if self.drives is not None:
-                ang = self.drives.wheel_angles()
-                d = [a - b for a, b in zip(ang, self._wheel_prev)]
-                self._wheel_prev = ang
-                if any(abs(x) > 1e-12 for x in d):
-                    dx, dy, dth = self.mecanum.twist(d)
-                    x, y, yaw = self._pose
-                    ym = yaw + dth / 2.0
-                    self._pose = [x + math.cos(ym) * dx - math.sin(ym) * dy,
-                                  y + math.sin(ym) * dx + math.cos(ym) * dy, yaw + dth]
-                    moved = True
+                if hasattr(self.drives, "wheel_angle_samples"):
+                    samples = self.drives.wheel_angle_samples(t_prev, now, BASE_SUBSTEP)
+                else:
+                    samples = [self.drives.wheel_angles()]
+                for ang in samples:
+                    d = [a - b for a, b in zip(ang, self._wheel_prev)]
+                    self._wheel_prev = ang
+                    if any(abs(x) > 1e-12 for x in d):
+                        dx, dy, dth = self.mecanum.twist(d)
+                        x, y, yaw = self._pose
+                        ym = yaw + dth / 2.0
+                        self._pose = [x + math.cos(ym) * dx - math.sin(ym) * dy,
+                                      y + math.sin(ym) * dx + math.cos(ym) * dy, yaw + dth]
+                        moved = True
             qs: List[List[float]] = []
             while self._samples:
                 qs.append(self._samples.popleft())

@@ -57,3 +57,33 @@ def test_stop_start_keeps_arm_state_and_joins_threads(ur_address):
         assert ctl.get_state()["runtime_state_name"] == "STOPPED"
     finally:
         ctl.stop()
+
+
+def test_contact_provider_from_the_world_drives_the_force_reading(ur_address):
+    """The world injects a callable that knows its walls; the stand-in asks it every cycle with the TCP pose."""
+    import pytest
+    from locem_bridge.sim.ur import ConfigurationError
+    ctl = UrControllerStandIn(ur_address, time_scale=1.0)
+    asked = []
+
+    def wall(tcp_pose):
+        asked.append(list(tcp_pose))
+        x_face = tcp_pose[0] - 0.001                  # the TCP is 1 mm into a wall whose outward normal is +x
+        return (tcp_pose[0] - x_face, [1.0, 0.0, 0.0])
+
+    with pytest.raises(ConfigurationError, match="must be callable"):
+        ctl.set_contact_provider("wall_1")
+    with pytest.raises(ConfigurationError, match="stiffness must be a finite number > 0"):
+        ctl.set_contact_provider(wall, stiffness=-1.0)
+    ctl.set_contact_provider(wall, stiffness=10000.0)
+    ctl.start()
+    try:
+        end = time.time() + 2.0
+        while len(asked) < 20 and time.time() < end:
+            time.sleep(0.01)
+        assert np.allclose(asked[-1], ctl.get_tcp_pose(), atol=1e-9)
+        assert np.allclose(ctl.get_tcp_force(), [10.0, 0, 0, 0, 0, 0], atol=1e-6)     # 10 kN/m x 1 mm
+        ctl.set_contact_provider(None)
+        assert np.allclose(ctl.get_tcp_force(), 0.0)
+    finally:
+        ctl.stop()

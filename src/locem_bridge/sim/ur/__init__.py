@@ -24,6 +24,10 @@ API for the world (PyBullet) and for tests::
     ur.inject_protective_stop("collision with wall_1")   # e.g. from the world's collision check
     ur.inject_emergency_stop(); ur.release_emergency_stop()
     ur.set_joint_positions(q)      # teleport while idle (scene setup)
+    ur.set_contact_provider(fn, stiffness=20000.0)  # fn(tcp_pose) -> None | (depth m, outward normal), base frame
+    ur.set_contact_planes([{"point": [..], "normal": [..]}])   # the same with flat surfaces (works through a pipe)
+    ur.get_tcp_force()             # actual_TCP_force as streamed (contact force on the tool minus the FT zero)
+    ur.get_force_mode()            # parameters of the active force mode and its TCP offset, or None
     ur.refused                     # log of refused bad input (malformed packages, garbage lines, ...)
     ur.stop()                      # closes sockets, joins threads; start() again to restart
 
@@ -51,10 +55,20 @@ Model: ``ur10e`` by default (e-Series DH geometry on example-robot-data's UR10 U
 :func:`e_series_urdf_xml`), or ``ur5e``, ``ur10``, ``ur5``, ``ur3``, or any URDF path (the world passes its own URDF
 so that PyBullet and the stand-in agree).
 
-Known simplifications: a new motion command replaces the current one from the current position (no blending, no
-velocity continuity), no dynamics (actual = target, zero currents and forces), force mode / freedrive / contact
-detection / path moves are not emulated (the program halts with "command N is not implemented"), port 30003 does not
-stream the realtime state package, URScript other than the ur_rtde control script is accepted but not run.
+Path moves (ur_rtde ``moveL(path)`` / ``moveJ(path)`` / ``movePath``): the client re-uploads the control script
+with the waypoints injected into ``exec_move_path`` (:mod:`.script_path` reads them) and sends command 45; the path
+runs with UR blend semantics (:mod:`.blended`: straight segments, circular blends within each waypoint's radius, per
+waypoint speed and acceleration, stops where the radius is 0), after checking every waypoint first.
+
+Force mode (ur_rtde ``forceMode`` 6, ``forceModeStop`` 7, ``zeroFtSensor`` 8, output ``actual_TCP_force``): a
+stiff-spring contact with the surfaces of an injected contact provider and admittance control along the selected
+translation axes of the task frame, speed-limited (:mod:`.force`; type 2 only).
+
+Known simplifications: a new motion command replaces the current one from the current position (no blending
+between separate commands, no velocity continuity), no dynamics (actual = target, zero currents; forces only from
+the contact model), force-mode types 1 and 3, compliance about rotation axes, freedrive and contact detection
+(moveUntilContact) are not emulated (the program halts with a message naming it), port 30003 does not stream the
+realtime state package, URScript other than the ur_rtde control script is accepted but not run.
 """
 from .arm import ArmSnapshot
 from .controller import UrControllerStandIn

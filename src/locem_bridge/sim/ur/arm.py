@@ -7,7 +7,10 @@ The ur_rtde control script is not interpreted: when it is uploaded, :class:`Cont
 protocol in Python (input_int_register_0 = command id, input_int_register_1 = async flag, input_double_register_*
 = parameters; output_int_register_0 = 1 ready / 2 done, output_int_register_1 = boolean results,
 output_int_register_2 = async progress word, output_double_register_0..5 = vector results), with the register
-offset (0, or 24 for ``FLAG_UPPER_RANGE_REGISTERS``) read from the uploaded script.
+offset (0, or 24 for ``FLAG_UPPER_RANGE_REGISTERS``) read from the uploaded script. Command 45 runs the path that
+ur_rtde injected into the script's ``exec_move_path`` (:mod:`.script_path`, :mod:`.blended`); commands 6 / 7 / 8
+are force mode, its end and the FT-sensor zero (:mod:`.force`): while force mode runs, the motion generators follow
+nominal joints and the actual joints add the compliant TCP offset.
 
 State machines (values as in the UR RTDE guide / ur_rtde enums):
 - robot_mode: POWER_OFF (3) --power on--> IDLE (5) --brake release--> RUNNING (7); power off returns to 3.
@@ -25,11 +28,14 @@ from typing import Callable, Dict, List, Optional, Sequence
 import numpy as np
 import pinocchio as pin
 
+from .blended import PathMove
 from .errors import KinematicsError, ScriptRuntimeError
+from .force import DEFAULT_STIFFNESS, ContactProvider, ForceMode, contact_force
 from .kinematics import ArmKinematics, pose_to_se3, se3_to_pose
 from .motion import (CartesianSpeed, CartesianStop, JointMove, JointSpeed, JointStop, LinearMove, Motion, ServoJ,
                      tcp_twist)
 from .rtde_vars import OUTPUT_VARIABLES, default_value
+from .script_path import parse_move_path
 
 LOG = logging.getLogger("locem_bridge.sim.ur")
 
@@ -57,11 +63,15 @@ SAFETY_STOP_DECELERATION = 20.0
 
 # command ids of the ur_rtde control script
 CMD_NONE, CMD_MOVEJ, CMD_MOVEJ_IK, CMD_MOVEL, CMD_MOVEL_FK = 0, 1, 2, 3, 4
+CMD_FORCE_MODE, CMD_FORCE_MODE_STOP = 6, 7
+#: deceleration (m/s^2) of the stopl(10) in the control script's force_mode_stop
+FORCE_MODE_STOP_DECELERATION = 10.0
 CMD_ZERO_FT, CMD_SPEEDJ, CMD_SPEEDL, CMD_SERVOJ = 8, 9, 10, 11
 CMD_SPEED_STOP, CMD_SERVO_STOP, CMD_SET_PAYLOAD = 15, 16, 17
 CMD_GET_STEPTIME, CMD_GET_TARGET_WAYPOINT, CMD_SET_TCP, CMD_GET_IK_ARGS, CMD_PROTECTIVE_STOP = 26, 28, 29, 30, 31
 CMD_STOPL, CMD_STOPJ, CMD_SET_WATCHDOG, CMD_POSE_SAFE, CMD_JOINTS_SAFE, CMD_JOINT_TORQUES = 33, 34, 35, 36, 37, 38
 CMD_POSE_TRANS, CMD_GET_TCP_OFFSET, CMD_FK_DEFAULT, CMD_FK_ARGS, CMD_IK_DEFAULT, CMD_IS_STEADY = 39, 40, 43, 44, 46, 47
+CMD_MOVE_PATH = 45
 CMD_STOP_SCRIPT = 255
 #: commands the control script treats as realtime (processed every cycle, answered "ready" at once)
 REALTIME_COMMANDS = frozenset((24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 68, 69, 70, 71))
@@ -84,6 +94,8 @@ class ControlProgram:
         self.async_motion: Optional[Motion] = None
         self.async_wr_count = 0
         self.async_op_id = 0
+        self.path: list = []                     # the move path injected into exec_move_path (see script_path)
+        self.path_error: Optional[str] = None
 
 
 class ArmCore:
@@ -122,6 +134,15 @@ class ArmCore:
         self.payload_mass = 0.0
         self.payload_cog = [0.0, 0.0, 0.0]
         self.external_wrench = (0.0,) * 6
+        # contact and force mode (see .force): provider of the surfaces, spring stiffness, the active force mode,
+        # the TCP offset it has built up, the nominal joints the motion generators follow meanwhile, FT zero
+        self.contact_provider: Optional[ContactProvider] = None
+        self.contact_stiffness = DEFAULT_STIFFNESS
+        self.force: Optional[ForceMode] = None
+        self.force_offset = np.zeros(3)
+        self._q_nom: Optional[np.ndarray] = None
+        self.raw_force = np.zeros(3)
+        self.ft_zero = np.zeros(3)
         self.remote_control = True
         self.last_error = ""
         self.refused: List[str] = []
@@ -220,6 +241,7 @@ class ArmCore:
                 off_i = _script_int(text, "reg_offset_int")
                 off_f = _script_int(text, "reg_offset_float")
                 self.program = ControlProgram(name or "rtde_control", off_i, off_f)
+                self.program.path, self.program.path_error = parse_move_path(text)
                 self.runtime_state = RUNTIME_PLAYING
                 self.in_int[off_i] = 0
                 self._async_write(self.program, -1)
@@ -236,6 +258,7 @@ class ArmCore:
         if prog is not None and prog.async_motion is not None:
             self._async_write(prog, -1)
         self.program = None
+        self._end_force_mode()
         if self.runtime_state != RUNTIME_STOPPED:
             self.runtime_state = RUNTIME_STOPPED
             self._modes_dirty = True
@@ -255,6 +278,7 @@ class ArmCore:
             self.safety_mode = SAFETY_PROTECTIVE_STOP
             self.protective_stop_time = self.motion_time
             self.safety_popup = True
+            self._end_force_mode()
             self.motion = JointStop(self.qd, SAFETY_STOP_DECELERATION)
             prog = self.program
             if prog is not None:
@@ -340,6 +364,7 @@ class ArmCore:
             if self.runtime_state != RUNTIME_PLAYING:
                 return False
             self.runtime_state = RUNTIME_PAUSED
+            self._end_force_mode()          # the arm stops where it is; the program's force_mode() is not resumed
             self.motion = JointStop(self.qd, SAFETY_STOP_DECELERATION)
             if self.program is not None:
                 self.program.blocking = None
@@ -375,18 +400,30 @@ class ArmCore:
                 except (ScriptRuntimeError, KinematicsError, ValueError) as exc:
                     self._stop_program(str(exc))
             m = self.motion
+            nominal = self._q_nom is not None
             if m is not None and mdt > 0:
                 try:
-                    q, qd = m.step(mdt, self.q, self.qd)
+                    q, qd = m.step(mdt, self._q_nom if nominal else self.q, self.qd)
                 except KinematicsError as exc:
                     self._motion_error(str(exc))
                 else:
-                    self.q, self.qd = q, qd
+                    if nominal:
+                        self._q_nom = q
+                    else:
+                        self.q, self.qd = q, qd
                     self._q_dirty = True
+                    if isinstance(m, PathMove) and m.progress != m.reported_progress:
+                        self._path_progress(m)
                     if m.done:
                         self._motion_finished(m)
             elif m is None and self._q_dirty:
                 self.qd = np.zeros(6)
+            if self.force is not None and mdt > 0:
+                self._force_step(mdt)
+            if self.contact_provider is not None:
+                self.raw_force = contact_force(self.contact_provider, se3_to_pose(self.kin.fk_se3(self.q)),
+                                               self.contact_stiffness)
+                self._update_force_values()
             self._update_outputs(dt)
             snap = None
             if listeners:
@@ -414,12 +451,51 @@ class ArmCore:
     def _motion_finished(self, m: Motion) -> None:
         if self.motion is m:
             self.motion = None
-            if isinstance(m, (JointStop, CartesianStop)) or m.kind in ("movej", "movel"):
+            if isinstance(m, (JointStop, CartesianStop)) or m.kind in ("movej", "movel", "path"):
                 self.qd = np.zeros(6)
         prog = self.program
         if prog is not None and prog.async_motion is m:
             prog.async_motion = None
             self._async_write(prog, -1)
+
+    # ------------------------------------------------------------------------------------------------ force mode
+    def _force_step(self, dt: float) -> None:
+        """One admittance cycle: move the TCP along the compliant axes by the force error (see .force)."""
+        if self._q_nom is None:
+            self._q_nom = self.q.copy()
+        tcp = self.kin.fk_se3(self.q)
+        applied = -contact_force(self.contact_provider, se3_to_pose(tcp), self.contact_stiffness)
+        self.force_offset = self.force_offset + self.force.step(applied, dt, self.contact_stiffness)
+        target = self.kin.fk_se3(self._q_nom)
+        target = pin.SE3(target.rotation, target.translation + self.force_offset)
+        qn = self.kin.ik_se3(target, self.q, max_iter=50, tol=1e-11)
+        if qn is None:
+            self._motion_error("force mode: TCP target not reachable (singularity or workspace limit)")
+            return
+        self.qd = (qn - self.q) / dt
+        self.q = qn
+        self._q_dirty = True
+
+    def _end_force_mode(self) -> None:
+        """Leave force mode where the arm is (the nominal joints become the actual ones)."""
+        self.force = None
+        self._q_nom = None
+        self.force_offset = np.zeros(3)
+
+    def _update_force_values(self) -> None:
+        f = self.raw_force - self.ft_zero
+        self.values["actual_TCP_force"] = (float(f[0]), float(f[1]), float(f[2]), 0.0, 0.0, 0.0)
+        self.values["tcp_force_scalar"] = (float(np.linalg.norm(f)),)
+        self.values["ft_raw_wrench"] = (float(self.raw_force[0]), float(self.raw_force[1]),
+                                        float(self.raw_force[2]), 0.0, 0.0, 0.0)
+
+    def _path_progress(self, m: PathMove) -> None:
+        """signal_async_progress(i) of the injected path: written whenever the path approaches a new waypoint
+        (also for a synchronous path, as the script does; then nothing writes "finished" afterwards)."""
+        m.reported_progress = m.progress
+        prog = self.program
+        if prog is not None and m.progress >= 0 and (prog.async_motion is m or prog.blocking is m):
+            self._async_write(prog, m.progress)
 
     def _update_outputs(self, dt: float) -> None:
         """Refresh the streamed values. Internal ``qd`` runs in trajectory time (motion time x speed slider); the
@@ -546,6 +622,9 @@ class ArmCore:
         """Execute one command; returns False when the command ends the program (stopScript)."""
         kin = self.kin
         asyn = self.in_int[prog.off_i + 1] == 1
+        # motions start from the joints the generators follow: in force mode the nominal ones (the actual joints
+        # add the compliant offset, see _force_step)
+        q_cmd = self.q if self._q_nom is None else self._q_nom
         if cmd in (CMD_MOVEJ, CMD_MOVEJ_IK, CMD_MOVEL, CMD_MOVEL_FK):
             v, a = self._f(prog, 6), self._f(prog, 7)
             if not (v > 0 and a > 0 and math.isfinite(v) and math.isfinite(a)):
@@ -553,15 +632,33 @@ class ArmCore:
             x = self._vec(prog, 0)
             if cmd == CMD_MOVEJ:
                 self._check_target(x)
-                m = JointMove(self.q, x, v, a)
+                m = JointMove(q_cmd, x, v, a)
             elif cmd == CMD_MOVEJ_IK:
-                q1 = np.array(kin.ik(x.tolist(), self.q.tolist()))
-                m = JointMove(self.q, q1, v, a)
+                q1 = np.array(kin.ik(x.tolist(), q_cmd.tolist()))
+                m = JointMove(q_cmd, q1, v, a)
             elif cmd == CMD_MOVEL:
-                m = LinearMove(kin, self.q, pose_to_se3(x), v, a)
+                m = LinearMove(kin, q_cmd, pose_to_se3(x), v, a)
             else:
                 self._check_target(x)
-                m = LinearMove(kin, self.q, kin.fk_se3(x), v, a)
+                m = LinearMove(kin, q_cmd, kin.fk_se3(x), v, a)
+            self._start_motion(prog, m, asyn)
+        elif cmd == CMD_FORCE_MODE:
+            o_i = prog.off_i
+            fm = ForceMode(self._vec(prog, 0), self.in_int[o_i + 2:o_i + 8], self._vec(prog, 6),
+                           self.in_int[o_i + 1], self._vec(prog, 12))
+            if self.force is None:
+                self._q_nom = self.q.copy()
+                self.force_offset = np.zeros(3)
+            self.force = fm
+        elif cmd == CMD_FORCE_MODE_STOP:
+            self._end_force_mode()
+            if self.motion is not None or np.any(self.qd != 0):
+                m = CartesianStop(kin, self.q, self._trajectory_twist(), FORCE_MODE_STOP_DECELERATION)
+                self._start_motion(prog, m, False)
+        elif cmd == CMD_MOVE_PATH:
+            if prog.path_error:
+                raise ScriptRuntimeError(prog.path_error)
+            m = PathMove(kin, q_cmd, prog.path)        # checks the whole path first: nothing moves on an error
             self._start_motion(prog, m, asyn)
         elif cmd == CMD_SPEEDJ:
             self._stop_async_move(prog)
@@ -576,7 +673,7 @@ class ArmCore:
             if type(self.motion) is CartesianSpeed:
                 self.motion.retarget(xd, a)
             else:
-                self.motion = CartesianSpeed(kin, self.q, self._trajectory_twist(), xd, a)
+                self.motion = CartesianSpeed(kin, q_cmd, self._trajectory_twist(), xd, a)
         elif cmd == CMD_SERVOJ:
             self._stop_async_move(prog)
             target, t = self._vec(prog, 0), self._f(prog, 8)
@@ -590,7 +687,7 @@ class ArmCore:
                 raise ScriptRuntimeError("stop: deceleration must be positive (got %r)" % a)
             cart = cmd in (CMD_STOPL, CMD_SERVO_STOP) or (cmd == CMD_SPEED_STOP
                                                           and isinstance(self.motion, CartesianSpeed))
-            m = CartesianStop(kin, self.q, self._trajectory_twist(), a) if cart else JointStop(self.qd, a)
+            m = CartesianStop(kin, q_cmd, self._trajectory_twist(), a) if cart else JointStop(self.qd, a)
             stop_async = cmd in (CMD_STOPL, CMD_STOPJ) and asyn
             self._start_motion(prog, m, stop_async)
         elif cmd == CMD_SET_TCP:
@@ -634,7 +731,10 @@ class ArmCore:
             self.set_out_double(prog.off_f, 1.0 / self.control_rate)
         elif cmd == CMD_JOINT_TORQUES:
             self._write_vec(prog, [0.0] * 6)
-        elif cmd in (CMD_SET_WATCHDOG, CMD_ZERO_FT):
+        elif cmd == CMD_ZERO_FT:
+            self.ft_zero = self.raw_force.copy()
+            self._update_force_values()
+        elif cmd == CMD_SET_WATCHDOG:
             pass
         elif cmd == CMD_PROTECTIVE_STOP:
             self.protective_stop("protective_stop() requested by the control script")

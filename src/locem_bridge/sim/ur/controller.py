@@ -10,6 +10,7 @@ import numpy as np
 from .arm import ArmCore, ArmSnapshot
 from .dashboard import Dashboard
 from .errors import ConfigurationError
+from .force import ContactProvider, PlaneContact
 from .kinematics import ArmKinematics
 from .servers import NetLoop
 
@@ -240,6 +241,44 @@ class UrControllerStandIn:
     def release_emergency_stop(self) -> None:
         """Release the emergency stop button (then dashboard: close safety popup, power on, brake release)."""
         self.arm.release_emergency_stop()
+
+    # ------------------------------------------------------------------------------------------------ contact
+    def set_contact_provider(self, provider: Optional[ContactProvider], stiffness: Optional[float] = None) -> None:
+        """Surfaces the tool can touch: ``provider(tcp_pose) -> None | (depth, outward normal)`` in the UR base
+        frame, called on the control thread once per cycle (keep it short); None removes contact. ``stiffness``
+        (N/m) of the contact spring (default 20000)."""
+        if provider is not None and not callable(provider):
+            raise ConfigurationError("contact provider must be callable(tcp_pose) -> None | (depth, normal)")
+        if stiffness is not None and not (isinstance(stiffness, (int, float)) and np.isfinite(stiffness)
+                                          and stiffness > 0):
+            raise ConfigurationError("contact stiffness must be a finite number > 0 N/m, got %r" % (stiffness,))
+        with self.arm.lock:
+            self.arm.contact_provider = provider
+            if stiffness is not None:
+                self.arm.contact_stiffness = float(stiffness)
+            if provider is None:
+                self.arm.raw_force = np.zeros(3)
+                self.arm._update_force_values()
+
+    def set_contact_planes(self, planes: Sequence[dict], stiffness: Optional[float] = None) -> None:
+        """Flat contact surfaces ``[{"point": [x, y, z], "normal": [nx, ny, nz], "radius": r?}, ...]`` in the UR
+        base frame (normal out of the solid); [] removes them. Usable through :class:`.process.StandInProcess`."""
+        self.set_contact_provider(PlaneContact(planes) if planes else None, stiffness)
+
+    def get_tcp_force(self) -> List[float]:
+        """``actual_TCP_force`` as streamed: contact force on the tool (N, base axes) minus the FT zero."""
+        with self.arm.lock:
+            return list(self.arm.values["actual_TCP_force"])
+
+    def get_force_mode(self) -> Optional[dict]:
+        """The active force mode's parameters and the TCP offset it built up, or None."""
+        with self.arm.lock:
+            fm = self.arm.force
+            if fm is None:
+                return None
+            out = fm.describe()
+            out["offset"] = self.arm.force_offset.tolist()
+            return out
 
     def add_step_listener(self, fn: Callable[[ArmSnapshot], None]) -> None:
         """Call ``fn(snapshot)`` after every control cycle, on the control thread (keep it short, < 0.5 ms)."""

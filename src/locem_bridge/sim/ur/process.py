@@ -25,6 +25,7 @@ ALLOWED_OPS = frozenset((
     "get_standard_digital_outputs", "get_configurable_digital_outputs", "get_tool_digital_outputs",
     "set_standard_digital_input", "set_tool_digital_input", "get_state", "set_joint_positions",
     "inject_protective_stop", "inject_emergency_stop", "release_emergency_stop", "refused", "stats", "later",
+    "set_contact_planes", "get_tcp_force", "get_force_mode",
 ))
 
 
