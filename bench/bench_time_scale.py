@@ -18,7 +18,18 @@ arm error (MOVE_J joint error in rad, MOVE_L TCP error in mm), pressure error af
 sim/wall ratio of the UR controller's motion clock and the world steps per second. Other agents share the 2 cores:
 compare the rows of the same run and repeat (``--repeat``).
 
-Usage: python3 bench/bench_time_scale.py [--scales 1 5 10 20] [--repeat 2] [--seconds 12]
+Variants (``--variants``), measured in the same run: ``before`` = heartbeats from canopen's timer threads inside the
+sim interpreter and cyclic TPDOs sampled per drive at its send time (the behaviour before the change); ``after`` =
+heartbeats from the helper process (``locem_bridge.sim.heartbeat``) and the TPDOs of all drives sampled at one sim
+instant per cycle; ``nosync`` = helper process, per-drive sampling; ``afterfix`` / ``nosyncfix`` = the same with
+``patch_odometry``: on top of the bridge's own odometry (which now integrates while braking after a fault and along
+the arc of the twist), it skips a cycle whose four wheel positions are not of one TPDO burst (drives synchronised
+by SYNC only; an experiment, not in the bridge).
+``machine_sched_late_worst_ms`` is a baseline from a lone process that sleeps 5 ms in a loop (how much the machine
+itself stalls during the run); ``sim_sched_late_worst_ms`` is the same probe as a thread inside the sim.
+``BENCH_VERBOSE=1`` prints every GOTO with ground truth and odometry. ``--load N`` adds N busy-loop processes.
+
+Usage: python3 bench/bench_time_scale.py [--scales 1 5 10 20] [--repeat 2] [--seconds 12] [--threads]
 """
 import argparse
 import json
@@ -157,7 +168,8 @@ class Probe:
         setattr(owner, name, timed)
 
     def report(self, wall):
-        return {"producer_worst_hb_gap_ms": 1000 * self.hb_worst, "world_step_share": self.step_total / wall,
+        return {"producer_worst_hb_gap_ms": 1000 * self.hb_worst if self.hb_last else None,
+                "world_step_share": self.step_total / wall,
                 "world_step_worst_ms": 1000 * self.step_worst, "sim_sched_late_worst_ms": 1000 * self.lat_worst,
                 "sim_sched_late_mean_ms": 1000 * self.lat_sum / max(1, self.lat_n),
                 "parts": {k: "%.1f%% worst %.1f ms n/s %.0f" % (100 * v[0] / wall, 1000 * v[1], v[2] / wall)
@@ -260,9 +272,10 @@ class CanStats:
 
 
 def patch_odometry():
-    """Experiment for a change proposed in the base bridge (not made in the bridge itself): integrate each
-    odometry increment along the circular arc of a constant twist (exact for it) instead of the chord at the
-    midpoint heading, and keep integrating while a fault holds the base (the wheels still move while they brake).
+    """Experiment for a change proposed in the base bridge (not made in the bridge itself): integrate only four
+    wheel positions of one TPDO burst (kernel receive stamps within half a control period), each increment along
+    the circular arc of a constant twist (exact for it) instead of the chord at the midpoint heading, and keep
+    integrating while a fault holds the base (the wheels still move while they brake).
     At time scale 20 one control cycle covers 0.4 s of motion, 0.2-0.3 rad of turn in a GOTO."""
     import math as _m
     from locem_bridge.bridges.cia402_base import Cia402Base
@@ -270,6 +283,9 @@ def patch_odometry():
     orig_cycle = Cia402Base._cycle
 
     def _odometry(self):
+        stamps = [node.tpdo[2].timestamp for node in self.nodes]
+        if any(t is None for t in stamps) or max(stamps) - min(stamps) > 0.5 / self.rate:
+            return                       # the four positions are not of one TPDO burst (yet)
         pos = []
         for node, pol in zip(self.nodes, self.polarity):
             counts = node.tpdo_values.get(0x6064)
@@ -310,7 +326,8 @@ def role_locem(args):
     import logging
     logging.basicConfig(level=logging.WARNING)
     logging.getLogger("canopen").setLevel(logging.ERROR)
-    overrides = {"arm": {"controller": {"host": args.host}}, "compressor": {"host": args.host, "port": args.modbus_port},
+    overrides = {"arm": {"controller": {"host": args.host}},
+                 "compressor": {"host": args.host, "port": args.modbus_port},
                  "base": {"drives": {"can": {"interface": "udp_multicast", "channel": args.can_group,
                                              "port": args.can_port}}}}
     robot = build_robot(load_robot_config(ROBOT_YAML, overrides), site=SITE_YAML,
@@ -347,8 +364,7 @@ def role_locem(args):
                 print("OUT " + json.dumps({"success": bool(r.success), "message": str(r.message),
                                            "result": r.result}, default=str), flush=True)
             elif parts[0] == "submit":
-                ex = core.dispatcher.submit(parts[1], _service_iface())
-                threading.Thread(target=_wait_exec, args=(ex,), daemon=True).start()
+                _ASYNC.append(core.dispatcher.submit(parts[1], _service_iface()))   # runs on; not awaited
                 print("OUT {}", flush=True)
     finally:
         core.close()
@@ -362,9 +378,6 @@ def _service_iface():
     from locem_bridge.locem.registry import Interface
     return Interface.SERVICE
 
-
-def _wait_exec(ex):
-    _ASYNC.append(ex)
 
 
 # ---------------------------------------------------------------------------------------------------- coordinator
@@ -419,7 +432,8 @@ def sched_probe(worst, stop):
 
 def run_scale(scale, seconds, variant):
     host, modbus_port = free_address(), free_port()
-    group, can_port = "239.74.%d.%d" % (random.randint(170, 250), random.randint(1, 250)), 45000 + random.randint(0, 999)
+    group = "239.74.%d.%d" % (random.randint(170, 250), random.randint(1, 250))
+    can_port = 45000 + random.randint(0, 999)
     common = ["--host", host, "--modbus-port", str(modbus_port), "--can-group", group, "--can-port", str(can_port),
               "--scale", str(scale)]
     sim = Child(["--role", "sim", "--switch-interval", str(SWITCH)] + common
@@ -506,7 +520,8 @@ def run_scale(scale, seconds, variant):
                 "ur_skipped": rate["ur_skipped"], "steps_per_s": rate["steps_per_s"], "failures": fails[:3],
                 "producer_worst_hb_gap_ms": rate["producer_worst_hb_gap_ms"],
                 "world_step_share": rate["world_step_share"], "world_step_worst_ms": rate["world_step_worst_ms"],
-                "sim_sched_late_worst_ms": rate["sim_sched_late_worst_ms"], "threads": rate["threads"], "parts": rate["parts"],
+                "sim_sched_late_worst_ms": rate["sim_sched_late_worst_ms"], "threads": rate["threads"],
+                "parts": rate["parts"],
                 "n_failures": len(fails), "spray_coverage": coverage,
                 "machine_sched_late_worst_ms": 1000 * worst.value}
     finally:
@@ -520,9 +535,10 @@ def main():
     ap.add_argument("--role", choices=("coordinator", "sim", "locem"), default="coordinator")
     ap.add_argument("--scales", type=float, nargs="+", default=[1.0, 5.0, 10.0, 20.0])
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--seconds", type=float, default=12.0)
+    ap.add_argument("--seconds", type=float, default=15.0)
     ap.add_argument("--scale", type=float, default=1.0)
-    ap.add_argument("--variants", nargs="+", choices=("before", "nosync", "after", "afterfix", "nosyncfix"), default=["before", "after"],
+    ap.add_argument("--variants", nargs="+", choices=("before", "nosync", "after", "afterfix", "nosyncfix"),
+                    default=["before", "after"],
                     help="before: heartbeats from canopen threads in the sim process, TPDOs sampled per drive; "
                     "nosync: heartbeat helper process, TPDOs sampled per drive; after: helper process and TPDOs "
                     "of all drives sampled at one instant per cycle; afterfix / nosyncfix: the same with the "
@@ -550,8 +566,9 @@ def main():
     print("worksite + LOCEM bridges vs time scale (%d cores, %.0f s workload per run, %d repetition(s))"
           % (os.cpu_count(), args.seconds, args.repeat))
     cols = ("cpu_sim", "cpu_locem", "frames_per_s", "worst_hb_gap_ms", "hb_gaps_over_150ms", "gotos", "goto_err_mm",
-            "goto_err_deg", "odom_vs_truth_mm", "movej_err_rad", "movel_err_mm", "pressure_err_bar", "sim_wall", "ur_motion_wall",
-            "steps_per_s", "n_failures", "spray_coverage", "producer_worst_hb_gap_ms", "world_step_share", "world_step_worst_ms",
+            "goto_err_deg", "odom_vs_truth_mm", "movej_err_rad", "movel_err_mm", "pressure_err_bar", "sim_wall",
+            "ur_motion_wall", "steps_per_s", "n_failures", "spray_coverage", "producer_worst_hb_gap_ms",
+            "world_step_share", "world_step_worst_ms",
             "sim_sched_late_worst_ms", "machine_sched_late_worst_ms")
     global SWITCH
     SWITCH = args.switch_interval
@@ -575,7 +592,11 @@ def main():
             print("    failures: %s" % r["failures"], flush=True)
     print("median over repetitions:")
     for (scale, variant), rows in results.items():
-        med = {k: statistics.median([r[k] for r in rows if k in r]) for k in cols if all(k in r for r in rows)}
+        med = {}
+        for k in cols:
+            vals = [r[k] for r in rows if isinstance(r.get(k), (int, float))]
+            if vals:
+                med[k] = statistics.median(vals)
         print("  scale %5.1f %-7s: %s" % (scale, variant, "  ".join("%s=%.3g" % (k, v) for k, v in med.items())))
         print("  scale %5.1f %-7s: worst heartbeat gap per repetition (ms): %s; heartbeat losses: %s"
               % (scale, variant, ", ".join("%.0f" % r.get("worst_hb_gap_ms", float("nan")) for r in rows),

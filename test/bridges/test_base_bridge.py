@@ -1,5 +1,6 @@
 """The base bridge (python-can + canopen BaseNode402) against four CiA 402 drive stand-ins and the PyBullet world."""
 import math
+import threading
 import time
 
 import pytest
@@ -152,3 +153,26 @@ def test_drive_fault_is_latched_until_reset_base(rig, core):
     assert "FAULT" in reset.result["cleared"]
     moved = run(core, "MOVE_BASE_REL 0.05 0 0")
     assert moved.success, moved
+
+
+def test_a_fix_replaces_the_drifted_odometry_pose_only_while_standing_still(rig, core):
+    r_, base = rig
+    x, y, th = r_.world.base_pose()
+    base.set_pose(x + 0.03, y - 0.02, th + 0.01)           # odometry drifted 3.6 cm / 0.6 deg from the truth
+    assert base.correct_pose(x, y, th)                     # standing still: the fix is taken
+    assert max(abs(a - b) for a, b in zip(base.pose(), (x, y, th))) < 1e-9
+    # during a GOTO the fix is refused and the odometry pose is left alone
+    refused = []
+    done = threading.Event()
+
+    def drive():
+        core.dispatcher.execute("GOTO %g %g %g speed=0.3" % (x + 0.4, y, th))
+        done.set()
+    threading.Thread(target=drive, daemon=True).start()
+    assert wait_until(lambda: abs(base.twist()[0]) + abs(base.twist()[1]) > 0.05, timeout=5.0)
+    before = base.pose()
+    refused.append(base.correct_pose(before[0] - 1.0, before[1], before[2]))
+    assert refused == [False] and abs(base.pose()[0] - (before[0] - 1.0)) > 0.5
+    assert done.wait(20.0)
+    gx, gy, _ = r_.world.base_pose()
+    assert abs(gx - (x + 0.4)) < 0.03 and abs(gy - y) < 0.03   # the GOTO was not thrown off by the refused fix

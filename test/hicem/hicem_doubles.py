@@ -74,6 +74,10 @@ class LocemDouble(LocemClient):
         self.handles: List[_Handle] = []
         self.fail_next: Dict[str, LocemReply] = {}
         self.pose = [1.4, 1.4, 0.7854]     # the default site's start (config/sites/default.yaml)
+        # STATUS 'health' (LOCEM's per-backend records); health_script: answers given first, one per STATUS
+        self.health: Dict[str, Dict[str, Any]] = {n: {"link": "up", "device": "ok", "last_error": ""}
+                                                  for n in ("arm", "base", "compressor", "wall")}
+        self.health_script: List[Dict[str, Dict[str, Any]]] = []
         self.log_path = log_path
         self._lock = threading.Lock()
 
@@ -120,6 +124,9 @@ class LocemDouble(LocemClient):
                 self.pose = [float(w) for w in command.split()[1:4]]
             elif name == "GET_POSE":
                 result = {"pose": list(self.pose), "twist": [0.0, 0.0, 0.0]}
+            elif name == "STATUS":
+                health = self.health_script.pop(0) if self.health_script else self.health
+                result = {"running": [], "resources": {}, "health": json.loads(json.dumps(health)), "uptime_s": 1.0}
             reply, dur = LocemReply(True, "OK", "", result), self.durations.get(name, 0.0)
         h = _Handle(self, command, reply, dur)
         self.handles.append(h)

@@ -13,7 +13,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..")
 TREES = os.path.join(ROOT, "trees")
 CATALOGUE = os.path.join(TREES, "node_catalogue.xml")
 ACTION_TYPES = ("SCAN", "GET_TOOL", "VALIDATE_TAPE_LINE", "TAPE_LINE", "MANUAL_TAPING", "SPRAY_AREA",
-                "SAND_AREA", "GO_HOME")
+                "SAND_AREA", "GO_HOME", "RECOVER")
 
 
 def test_catalogue_file_is_what_the_code_declares():

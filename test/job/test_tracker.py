@@ -36,6 +36,14 @@ def test_progress_counts_joints_and_areas_once_per_task():
                      "[1/2 taping] VALIDATE_TAPE_LINE, joint 1 of 3", "[1/2 taping] TAPE_LINE, joint 1 of 3",
                      "[1/2 taping] VALIDATE_TAPE_LINE, joint 2 of 3"]
     assert t.finished is None
+    # joint 2 rejected -> manual, joint 3 validated and taped: the taping of joint 3 is "joint 3", not the
+    # second TAPE_LINE seen
+    for s in [state("urn:p#Taping", "running", "MANUAL_TAPING", "t5"),
+              state("urn:p#Taping", "running", "VALIDATE_TAPE_LINE", "t6"),
+              state("urn:p#Taping", "running", "TAPE_LINE", "t7")]:
+        t.on_state(s)
+    assert lines[-3:] == ["[1/2 taping] MANUAL_TAPING, joint 2 of 3", "[1/2 taping] VALIDATE_TAPE_LINE, joint 3 of 3",
+                          "[1/2 taping] TAPE_LINE, joint 3 of 3"]
     clock.t += 42.5
     t.on_state(state("urn:p#Taping", "ended", detail="completed"))
     assert t.finished["phase"] == "ended"
@@ -65,3 +73,15 @@ def test_a_process_that_never_reported_is_recorded_with_the_given_status():
     t.begin(0)
     record = t.end(status="timeout", detail="no end state within 600 s")
     assert (record.status, record.detail) == ("timeout", "no end state within 600 s")
+
+
+def test_an_area_worked_again_after_recover_keeps_its_number():
+    t, lines, clock = tracker()
+    t.begin(1)
+    for s in [state("urn:p#Spraying", "running", "SPRAY_AREA", "s1"),
+              state("urn:p#Spraying", "running", "SPRAY_AREA", "s2"),
+              state("urn:p#Spraying", "running", "RECOVER", "s3"),
+              state("urn:p#Spraying", "running", "SPRAY_AREA", "s4")]:
+        t.on_state(s)
+    assert lines[-4:] == ["[2/2 spraying] SPRAY_AREA, area 1 of 2", "[2/2 spraying] SPRAY_AREA, area 2 of 2",
+                          "[2/2 spraying] RECOVER", "[2/2 spraying] SPRAY_AREA, area 2 of 2"]

@@ -1,5 +1,6 @@
 """The fast path (schema closure once + incremental ABox inference on oxigraph) answers exactly like a full owlrl
 OWL 2 RL closure of the same data evaluated by rdflib; closures respect their bounds and keep the last good state."""
+from decimal import Decimal
 from typing import Dict, Iterable, List, Set, Tuple
 
 import pytest
@@ -13,21 +14,31 @@ from locem_bridge.pemkre.reasoning import bounded_closure
 from locem_bridge.pemkre.store import ASSERTED_GRAPHS, G_LOG, G_WORLD
 
 
+def _norm_value(v):
+    if not isinstance(v, Literal):
+        return str(v)
+    py = v.toPython()
+    # xsd:decimal division: oxigraph keeps 18 fraction digits, Python's Decimal 28 (e.g. a success rate of 2/3)
+    return float(py) if isinstance(py, Decimal) else py
+
+
 def _norm_rows(rows: Iterable[Dict]) -> Set[frozenset]:
     out = set()
     for r in rows:
-        out.add(frozenset((k, v.toPython() if isinstance(v, Literal) else str(v)) for k, v in r.items()))
+        out.add(frozenset((k, _norm_value(v)) for k, v in r.items()))
     return out
 
 
 def _mid_run_engine(make_engine):
-    """A store with every kind of state: taped/manual/validated lines, sprayed/sanded areas, a running process."""
+    """A store with every kind of state: taped/manual/validated lines, sprayed/sanded areas, a failed and recovered
+    spraying task, a running process."""
     e = make_engine()
     e.update_world(scan_result(walls=2, joints_per_wall=3, areas_per_wall=2))
     e.start_process(str(PLB.SprayingProcess))
-    for _ in range(3):  # get tool, spray two areas
+    # get tool, spray one area, the second fails (failure transition), recover, spray it again
+    for status in ("succeeded", "succeeded", "failed", "succeeded", "succeeded"):
         a = e.next_action()
-        e.set_task_status(a.task, "succeeded")
+        e.set_task_status(a.task, status, "compressor link down" if status == "failed" else "")
     e.abort_process(reason="operator stop")
     e.start_process(str(PLB.SandingProcess))
     for _ in range(2):  # get tool, sand one area

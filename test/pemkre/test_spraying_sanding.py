@@ -49,16 +49,16 @@ def test_sanding_works_only_on_sprayed_areas(make_engine):
     e = make_engine()
     e.update_world(scan_result(areas_per_wall=3))
     e.start_process(SPRAY)
-    # spray two of three areas, then the spray gun fails on the third: the process fails
-    n = {"count": 0}
-
+    # spray two of three areas; the spray gun fails on the third every time: after RECOVER and the third failed
+    # attempt on the same area (the bound of the failure transition) the process fails
     def decide(a):
-        if a.action_type == "SPRAY_AREA":
-            n["count"] += 1
-            return ("failed", "nozzle clogged") if n["count"] == 3 else ("succeeded", "")
+        if a.action_type == "SPRAY_AREA" and a.params()["area"] == "wall_1_area_3":
+            return "failed", "nozzle clogged"
         return "succeeded", ""
     seen = run_process(e, decide)
-    assert seen[-1][0] == "FAILED" and "nozzle clogged" in seen[-1][1]["message"]
+    assert [s[0] for s in seen] == (["GET_TOOL", "SPRAY_AREA", "SPRAY_AREA"] + ["SPRAY_AREA", "RECOVER"] * 2
+                                    + ["SPRAY_AREA", "FAILED"])
+    assert "nozzle clogged" in seen[-1][1]["message"] and "no failure transition" in seen[-1][1]["message"]
     e.start_process(SAND)
     seen = run_process(e)
     assert [s[0] for s in seen] == ["GET_TOOL", "SAND_AREA", "SAND_AREA", "GO_HOME", "ENDED"]

@@ -8,13 +8,11 @@ arm and base still within 200 ms of sim time and still from then on, the spray v
 HICEM ends the taping process "stopped" with the operator's reason, the page shows it; report.json records the
 taping process as stopped and nothing after it as succeeded.
 
-The job node today starts its next process ~0.1 s after a stopped one (it does not end the job on STOP), and
-that process moves the arm: the arm is judged until the next process starts, the base until a later process
-runs an action that drives it (at most OBSERVE_WALL_S), and the operator presses STOP on every later process so
-the job ends and writes its report. Sim time = wall time x time_scale (the .test runs at time_scale 1, where
+The job ends after a stopped process (it writes its report, then the launch shuts down within seconds), so the
+live devices and the page are read right after the stop; arm and base are judged from the probe's samples over
+OBSERVE_WALL_S (or until a later process starts, should a job go on after a stop). Sim time = wall time x time_scale (the .test runs at time_scale 1, where
 the software path page -> HMI -> HICEM -> LOCEM -> devices is not compressed 5x against the sim clock).
 """
-import os
 import sys
 import time
 import unittest
@@ -23,12 +21,11 @@ import rospy
 import rostest
 
 from job_support import (TAPING, HicemTimeline, HmiClient, MotionProbe, SimCalls, init_test_node,
-                         launch_shutting_down, process_record, setting, wait_for_report, wait_until)
+                         process_record, setting, wait_for_report, wait_until)
 
 PKG = "locem_bridge"
 LIMIT_SIM_S = 0.200           # issue 7: all devices stopped within 200 ms of sim time
 OBSERVE_WALL_S = 1.5          # how long the base is watched after STOP at most
-BASE_IDLE_ACTIONS = ("", "SCAN", "GET_TOOL")   # actions that never drive the base
 
 
 class JobHmiStopTest(unittest.TestCase):
@@ -41,7 +38,6 @@ class JobHmiStopTest(unittest.TestCase):
         cls.scale = cls.sim.time_scale()
         cls.hmi = HmiClient(int(setting("hmi_port")))
         cls.hmi.wait_up(timeout=60.0)
-        cls.later_stops = []
         cls.probe = MotionProbe(setting("host"), int(setting("modbus_port")))
         try:
             cls._stop_mid_action()
@@ -64,48 +60,34 @@ class JobHmiStopTest(unittest.TestCase):
         cls.t_stop = time.monotonic()
         cls.stop_answer = cls.hmi.stop()
         cls.t_answer = time.monotonic()
-        # The job goes on with its next process right after a stopped one (see test_5), and that process moves
-        # the arm at once (GET_TOOL: HOME): the arm is judged until the next process starts. The base is judged
-        # until a later process runs an action that drives it (anything but SCAN and GET_TOOL; the operator
-        # then stops that process at once) or for OBSERVE_WALL_S.
-        cls.t_next = wait_until(lambda: cls._later_state(), timeout=OBSERVE_WALL_S, period=0.002)
-        cls.t_next = cls.t_next[0] if cls.t_next else time.monotonic()
-        driving = wait_until(lambda: cls._later_state(BASE_IDLE_ACTIONS),
-                             timeout=max(0.0, cls.t_stop + OBSERVE_WALL_S - time.monotonic()), period=0.002)
-        cls.t_observed = driving[0] if driving else time.monotonic()
-        if driving:
-            cls.later_stops.append(driving[1]["process"])
-            cls.hmi.stop()
-        cls.windows = {"arm": (cls.t_stop, cls.t_next), "base": (cls.t_stop, cls.t_observed)}
-        cls.driving_action = driving[1]["action_type"] if driving else ""
-        cls.still = {d: cls.probe.still_since(d, *w) for d, w in cls.windows.items()}
-        cls.samples = {d: cls.probe.samples_between(d, *w) for d, w in cls.windows.items()}
+        # The job ends after a stopped process (it writes its report and the launch shuts down within a few
+        # seconds): everything that needs a live device or page is read now, the rest from recorded samples.
+        time.sleep(max(0.3, 2.5 * LIMIT_SIM_S / cls.scale))
         cls.outputs_after = cls.probe.tool_outputs()
         cls.valve_open_after = cls.probe.spray_valve_open()
         cls.taping_end = cls.timeline.wait_for(
             lambda s: s["process"] == TAPING and s["phase"] in ("ended", "failed", "stopped"), timeout=30.0)
-        cls.page_after = cls.hmi.state()
-        cls.measured = ("STOP pressed during %s (moving: %s); page answered in %.3f s wall; next process after "
-                        "%.3f s wall; devices still after %s s wall (time_scale %.1f); base watched %.3f s wall%s" % (
+        try:
+            cls.page_after = cls.hmi.state()
+        except Exception as exc:          # the page may already be shutting down with the launch
+            cls.page_after = {"snapshot": {"phase": ""}, "events": [], "error": repr(exc)}
+        # devices are judged until a later process starts (if the job went on) or for OBSERVE_WALL_S
+        later = wait_until(lambda: cls._later_state(), timeout=max(0.0, cls.t_stop + OBSERVE_WALL_S
+                                                                    - time.monotonic()), period=0.002)
+        cls.t_next = later[0] if later else time.monotonic()
+        cls.t_observed = cls.t_next
+        cls.driving_action = later[1]["action_type"] if later else ""
+        cls.windows = {"arm": (cls.t_stop, cls.t_next), "base": (cls.t_stop, cls.t_observed)}
+        cls.still = {d: cls.probe.still_since(d, *w) for d, w in cls.windows.items()}
+        cls.samples = {d: cls.probe.samples_between(d, *w) for d, w in cls.windows.items()}
+        cls.measured = ("STOP pressed during %s (moving: %s); page answered in %.3f s wall; devices still after "
+                        "%s s wall (time_scale %.1f); watched %.3f s wall%s" % (
                             cls.stopped_state["action_type"], cls.moving_before, cls.t_answer - cls.t_stop,
-                            cls.t_next - cls.t_stop, {k: (None if v is None else round(v - cls.t_stop, 3))
-                                                      for k, v in cls.still.items()}, cls.scale,
-                            cls.t_observed - cls.t_stop,
+                            {k: (None if v is None else round(v - cls.t_stop, 3)) for k, v in cls.still.items()},
+                            cls.scale, cls.t_observed - cls.t_stop,
                             " (until the next process's %s)" % cls.driving_action if cls.driving_action else ""))
         rospy.logwarn("job_hmi_stop: %s", cls.measured)
         sys.stderr.write("[job_hmi_stop] %s\n" % cls.measured)
-        # The operator stops every later process too, so the job ends and writes its report.
-        cls._stop_later_processes(until=time.monotonic() + 90.0)
-
-    @classmethod
-    def _stop_later_processes(cls, until):
-        while not launch_shutting_down() and time.monotonic() < until and not cls._report_written():
-            s = cls.timeline.latest()
-            if s.get("process") not in ("", TAPING) and s.get("phase") not in ("ended", "failed", "stopped") \
-                    and s.get("process") not in cls.later_stops:
-                cls.later_stops.append(s["process"])
-                cls.hmi.stop()
-            time.sleep(0.01)
 
     @classmethod
     def _later_state(cls, except_actions=None):
@@ -117,10 +99,6 @@ class JobHmiStopTest(unittest.TestCase):
                     return t, s
         return None
 
-    @classmethod
-    def _report_written(cls):
-        return os.path.exists(os.path.join(cls.results_dir, "latest", "report.json"))
-
     def test_1_page_accepted_stop(self):
         status, body = self.stop_answer
         self.assertEqual(status, 200, body)
@@ -129,7 +107,7 @@ class JobHmiStopTest(unittest.TestCase):
     def test_2_devices_still_within_200ms_sim(self):
         for device in ("arm", "base"):
             start, end = self.windows[device]
-            if device == "base":      # the arm's window ends when the next process starts: it may be short
+            if device == "base":
                 self.assertGreaterEqual((end - start) * self.scale, 2 * LIMIT_SIM_S, "base: watched only %.3f s "
                                         "wall: too short to judge (%s)" % (end - start, self.measured))
             self.assertGreater(self.samples[device], 2, "%s: too few samples (%s)" % (device, self.measured))

@@ -62,7 +62,7 @@ class HeartbeatLog(can.Listener):
 @pytest.fixture
 def fast_stack(site_cfg, robot_cfg, port, free_port_factory):
     """Worksite at time scale 10 on udp_multicast (drive heartbeats from the helper process) and the real base
-    bridge (canopen BaseNode402 master, 1.5 x 100 ms heartbeat consumer) in LOCEM's dispatcher."""
+    bridge (canopen BaseNode402 master, 2 x 100 ms heartbeat consumer) in LOCEM's dispatcher."""
     group, can_port = _group(), free_port_factory()
     ws = Worksite(site_cfg, robot_cfg, modbus_port=port, can_interface="udp_multicast", can_channel=group,
                   can_port=can_port, time_scale=10.0, with_ur=False)

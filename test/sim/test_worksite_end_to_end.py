@@ -42,7 +42,7 @@ def _address() -> str:
 
 
 def _joint_and_base_pose(site_cfg):
-    """The taped joint (wall_1_joint_2 of the configured site) and a base pose 1.1 m in front of it."""
+    """The taped joint (wall_1_joint_2 of the tests' site) and a base pose 1.1 m in front of it."""
     from locem_bridge.sim.site import Site
     joint = next(j for w in Site(site_cfg).walls for j in w.joints if j.id == "wall_1_joint_2")
     x, y = float(joint.start[0]), float(joint.start[1])
@@ -50,15 +50,17 @@ def _joint_and_base_pose(site_cfg):
 
 
 @pytest.fixture
-def worksite_process(tmp_path, free_port_factory, site_cfg):
+def worksite_process(tmp_path, free_port_factory, site_cfg, test_site_path):
     faulthandler.dump_traceback_later(150, exit=True)    # ur_rtde may hold the GIL while it blocks
     addr = _address()
     modbus_port, can_port = free_port_factory(), free_port_factory()
     results = tmp_path / "results"
-    cmd = [sys.executable, "-m", "locem_bridge.sim", "--host", addr, "--modbus-port", str(modbus_port),
+    # the same site file as site_cfg; the arm starts in wall_ready (--arm-pose), in front of the wall
+    cmd = [sys.executable, "-m", "locem_bridge.sim", "--site", test_site_path, "--host", addr,
+           "--modbus-port", str(modbus_port),
            "--can-interface", "udp_multicast", "--can-channel", "239.74.163.2", "--can-port", str(can_port),
            "--time-scale", "4", "--base-pose"] + ["%g" % v for v in _joint_and_base_pose(site_cfg)[1]] + [
-           "--mount-tool", "taping_tool",
+           "--arm-pose", "wall_ready", "--mount-tool", "taping_tool",
            "--results", str(results), "--log-level", "WARNING"]
     env = dict(os.environ, PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
@@ -183,7 +185,10 @@ def test_worksite_process_serves_all_devices_and_records_a_taping_pass(worksite_
     outcome = json.loads((info["results"] / "outcome.json").read_text())
     joints = outcome["joints"]
     assert joints["wall_1_joint_2"]["coverage"] == pytest.approx(0.8 / joint.length, abs=0.03)
-    assert all(v["coverage"] == 0.0 for k, v in joints.items() if k != "wall_1_joint_2")
+    from locem_bridge.sim.site import Site
+    kinds = {j.id: j.kind for w in Site(site_cfg).walls for j in w.joints}
+    assert all(v["coverage"] == 0.0 for k, v in joints.items() if k != "wall_1_joint_2" and kinds[k] == "vertical")
+    assert all(v["coverage"] < 0.05 for k, v in joints.items() if kinds[k] == "horizontal")    # only crossed
     assert outcome["collisions"] == 0
     assert sorted(outcome["pictures"]) == ["wall_1.png", "wall_2.png"]
     assert (info["results"] / "wall_1.png").stat().st_size > 1000

@@ -226,12 +226,12 @@ class Cia402Base(Base):
             if sw is not None and sw & SW_FAULT:
                 self._latch("drive %d (%s) reports FAULT (statusword 0x%04X)" % (self.node_ids[i], self.names[i], sw),
                             "drive")
+        # 2. odometry, also while the base brakes after a fault (that motion is real)
+        self._odometry()
         if self._fault is not None:
             self._send_wheels([0.0] * 4)
             self._maybe_recover(now)
             return
-        # 2. odometry
-        self._odometry()
         # 3. command
         twist = self._command(period)
         self._send_wheels(self.kin.wheel_speeds(*twist))
@@ -256,8 +256,10 @@ class Cia402Base(Base):
                 d = [a - b for a, b in zip(pos, self._last_pos)]
                 dx, dy, dth = self.kin.twist(d)
                 x, y, yaw = self._pose
-                ym = yaw + dth / 2.0
-                self._pose = [x + math.cos(ym) * dx - math.sin(ym) * dy, y + math.sin(ym) * dx + math.cos(ym) * dy,
+                if abs(dth) > 1e-9:                 # along the arc of a constant twist over the cycle
+                    s, c = math.sin(dth) / dth, (1.0 - math.cos(dth)) / dth
+                    dx, dy = dx * s - dy * c, dx * c + dy * s
+                self._pose = [x + math.cos(yaw) * dx - math.sin(yaw) * dy, y + math.sin(yaw) * dx + math.cos(yaw) * dy,
                               wrap_angle(yaw + dth)]
             self._last_pos = pos
             speeds = []
@@ -346,6 +348,18 @@ class Cia402Base(Base):
     def set_pose(self, x: float, y: float, theta: float) -> None:
         with self._lock:
             self._pose = [float(x), float(y), wrap_angle(float(theta))]
+
+    def correct_pose(self, x: float, y: float, theta: float, still_speed: float = 0.005,
+                     still_rate: float = 0.01) -> bool:
+        """A localisation fix (map frame, e.g. AMCL's pose or the simulator's): taken as the odometry pose when
+        the base stands still and runs no GOTO, so wheel odometry drift does not add up over a job; ignored
+        while the base moves (the fix would be late by its latency). Returns whether it was taken."""
+        with self._lock:
+            vx, vy, wz = self._twist
+            if self._goal is not None or math.hypot(vx, vy) > still_speed or abs(wz) > still_rate:
+                return False
+            self._pose = [float(x), float(y), wrap_angle(float(theta))]
+            return True
 
     def twist(self) -> List[float]:
         with self._lock:

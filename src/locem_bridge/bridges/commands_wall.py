@@ -259,6 +259,13 @@ class WallCommands:
         if self.active_tool != tool:
             raise NotReady("the %s is needed but the active tool is %s; mount it and send MOUNT_TOOL %s"
                            % (tool, self.active_tool or "none", tool))
+        # the TCP offset and payload live in the controller's running program: a restarted control script
+        # (ur_rtde uploads it again for every path move, and after a stop or a reconnect) starts with the
+        # installation's, so every wall command sets the active tool's again before it moves
+        cfg = self.tools[tool]
+        arm = self._need("arm")
+        arm.set_tcp([float(v) for v in cfg["tcp"]])
+        arm.set_payload(float(cfg["mass"]), [float(v) for v in cfg["cog"]])
 
     def to_arm(self, point: Sequence[float], normal: Sequence[float]) -> List[float]:
         """TCP pose (arm base frame) at a map ``point`` facing the wall with inward ``normal``."""

@@ -16,7 +16,7 @@ from .errors import LocemError, PemkreError
 LOCEM_CODES = ("OK", "INVALID_COMMAND", "INVALID_ARGUMENT", "BUSY", "TIMEOUT", "HARDWARE_ERROR", "ABORTED",
                "NOT_READY")
 ACTION_TYPES = ("SCAN", "GET_TOOL", "VALIDATE_TAPE_LINE", "TAPE_LINE", "MANUAL_TAPING", "SPRAY_AREA",
-                "SAND_AREA", "GO_HOME")
+                "SAND_AREA", "GO_HOME", "RECOVER")
 TASK_STATUSES = ("in_progress", "succeeded", "failed")
 
 

@@ -1,9 +1,10 @@
 """The HICEM node library: generic nodes and plasterboard use-case nodes.
 
-Generic: CheckHealth, SendLocemCommand, ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual,
-SelectEntry, IngestScan, MarkFeature. Use case: TagIdNameToObjectId (PEMKRE symbol → stored object id), GetTapingPosition
-(approach pose for a joint line), GetTapePath (line endpoints and wall normal), GetAreaRaster (base stations and
-raster rectangles for an area).
+Generic: CheckHealth, CheckDevicesUp (devices back after a failure, from LOCEM's STATUS), SendLocemCommand,
+ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual, SelectEntry, IngestScan, MarkFeature.
+Use case: TagIdNameToObjectId (PEMKRE symbol → stored object id), GetTapingPosition (approach pose for a joint
+line), GetTapePath (line endpoints and wall normal), GetAreaRaster (base stations and raster rectangles for an
+area).
 
 No node holds a number of its own: distances, speeds, offsets and timeouts arrive through ports, fed from the
 blackboard (``{@cfg....}`` = the robot/site parameters the controller loads, ``param_*`` = PEMKRE parameters) or
@@ -81,6 +82,44 @@ class CheckHealth(ConditionLeaf):
         faults = hem.faults(self.get("modules") or None)
         if faults:
             return self.fail("unhealthy: " + "; ".join(r for _m, r in faults))
+        return Status.SUCCESS
+
+
+class CheckDevicesUp(ConditionLeaf):
+    DESCRIPTION = ("SUCCESS when every listed device in a LOCEM STATUS result reports its link up and no fault "
+                   "(its 'health' entry: link 'up', device 'ok', no 'fault'); FAILURE naming each device that "
+                   "is not, with its last error. Used after a failed action to wait until the devices are back.")
+    PORTS = (input_port("status", JSON, None, "", "the result of LOCEM's STATUS command (SendLocemCommand result)"),
+             input_port("devices", STRING_LIST, "", "", "backends to check, e.g. 'compressor;arm'; empty = every "
+                        "backend STATUS reports"))
+
+    def on_tick(self) -> Status:
+        status = self.get("status")
+        health = status.get("health") if isinstance(status, dict) else None
+        if not isinstance(health, dict):
+            return self.fail("the STATUS result has no 'health' object (got %s)" % (
+                sorted(status) if isinstance(status, dict) else type(status).__name__))
+        wanted = list(self.get("devices") or sorted(health))
+        if not wanted:
+            return self.fail("STATUS reports no device at all")
+        down = []
+        for name in wanted:
+            h = health.get(name)
+            if not isinstance(h, dict):
+                down.append("%s: not in STATUS (it reports %s)" % (name, ", ".join(sorted(health)) or "nothing"))
+                continue
+            why = []
+            if h.get("link") != "up":
+                why.append("link %s" % h.get("link", "unknown"))
+            if h.get("device", "ok") != "ok":
+                why.append("device %s" % h.get("device"))
+            if h.get("fault"):
+                why.append("fault %s" % h.get("fault"))
+            if why:
+                err = h.get("last_error") or ""
+                down.append("%s: %s%s" % (name, ", ".join(why), " (%s)" % err if err else ""))
+        if down:
+            return self.fail("devices not ready: " + "; ".join(down))
         return Status.SUCCESS
 
 
@@ -535,6 +574,6 @@ class PlanTransit(Leaf):
         return Status.SUCCESS
 
 
-LIBRARY = (CheckHealth, SendLocemCommand, ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual,
+LIBRARY = (CheckHealth, CheckDevicesUp, SendLocemCommand, ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual,
            SelectEntry, IngestScan, MarkFeature, TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments,
            GetAreaRaster, PlanTransit)

@@ -49,6 +49,11 @@ class JobTracker:
         self._started = self.clock()
         self._tasks = {}
         self._last_task = ""
+        self._joint_index = 0
+        self._last_line_action = ""
+        self._area_index = 0
+        self._last_action = ""
+        self._all_tasks: set = set()
         self._done = None
         step = self.steps[index]
         self.say("%s starting %s" % (self._tag(), step.name))
@@ -64,7 +69,21 @@ class JobTracker:
             seen = self._tasks.setdefault(action, [])
             if task not in seen:
                 seen.append(task)
-            self.say("%s %s%s" % (self._tag(), action, self._count(action, len(seen))))
+                if action in LINE_ACTIONS:
+                    # a joint starts with its validation, or with its taping when it is not validated
+                    if action == "VALIDATE_TAPE_LINE" or self._last_line_action != "VALIDATE_TAPE_LINE":
+                        self._joint_index += 1
+                    self._last_line_action = action
+                if action in AREA_ACTIONS:
+                    # an area task after RECOVER is the failed area worked again, not a new one
+                    if self._last_action != "RECOVER":
+                        self._area_index += 1
+            if task not in self._all_tasks:
+                self._all_tasks.add(task)
+                self._last_action = action
+            n = (self._joint_index if action in LINE_ACTIONS else
+                 self._area_index if action in AREA_ACTIONS else len(seen))
+            self.say("%s %s%s" % (self._tag(), action, self._count(action, n)))
         if state.get("phase") in TERMINAL_PHASES and self._done is None:
             self._done = dict(state)
 

@@ -10,7 +10,10 @@ and finds the process that was running when the store was last used. Then, from 
   type, IRI and parameters as N-Triples), or ``ended`` / ``failed``. Asking again before the task is reported
   returns the same task: the answer is stored before it is returned, so a restart never repeats or skips a task;
 * :meth:`ProcessEngine.set_task_status` records ``in_progress`` / ``succeeded`` / ``failed`` with timestamps and
-  applies the task type's semantic effects (and, for SCAN tasks, merges the SCAN result into the world);
+  applies the task type's semantic effects (and, for SCAN tasks, merges the SCAN result into the world). A failed
+  task fails its process, unless its node has failure transitions (``proc:onTaskFailure``): then the process
+  stays running and the next :meth:`~ProcessEngine.next_action` walks the first failure transition whose
+  condition holds (none holding fails the process then). The failed task stays failed in the log and the KPIs.
 * :meth:`ProcessEngine.query` runs a predefined query of the ontology with values passed as bindings.
 
 Every state change is one atomic :meth:`TripleStore.apply` holding the asserted triples and the inferred triples
@@ -309,13 +312,15 @@ class ProcessEngine:
                 return NextAction("ended", str(sp), message=self._outcome(state))
             if state.status == "failed":
                 return NextAction("failed", str(sp), message=str(self._v(sp, _P_detail) or "process failed"))
-            leaving = False
+            leaving = recovering = False
             if state.task is not None and state.node in self.model.task_node_index:
                 tstatus = self.model.status_name.get(self._v(state.task, _P_status), "")
                 if tstatus in ("issued", "in_progress"):
                     return self._describe(state.task, state, tstatus)
                 if tstatus == "succeeded":
                     leaving = True
+                elif tstatus == "failed" and self.model.task_node_index[state.node][1].on_failure:
+                    recovering = True
                 else:
                     return NextAction("failed", str(sp), message="task <%s> is %s" % (state.task, tstatus))
             ap = self.model.processes[state.abstract]
@@ -323,6 +328,16 @@ class ProcessEngine:
             if node is None:
                 raise ProcessModelError("specific process <%s> sits at <%s>, which is not a node of <%s> "
                                         "(ontology changed under a running process?)" % (sp, state.node, ap.iri))
+            if recovering:  # the task failed and its node has failure transitions: walk one of them
+                tr = self._choose_failure(node, sp)
+                if tr is None:
+                    assert state.task is not None
+                    message = "%s; no failure transition of <%s> applies (%s)" % (
+                        self._failure_message(state.task, node), node.iri,
+                        ", ".join("<%s>" % t.iri for t in node.on_failure))
+                    self._commit(self._fail_changes(state, message))
+                    return NextAction("failed", str(sp), message=message)
+                node = ap.nodes[tr.target]
             for _ in range(self.max_walk_steps):
                 if not leaving:
                     if node.kind == "task":
@@ -335,7 +350,21 @@ class ProcessEngine:
                                     "(loop without a task around <%s>)" % (ap.iri, self.max_walk_steps, node.iri))
 
     def _choose(self, node: FlowNode, sp: URIRef) -> Transition:
-        for tr in node.outgoing:
+        tr = self._first_applicable(node, node.outgoing, sp, "transition")
+        if tr is None:
+            raise ProcessModelError("no transition applies at <%s>: every condition is false and there is no "
+                                    "transition without condition (%s)"
+                                    % (node.iri, ", ".join("<%s>" % t.iri for t in node.outgoing)))
+        return tr
+
+    def _choose_failure(self, node: FlowNode, sp: URIRef) -> Optional[Transition]:
+        """The failure transition to take from ``node`` (first whose condition holds), or None if none applies."""
+        return self._first_applicable(node, node.on_failure, sp, "failure transition")
+
+    def _first_applicable(self, node: FlowNode, transitions: Sequence[Transition], sp: URIRef,
+                          what: str) -> Optional[Transition]:
+        """The first of ``transitions`` (in priority order) without a condition or whose condition holds."""
+        for tr in transitions:
             if tr.condition is None:
                 return tr
             binds = {"process": sp} if tr.condition.bindable("process") else None
@@ -343,10 +372,14 @@ class ProcessEngine:
                 if self.store.ask(tr.condition, binds):
                     return tr
             except QueryError as exc:
-                raise ConditionError("condition of transition <%s> (from <%s>) failed: %s"
-                                     % (tr.iri, node.iri, exc), str(tr.iri)) from None
-        raise ProcessModelError("no transition applies at <%s>: every condition is false and there is no transition "
-                                "without condition (%s)" % (node.iri, ", ".join("<%s>" % t.iri for t in node.outgoing)))
+                raise ConditionError("condition of %s <%s> (from <%s>) failed: %s"
+                                     % (what, tr.iri, node.iri, exc), str(tr.iri)) from None
+        return None
+
+    def _failure_message(self, task: URIRef, node: FlowNode) -> str:
+        tt = node.task_type
+        detail = self._v(task, _P_detail)
+        return "task <%s> (%s) failed: %s" % (task, tt.action_type if tt else "?", detail if detail is not None else "")
 
     def _issue(self, state: _State, ap: AbstractProcess, node: FlowNode) -> NextAction:
         sp = state.sp
@@ -498,7 +531,8 @@ class ProcessEngine:
                     cs.add.append((subj, e.prop, value, G_WORLD))  # type: ignore[arg-type]
                     effects_applied += 1
                 cs.extend(world)
-                if status == "failed":
+                if status == "failed" and not node.on_failure:
+                    # no failure transition: the process fails with its task (else next_action walks one)
                     cs.extend(self._fail_changes(state, "task <%s> (%s) failed: %s" % (t, tt.action_type, detail)))
             self._commit(cs, max_seconds=None)
             return TaskStatusReport(str(t), status, str(sp), effects_applied, world_changed)

@@ -130,6 +130,8 @@ class Transition:
     target: URIRef
     priority: int
     condition: Optional[PreparedQuery]
+    #: ``proc:onTaskFailure true``: taken only when the source task node's task failed (never when leaving it)
+    on_failure: bool = False
 
 
 @dataclass
@@ -141,6 +143,8 @@ class FlowNode:
     outgoing: List[Transition] = field(default_factory=list)
     end_outcome: Optional[str] = None
     effects: List[Effect] = field(default_factory=list)
+    #: failure transitions (task nodes only), in the order they are tried; empty = a failed task fails the process
+    on_failure: List[Transition] = field(default_factory=list)
 
     def all_effects(self) -> List[Effect]:
         return list(self.task_type.effects if self.task_type else []) + list(self.effects)
@@ -201,6 +205,18 @@ def _bool(g: Graph, s: Node, p: URIRef, default: bool) -> bool:
     if v is None:
         return default
     return bool(v.toPython()) if isinstance(v, Literal) else default
+
+
+def _failure_flag(g: Graph, t: Node) -> bool:
+    """``proc:onTaskFailure`` of transition ``t`` (default false); anything but one boolean is refused."""
+    values = list(g.objects(t, PROC.onTaskFailure))
+    if not values:
+        return False
+    v = values[0]
+    if len(values) > 1 or not isinstance(v, Literal) or not isinstance(v.toPython(), bool):
+        raise ProcessModelError("transition <%s>: proc:onTaskFailure must be one boolean (true or false), got %s"
+                                % (t, ", ".join(x.n3() for x in values)))
+    return bool(v.toPython())
 
 
 def compile_model(g: Graph, store: TripleStore, prefixes: Mapping[str, str]) -> ProcessModel:
@@ -311,16 +327,27 @@ def compile_model(g: Graph, store: TripleStore, prefixes: Mapping[str, str]) -> 
                     raise ProcessModelError("condition of <%s> must be ASK or SELECT, not %s" % (t, cond.kind))
                 _check_projection(cond, ("process",), t)
             prio = g.value(t, PROC.priority)
-            nodes[src].outgoing.append(Transition(t, src, dst, int(prio.toPython()) if prio is not None else 1_000_000,  # type: ignore
-                                                  cond))
+            on_failure = _failure_flag(g, t)
+            if on_failure and nodes[src].kind != "task":  # type: ignore[index]
+                raise ProcessModelError("transition <%s> has proc:onTaskFailure true but its source <%s> is a %s node; "
+                                        "only a task node (proc:TaskNode) has a task that can fail"
+                                        % (t, src, nodes[src].kind))  # type: ignore[index]
+            tr = Transition(t, src, dst, int(prio.toPython()) if prio is not None else 1_000_000,  # type: ignore
+                            cond, on_failure)
+            (nodes[src].on_failure if on_failure else nodes[src].outgoing).append(tr)  # type: ignore[index]
         for node in nodes.values():
             node.outgoing.sort(key=lambda tr: (tr.condition is None, tr.priority, str(tr.iri)))
+            node.on_failure.sort(key=lambda tr: (tr.condition is None, tr.priority, str(tr.iri)))
             if node.kind == "end" and node.outgoing:
                 raise ProcessModelError("end node <%s> must not have outgoing transitions" % node.iri)
             if node.kind != "end" and not node.outgoing:
-                raise ProcessModelError("node <%s> of <%s> has no outgoing transition" % (node.iri, proc_iri))
-            if sum(1 for tr in node.outgoing if tr.condition is None) > 1:
-                raise ProcessModelError("node <%s> has more than one transition without condition" % node.iri)
+                raise ProcessModelError("node <%s> of <%s> has no outgoing transition%s" % (
+                    node.iri, proc_iri, " (its failure transitions are only taken when its task fails)"
+                    if node.on_failure else ""))
+            for kind, trs in (("", node.outgoing), ("failure ", node.on_failure)):
+                if sum(1 for tr in trs if tr.condition is None) > 1:
+                    raise ProcessModelError("node <%s> has more than one %stransition without condition"
+                                            % (node.iri, kind))
             if node.kind == "task":
                 task_node_index[node.iri] = (proc_iri, node)  # type: ignore[index]
         starts = [s for s in g.objects(proc_iri, PROC.startNode)]

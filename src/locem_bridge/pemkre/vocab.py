@@ -78,6 +78,7 @@ class PROC(DefinedNamespace):
     nodeOf: URIRef
     onDetail: URIRef
     onStatus: URIRef
+    onTaskFailure: URIRef
     optionName: URIRef
     optionProperty: URIRef
     outgoing: URIRef
@@ -165,6 +166,7 @@ class PLB(DefinedNamespace):
     GetToolTask: URIRef
     GoHomeTask: URIRef
     ManualTapingTask: URIRef
+    RecoverTask: URIRef
     SandAreaTask: URIRef
     SandingProcess: URIRef
     ScanTask: URIRef
@@ -211,6 +213,7 @@ class PLB(DefinedNamespace):
     sanding_goHomeEarly: URIRef
     sanding_loop: URIRef
     sanding_morePending: URIRef
+    sanding_recover: URIRef
     sanding_sand: URIRef
     sanding_scan: URIRef
     sanding_start: URIRef
@@ -227,6 +230,8 @@ class PLB(DefinedNamespace):
     sanding_t11: URIRef
     sanding_t12: URIRef
     sanding_t13: URIRef
+    sanding_t14: URIRef
+    sanding_t15: URIRef
     spraying_afterScan: URIRef
     spraying_anyPending: URIRef
     spraying_end: URIRef
@@ -236,6 +241,7 @@ class PLB(DefinedNamespace):
     spraying_goHomeEarly: URIRef
     spraying_loop: URIRef
     spraying_morePending: URIRef
+    spraying_recover: URIRef
     spraying_scan: URIRef
     spraying_spray: URIRef
     spraying_start: URIRef
@@ -252,6 +258,8 @@ class PLB(DefinedNamespace):
     spraying_t11: URIRef
     spraying_t12: URIRef
     spraying_t13: URIRef
+    spraying_t14: URIRef
+    spraying_t15: URIRef
     taping_afterScan: URIRef
     taping_anyPending: URIRef
     taping_end: URIRef

@@ -8,6 +8,9 @@ publisher, 50 Hz         ``odom`` + TF ``odom -> base_link``         ``nav_msgs/
 subscriber               ``cmd_vel``                                 ``geometry_msgs/Twist`` (base, open loop,
                                                                      held ``~cmd_vel_hold`` s, ignored while a
                                                                      GOTO runs)
+subscriber (optional)    ``~localisation_topic`` of the LOCEM node   ``geometry_msgs/PoseWithCovarianceStamped``
+                                                                     in map (AMCL, the simulator): taken as the
+                                                                     odometry pose while the base stands still
 publisher, 1 Hz          ``/diagnostics``                            ``diagnostic_msgs/DiagnosticArray``
 publisher, on change     ``~status`` (the LOCEM node's)              ``locem_bridge/Status`` with
 and every 2 s                                                        ``name = HEALTH``, ``interface = health``,
@@ -49,13 +52,15 @@ class LocemDevices:
     """Publishes the state and health of a :class:`locem_bridge.bridges.robot.Robot`; forwards ``cmd_vel``."""
 
     def __init__(self, robot: Any, health_source: Any, rate: float = 50.0, odom_frame: str = "odom",
-                 base_frame: str = "base_link", cmd_vel_hold: float = 0.5) -> None:
+                 base_frame: str = "base_link", cmd_vel_hold: float = 0.5, localisation_topic: str = "") -> None:
         self.robot = robot
         self.health_source = health_source      # callable -> {backend: health}
         self.rate = rate
         self.odom_frame = odom_frame
         self.base_frame = base_frame
         self.cmd_vel_hold = cmd_vel_hold
+        self.localisation_topic = localisation_topic   # PoseWithCovarianceStamped in map (AMCL, the simulator)
+        self.fixes_taken = 0
         self._last_health: Optional[str] = None
         self._last_health_stamp = 0.0
         self.health_repeat = 2.0          # s, a late subscriber hears the health within this time
@@ -73,6 +78,10 @@ class LocemDevices:
             self._odom_pub = rospy.Publisher("odom", Odometry, queue_size=10)
             self._tf = tf2_ros.TransformBroadcaster()
             self._cmd_sub = rospy.Subscriber("cmd_vel", Twist, self._on_cmd_vel, queue_size=10)
+            if self.localisation_topic and hasattr(base, "correct_pose"):
+                from geometry_msgs.msg import PoseWithCovarianceStamped
+                self._loc_sub = rospy.Subscriber(self.localisation_topic, PoseWithCovarianceStamped,
+                                                 self._on_localisation, queue_size=1)
         self._timers.append(rospy.Timer(rospy.Duration(1.0 / self.rate), self._publish_state))
         self._timers.append(rospy.Timer(rospy.Duration(1.0), self._publish_diagnostics))
         self._timers.append(rospy.Timer(rospy.Duration(0.1), self._publish_health))
@@ -114,6 +123,12 @@ class LocemDevices:
             tf.transform.translation.x, tf.transform.translation.y = x, y
             tf.transform.rotation = _quat_z(yaw)
             self._tf.sendTransform(tf)
+
+    def _on_localisation(self, msg: Any) -> None:
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        if self.robot.get("base").correct_pose(p.x, p.y, yaw):
+            self.fixes_taken += 1
 
     def _on_cmd_vel(self, msg: Any) -> None:
         base = self.robot.get("base")

@@ -225,7 +225,8 @@ def main() -> None:
         for command_set in robot.command_sets:
             core.install(command_set)
         robot.start()
-        devices = LocemDevices(robot, core.dispatcher.health)
+        devices = LocemDevices(robot, core.dispatcher.health,
+                               localisation_topic=str(rospy.get_param("~localisation_topic", "") or ""))
     node = LocemNode(core)
     node.start()
     if devices is not None:

@@ -81,7 +81,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         assert proc.stdout is not None
         for raw in proc.stdout:
             line = re.sub(r"\x1b\[[0-9;]*m", "", raw.rstrip())
-            if args.verbose or PROGRESS.match(line) or "REQUIRED process" in line or "ERROR" in line:
+            ended_normally = bool(report) and "REQUIRED process" in line   # the job node ends the launch
+            if args.verbose or PROGRESS.match(line) or (("REQUIRED process" in line or "ERROR" in line)
+                                                        and not ended_normally):
                 print(line, flush=True)
             found = re.match(r"^\[job\] report: (.+)$", line)
             if found:

@@ -17,11 +17,16 @@ service             args (JSON object)                                     resul
 ``~save_outcome``   ``{"folder": "/abs/path"}``                            numbers + picture file names
 ==================  =====================================================  ======================================
 
+Topic ``~localisation`` (``geometry_msgs/PoseWithCovarianceStamped``, map frame, 5 Hz): the localisation a real
+robot gets from AMCL or similar, here the true pose with ``~localisation_noise`` (default 0.002 m / rad) of
+Gaussian noise; LOCEM takes it as its odometry pose while the base stands still (``localisation_topic``).
 Topic ``~ground_truth/base_pose`` (``geometry_msgs/Pose2D``, map frame, 20 Hz): the simulator's true base pose,
 for tests and for the HMI; nothing in the control path reads it.
 """
 
 import json
+import math
+import random
 from typing import Any, Callable, Dict
 
 import rospy
@@ -54,6 +59,12 @@ class SimNode:
             self._services.append(rospy.Service("~" + name, JsonCall, _serve(name, operation)))
         self._pose_pub = rospy.Publisher("~ground_truth/base_pose", Pose2D, queue_size=1)
         self._timer = rospy.Timer(rospy.Duration(0.05), self._publish_pose)
+        from geometry_msgs.msg import PoseWithCovarianceStamped
+        self._loc_msg = PoseWithCovarianceStamped
+        self._loc_pub = rospy.Publisher("~localisation", PoseWithCovarianceStamped, queue_size=1)
+        self._loc_noise = float(rospy.get_param("~localisation_noise", 0.002))
+        self._loc_rng = random.Random(1)
+        self._loc_timer = rospy.Timer(rospy.Duration(0.2), self._publish_localisation)
 
     def _publish_pose(self, _event: Any) -> None:
         world = self.worksite.world
@@ -62,8 +73,29 @@ class SimNode:
         x, y, yaw = world.base_pose()
         self._pose_pub.publish(Pose2D(x, y, yaw))
 
+    def _publish_localisation(self, _event: Any) -> None:
+        """A localisation stand-in (what AMCL gives on the robot): the true pose with Gaussian noise of
+        ``~localisation_noise`` (m in x and y, rad in yaw), 5 Hz, map frame."""
+        world = self.worksite.world
+        if world is None:
+            return
+        x, y, yaw = world.base_pose()
+        s = self._loc_noise
+        yaw += self._loc_rng.gauss(0.0, s) if s > 0 else 0.0
+        msg = self._loc_msg()
+        msg.header.stamp = rospy.Time.now()
+        msg.header.frame_id = "map"
+        msg.pose.pose.position.x = x + (self._loc_rng.gauss(0.0, s) if s > 0 else 0.0)
+        msg.pose.pose.position.y = y + (self._loc_rng.gauss(0.0, s) if s > 0 else 0.0)
+        msg.pose.pose.orientation.z = math.sin(yaw / 2.0)
+        msg.pose.pose.orientation.w = math.cos(yaw / 2.0)
+        msg.pose.covariance[0] = msg.pose.covariance[7] = s * s
+        msg.pose.covariance[35] = s * s
+        self._loc_pub.publish(msg)
+
     def shutdown(self) -> None:
         self._timer.shutdown()
+        self._loc_timer.shutdown()
         for service in self._services:
             service.shutdown("sim_worksite shutting down")
         self.worksite.stop()

@@ -32,6 +32,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument("--no-ur", action="store_true", help="run without the UR controller stand-in")
     ap.add_argument("--base-pose", type=float, nargs=3, metavar=("X", "Y", "YAW"),
                     help="start pose of the base in map (overrides robot_start)")
+    ap.add_argument("--arm-pose", help="named arm pose (robot.arm.named_poses) the arm starts in (default: home)")
     ap.add_argument("--mount-tool", choices=("taping_tool", "spray_gun", "sander"),
                     help="tool the operator has mounted before the start")
     ap.add_argument("--results", help="folder for outcome.json and the wall pictures, written on exit")
@@ -48,7 +49,7 @@ def main(argv: Optional[List[str]] = None) -> int:
             site["site"]["robot_start"] = list(args.base_pose)
         ws = Worksite(site, robot, host=args.host, modbus_port=args.modbus_port, can_interface=args.can_interface,
                       can_channel=args.can_channel, can_port=args.can_port, time_scale=args.time_scale,
-                      gui=True if args.gui else None, with_ur=not args.no_ur)
+                      gui=True if args.gui else None, with_ur=not args.no_ur, arm_pose=args.arm_pose)
         endpoints = ws.start()
     except (SimError, OSError) as exc:
         print("worksite: cannot start: %s" % exc, file=sys.stderr)

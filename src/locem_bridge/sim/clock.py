@@ -2,7 +2,7 @@
 
 Models (pressure, drives, base, arm motion) advance on :meth:`SimClock.now`; protocol streams (TPDOs,
 heartbeats, RTDE, Modbus answers) keep wall-clock rates: they are the devices' real-time behaviour, and the
-clients' timeouts (e.g. the base bridge's 1.5 x 100 ms heartbeat consumer) are wall-clock facts of the real robot
+clients' timeouts (e.g. the base bridge's 2 x 100 ms heartbeat consumer) are wall-clock facts of the real robot
 (docs/protocol_notes.md, "Time scale and the bus"). ``time_scale = 1.0`` is hardware-like. The scale can
 be changed while running; sim time stays continuous. Thread-safe.
 """

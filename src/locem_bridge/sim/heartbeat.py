@@ -4,7 +4,7 @@ Why a process: a real drive's heartbeat comes from its communication stack, on t
 does. In the simulator the drives share one Python interpreter with PyBullet, the UR controller stand-in and the
 Modbus server; on a loaded 2-core machine a heartbeat thread there waits for the GIL behind a thread the OS has
 preempted, and heartbeats measured 149 ms apart at the producer (against a 100 ms producer time and the base
-bridge's 150 ms consumer timeout; see docs/protocol_notes.md). The helper process holds nothing but the
+bridge's consumer timeout (150 ms then, 200 ms now); see docs/protocol_notes.md). The helper process holds nothing but the
 heartbeat timers, so it is scheduled as soon as a timer is due.
 
 Semantics are unchanged: canopen's ``NmtSlave`` still decides when the heartbeat starts (boot-up -> PRE-OPERATIONAL,

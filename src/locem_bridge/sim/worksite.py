@@ -7,7 +7,7 @@ endpoints) -> :meth:`stop` (reverse order, idempotent). Overrides change address
 ``host`` (one loopback address for the UR stand-in and the Modbus server, e.g. ``127.0.0.2`` for a second
 robot), ``modbus_port``, ``can_interface``, ``can_channel``, ``can_port``, ``time_scale``, ``gui``, ``with_ur``,
 ``heartbeat_process`` (drive heartbeats from a helper process; default: on ``udp_multicast``/``socketcan``, see
-:mod:`.heartbeat`).
+:mod:`.heartbeat`), ``arm_pose`` (named pose the arm starts in; default ``home``).
 
 Operator calls (tools are changed by a person on the real site): :meth:`mount_tool`, :meth:`remove_tool`,
 :meth:`mark_manual_taping`. Perception: :meth:`scan`. Results: :meth:`outcome` (numbers) and
@@ -26,7 +26,7 @@ from .clock import SimClock
 from .compressor import CompressorModel
 from .config import load_robot, load_site, resolve_relative
 from .drives import DriveSet
-from .errors import DeviceStandInError, SimStateError
+from .errors import DeviceStandInError, SimConfigError, SimStateError
 from .modbus_server import CompressorServer
 from .world import World, resolve_arm_urdf
 
@@ -41,7 +41,7 @@ class Worksite:
                  can_channel: Optional[str] = None, can_port: Optional[int] = None,
                  time_scale: Optional[float] = None, gui: Optional[bool] = None, with_ur: bool = True,
                  ur_ports: Optional[Dict[str, int]] = None, protective_stop_on_collision: bool = True,
-                 heartbeat_process: Optional[bool] = None) -> None:
+                 heartbeat_process: Optional[bool] = None, arm_pose: Optional[str] = None) -> None:
         self.site_cfg = copy.deepcopy(site_cfg if site_cfg is not None else load_site())
         self.robot_cfg = copy.deepcopy(robot_cfg if robot_cfg is not None else load_robot())
         robot = self.robot_cfg["robot"]
@@ -66,6 +66,11 @@ class Worksite:
         self.ur_ports = ur_ports
         self.protective_stop_on_collision = protective_stop_on_collision
         self.heartbeat_process = heartbeat_process
+        poses = robot["arm"]["named_poses"]
+        if arm_pose is not None and arm_pose not in poses:
+            raise SimConfigError("arm_pose %r is not a named pose of robot.arm.named_poses, allowed: %s"
+                                 % (arm_pose, ", ".join(sorted(poses))))
+        self.arm_pose = arm_pose
         self.clock: Optional[SimClock] = None
         self.compressor: Optional[CompressorModel] = None
         self.modbus: Optional[CompressorServer] = None
@@ -89,11 +94,12 @@ class Worksite:
             self.modbus.start()
             dcfg = robot["base"]["drives"]
             eds = resolve_relative(self.robot_cfg, robot["base"]["eds"])
-            self.drives = DriveSet(dcfg, eds, self.clock.now, max_wheel_speed=robot["base"]["limits"]["max_wheel_speed"],
+            self.drives = DriveSet(dcfg, eds, self.clock.now,
+                                   max_wheel_speed=robot["base"]["limits"]["max_wheel_speed"],
                                    heartbeat_process=self.heartbeat_process)
             self.drives.start()
             arm_cfg = robot["arm"]
-            q0 = arm_cfg["named_poses"].get("home", [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
+            q0 = arm_cfg["named_poses"].get(self.arm_pose or "home", [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
             if self.with_ur:
                 self.ur = self._make_ur(arm_cfg, q0, sim["time_scale"])
                 self.ur.start()

@@ -56,8 +56,18 @@ class JobHicemKillTest(unittest.TestCase):
         if cls.new_pid is None:      # fail fast: without a new HICEM the job only ends at its process_timeout
             raise AssertionError("no new /hicem within 40 s of kill -9 of pid %d (respawn missing on the hicem "
                                  "node of launch/hicem.launch?)" % cls.old_pid)
-        cls.resumed = cls.timeline.wait_for(lambda s: s["process"] == TAPING and s["phase"] == "resuming",
-                                            timeout=40.0)
+        # the new HICEM's first states may be published before this node has reconnected to it (the topic is
+        # latched: the reconnection then delivers only the latest one), so "resumed" is any state of the same
+        # specific taping process that arrives after the kill, by the new node
+        specific = cls.killed_in.get("specific_process")
+
+        def resumed():
+            for t, st in cls.timeline.timed():
+                if (t > cls.t_kill and st["process"] == TAPING and st.get("specific_process") == specific
+                        and st["phase"] not in ("idle",)):
+                    return st
+            return None
+        cls.resumed = wait_until(resumed, timeout=60.0, period=0.1)
         cls.taping_end = cls.timeline.wait_for(lambda s: s["process"] == TAPING and s["phase"] in TERMINAL,
                                                timeout=600.0)
         cls.line_states = {r["state"].split("#")[-1]: int(r["lines"]) for r in pemkre_rows("feature_counts")}

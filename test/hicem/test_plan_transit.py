@@ -1,0 +1,40 @@
+"""PlanTransit: large turns are made at the transit point, not next to a wall (DriveSafely / DriveToWall)."""
+import math
+
+import pytest
+from py_trees.common import Status
+
+from test_nodes import Rig
+
+CFG = {"cfg.site.locations": {"home": [1.4, 1.4, 0.7854]}, "cfg.site.max_turn_near_walls": 0.5}
+BODY = '<PlanTransit here="{here}" goal="{goal}" transit="{@cfg.site.locations.home}" waypoints="{w}"/>'
+
+
+def plan(here, goal, rig=None):
+    rig = rig or Rig(BODY, cfg=CFG)
+    rig.bb.set("here", here)
+    rig.bb.set("goal", goal)
+    status = rig.tree.tick()
+    return status, (rig.bb.get("w") if status == Status.SUCCESS else None)
+
+
+def test_a_small_turn_goes_straight_to_the_goal():
+    status, w = plan([0.6, 1.7, 1.5708], [1.2, 1.7, 1.5708 + 0.3])
+    assert status == Status.SUCCESS and w == [[1.2, 1.7, 1.5708 + 0.3]]
+
+
+def test_a_large_turn_is_made_at_the_transit_point_and_get_pose_results_are_read():
+    # from the last section of wall_1 to the first of wall_2: a quarter turn next to the corner
+    status, w = plan({"pose": [2.4, 1.7, math.pi / 2], "twist": [0, 0, 0]}, [1.7, 2.4, 0.0])
+    assert status == Status.SUCCESS
+    assert w == [[1.4, 1.4, math.pi / 2], [1.4, 1.4, 0.0], [1.7, 2.4, 0.0]]
+    # going home (the goal is the transit point): out keeping the heading, then the turn there, nothing twice
+    status, w = plan([2.4, 1.7, math.pi / 2], [1.4, 1.4, 0.7854])
+    assert w == [[1.4, 1.4, math.pi / 2], [1.4, 1.4, 0.7854]]
+
+
+def test_bad_poses_are_refused_with_what_was_given():
+    rig = Rig(BODY, cfg=CFG)
+    status, _ = plan([1.0, 2.0], [1.0, 2.0, 0.0], rig)       # the port error is the action's failure reason
+    assert status == Status.FAILURE and "here and goal must be [x, y, theta]" in rig.reason()
+    assert "got [1.0, 2.0]" in rig.reason()
