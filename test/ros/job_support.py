@@ -1,5 +1,4 @@
-"""Shared helpers of the job rostest suites (``test/ros/job_*.test`` and, until the full job completes,
-``test/ros/pending/job_*.test``).
+"""Shared helpers of the job rostest suites (``test/ros/job_*.test``).
 
 Each suite includes the REAL ``launch/plasterboard.launch`` (sim worksite, LOCEM with its bridges, PEMKRE,
 HICEM, operator_hmi, the job node) and adds one test node. The .test file gives the test node the launch's

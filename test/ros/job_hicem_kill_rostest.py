@@ -14,7 +14,7 @@ import time
 import unittest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:0] = [d for d in (HERE, os.path.dirname(HERE)) if os.path.exists(os.path.join(d, "job_support.py"))]
+sys.path[:0] = [HERE]
 
 import rostest  # noqa: E402
 
