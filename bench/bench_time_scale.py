@@ -48,7 +48,7 @@ ROOT = os.path.dirname(HERE)
 SRC = os.path.join(ROOT, "src")
 sys.path.insert(0, SRC)
 
-CLK = os.sysconf("SC_CLK_TCK")
+from bench_worksite import CLK, cpu_seconds, free_address  # noqa: E402  (same folder: UR address, /proc CPU)
 ROBOT_YAML = os.path.join(ROOT, "config", "robots", "rbkairos_ur10e.yaml")
 SITE_YAML = os.path.join(ROOT, "config", "sites", "default.yaml")
 
@@ -57,27 +57,6 @@ def free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def free_address():
-    third = 1 + (os.getpid() + random.randint(0, 200)) % 250
-    for last in range(1, 250):
-        addr = "127.64.%d.%d" % (third, last)
-        try:
-            for port in (29999, 30003, 30004):
-                with socket.socket() as s:
-                    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-                    s.bind((addr, port))
-            return addr
-        except OSError:
-            continue
-    raise RuntimeError("no free loopback address")
-
-
-def cpu_seconds(pid):
-    with open("/proc/%d/stat" % pid) as fh:
-        fields = fh.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / CLK
 
 
 # ----------------------------------------------------------------------------------------------------- probes
