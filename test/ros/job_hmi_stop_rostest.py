@@ -8,9 +8,10 @@ arm and base still within 200 ms of sim time and still from then on, the spray v
 HICEM ends the taping process "stopped" with the operator's reason, the page shows it; report.json records the
 taping process as stopped and nothing after it as succeeded.
 
-The job ends after a stopped process (it writes its report, then the launch shuts down within seconds), so the
-live devices and the page are read right after the stop; arm and base are judged from the probe's samples over
-OBSERVE_WALL_S (or until a later process starts, should a job go on after a stop). Sim time = wall time x time_scale (the .test runs at time_scale 1, where
+The job ends after a stopped process and writes its report; the .test keeps the other nodes up after that
+(end_with_job false), so the test, not the job's exit, ends the launch. The live devices and the page are read
+right after the stop; arm and base are judged from the probe's samples over OBSERVE_WALL_S (or until a later
+process starts, should a job go on after a stop). Sim time = wall time x time_scale (the .test runs at time_scale 1, where
 the software path page -> HMI -> HICEM -> LOCEM -> devices is not compressed 5x against the sim clock).
 """
 import sys
@@ -60,8 +61,7 @@ class JobHmiStopTest(unittest.TestCase):
         cls.t_stop = time.monotonic()
         cls.stop_answer = cls.hmi.stop()
         cls.t_answer = time.monotonic()
-        # The job ends after a stopped process (it writes its report and the launch shuts down within a few
-        # seconds): everything that needs a live device or page is read now, the rest from recorded samples.
+        # Everything that needs a live device or page is read now, the rest from recorded samples.
         time.sleep(max(0.3, 2.5 * LIMIT_SIM_S / cls.scale))
         cls.outputs_after = cls.probe.tool_outputs()
         cls.valve_open_after = cls.probe.spray_valve_open()
