@@ -176,3 +176,27 @@ def test_a_fix_replaces_the_drifted_odometry_pose_only_while_standing_still(rig,
     assert done.wait(20.0)
     gx, gy, _ = r_.world.base_pose()
     assert abs(gx - (x + 0.4)) < 0.03 and abs(gy - y) < 0.03   # the GOTO was not thrown off by the refused fix
+
+
+def test_fixes_while_standing_still_are_averaged_and_a_move_starts_afresh(rig, core):
+    import random
+    r_, base = rig
+    x, y, th = r_.world.base_pose()
+    base.set_pose(x + 0.03, y - 0.02, th + 0.01)
+    rnd = random.Random(7)
+    fixes = [(x + rnd.gauss(0, 0.002), y + rnd.gauss(0, 0.002), th + rnd.gauss(0, 0.002)) for _ in range(14)]
+    assert base.correct_pose(*fixes[0])
+    assert base.pose() == pytest.approx(list(fixes[0]), abs=1e-12)          # the first fix replaces the drift
+    for f in fixes[1:]:
+        assert base.correct_pose(*f)
+    window = fixes[-base.fix_window:]                                         # then: the mean of the last 10
+    mean = [sum(f[i] for f in window) / len(window) for i in range(3)]
+    assert base.pose() == pytest.approx(mean, abs=1e-6)
+    assert math.hypot(base.pose()[0] - x, base.pose()[1] - y) < 0.002       # closer than one fix's 2 mm sigma
+    # a move clears the fixes: the first fix after it replaces the pose again, nothing from before is averaged in
+    moved = run(core, "MOVE_BASE_REL 0.1 0 0")
+    assert moved.success, moved
+    assert wait_until(lambda: math.hypot(*base.twist()[:2]) < 0.001, timeout=5.0)
+    x2, y2, th2 = r_.world.base_pose()
+    assert base.correct_pose(x2, y2, th2)
+    assert base.pose() == pytest.approx([x2, y2, th2], abs=1e-12)

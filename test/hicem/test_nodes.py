@@ -35,7 +35,8 @@ class Rig:
         bb = Blackboard()
         bb.update({"cfg.locem.command_timeout_s": 10.0, "cfg.tools": ["taping_tool", "spray_gun"],
                    "cfg.taping.base_standoff": 0.8, "cfg.taping.lateral_offset": 0.1,
-                   "cfg.taping.yaw_offset": 0.0, "cfg.taping.surface_offset": 0.01})
+                   "cfg.taping.yaw_offset": 0.0, "cfg.taping.surface_offset": 0.01,
+                   "cfg.taping.plumb_tolerance": 0.02})
         bb.update(cfg or {})
         self.tree = lib.build("T", self.ctx, bb)
         self.bb = bb
@@ -169,6 +170,50 @@ def test_get_tape_path_offsets_along_normal():
     assert rig.bb.get("s") == pytest.approx([1.2, 2.99, 0.0])
     assert rig.bb.get("e") == pytest.approx([1.2, 2.99, 2.5])
     assert rig.bb.get("n") == pytest.approx([0, -1, 0]) and rig.bb.get("l") == pytest.approx(2.5)
+
+
+def _scanned(joint_id, start, end):
+    """SITE as a scan that measured ``joint_id`` with the given ends."""
+    import copy
+    site = copy.deepcopy(SITE)
+    j = next(j for j in site["joints"] if j["id"] == joint_id)
+    j["start"], j["end"] = list(start), list(end)
+    site["stamp"] = 2.0
+    return site
+
+
+def test_tape_path_straightens_a_nearly_plumb_joint_through_the_mean_of_its_ends():
+    # the scanner put the foot of wall_1_joint_1 13 mm and the top 1 mm to the right of x = 1.2: the path is
+    # plumb at their mean (7 mm), not a line leaning out of a 15 mm band at the foot
+    body = ('<Sequence><GetTapePath line_id="wall_1_joint_1" path_start="{s}" path_end="{e}" normal="{n}" '
+            'length="{l}"/><GetTapingPosition line_id="wall_1_joint_1" approach_pose="{p}" '
+            'lateral_offset="0"/></Sequence>')
+    rig = Rig(body)
+    rig.hdh.ingest_scan(_scanned("wall_1_joint_1", [1.213, 3.0, 0.0], [1.201, 3.0, 2.5]))
+    assert rig.tree.tick() == S
+    assert rig.bb.get("s") == pytest.approx([1.207, 2.99, 0.0])
+    assert rig.bb.get("e") == pytest.approx([1.207, 2.99, 2.5])
+    assert rig.bb.get("p")[:2] == pytest.approx([1.207, 2.2])
+    # tilted beyond the tolerance (0.1 rad): a real slanted joint, taped as measured
+    rig = Rig(body)
+    rig.hdh.ingest_scan(_scanned("wall_1_joint_1", [1.2, 3.0, 0.0], [1.45, 3.0, 2.5]))
+    assert rig.tree.tick() == S
+    assert rig.bb.get("s") == pytest.approx([1.2, 2.99, 0.0]) and rig.bb.get("e") == pytest.approx([1.45, 2.99, 2.5])
+    # max_tilt 0: every line as measured
+    rig = Rig(body, cfg={"cfg.taping.plumb_tolerance": 0.0})
+    rig.hdh.ingest_scan(_scanned("wall_1_joint_1", [1.213, 3.0, 0.0], [1.201, 3.0, 2.5]))
+    assert rig.tree.tick() == S
+    assert rig.bb.get("s")[0] == pytest.approx(1.213) and rig.bb.get("e")[0] == pytest.approx(1.201)
+
+
+def test_tape_path_levels_a_nearly_level_joint_and_refuses_a_negative_tolerance():
+    rig = Rig('<GetTapePath line_id="wall_2_joint_1" path_start="{s}" path_end="{e}" normal="{n}" length="{l}"/>')
+    rig.hdh.ingest_scan(_scanned("wall_2_joint_1", [4.8, 2.5, 1.21], [4.8, 0.5, 1.196]))
+    assert rig.tree.tick() == S
+    assert rig.bb.get("s")[2] == pytest.approx(1.203) and rig.bb.get("e")[2] == pytest.approx(1.203)
+    bad = Rig('<GetTapePath line_id="wall_2_joint_1" max_tilt="-0.1" path_start="{s}" path_end="{e}" '
+              'normal="{n}" length="{l}"/>')
+    assert bad.tree.tick() == F and "max_tilt must be >= 0 rad, got -0.1" in bad.reason()
 
 
 def test_get_area_raster_sections_cover_the_area():

@@ -67,6 +67,7 @@ class Cia402Base(Base):
         self.lin_accel = need(limits, "linear_acceleration", float, default=0.6, lo=0.01, where=w + ".limits")
         self.ang_accel = need(limits, "angular_acceleration", float, default=1.2, lo=0.01, where=w + ".limits")
         self.rate = need(cfg, "control_rate", float, default=50.0, lo=5.0, hi=1000.0, where=w)
+        self.fix_window = int(need(cfg, "localisation_window", float, default=10.0, lo=1.0, hi=1000.0, where=w))
         self.named_poses = {k: [float(x) for x in v] for k, v in dict(cfg.get("named_poses", {}) or {}).items()}
         self.eds_path = eds_path
         self._bus_given = bus
@@ -81,6 +82,7 @@ class Cia402Base(Base):
         self._open_loop: Optional[Tuple[List[float], float]] = None
         self._goal: Optional[Dict[str, Any]] = None
         self._last_pos: Optional[List[float]] = None
+        self._fixes: List[Tuple[float, float, float]] = []   # localisation fixes taken since the base stopped
         self._last_hb = [0.0] * 4
         self._enabled = False
         self._fault: Optional[str] = None
@@ -348,17 +350,28 @@ class Cia402Base(Base):
     def set_pose(self, x: float, y: float, theta: float) -> None:
         with self._lock:
             self._pose = [float(x), float(y), wrap_angle(float(theta))]
+            self._fixes = []
 
     def correct_pose(self, x: float, y: float, theta: float, still_speed: float = 0.005,
                      still_rate: float = 0.01) -> bool:
-        """A localisation fix (map frame, e.g. AMCL's pose or the simulator's): taken as the odometry pose when
-        the base stands still and runs no GOTO, so wheel odometry drift does not add up over a job; ignored
-        while the base moves (the fix would be late by its latency). Returns whether it was taken."""
+        """A localisation fix (map frame, e.g. AMCL's pose or the simulator's), used while the base stands
+        still and runs no GOTO, so wheel odometry drift does not add up over a job: the first fix after the
+        base stopped replaces the odometry pose, and from then on the pose is the mean of the last
+        ``robot.base.localisation_window`` fixes since it stopped (independent fix noise shrinks with their
+        number instead of jumping the pose by it on every fix: a wall command's targets, computed one after the
+        other, then agree). Ignored while the base moves (the fix would be late by its latency); moving clears
+        the fixes. Returns whether it was taken."""
         with self._lock:
             vx, vy, wz = self._twist
             if self._goal is not None or math.hypot(vx, vy) > still_speed or abs(wz) > still_rate:
+                self._fixes = []
                 return False
-            self._pose = [float(x), float(y), wrap_angle(float(theta))]
+            self._fixes.append((float(x), float(y), float(theta)))
+            del self._fixes[:-self.fix_window]
+            n = float(len(self._fixes))
+            mean_yaw = math.atan2(sum(math.sin(f[2]) for f in self._fixes), sum(math.cos(f[2]) for f in self._fixes))
+            self._pose = [sum(f[0] for f in self._fixes) / n, sum(f[1] for f in self._fixes) / n,
+                          wrap_angle(mean_yaw)]
             return True
 
     def twist(self) -> List[float]:
@@ -374,6 +387,8 @@ class Cia402Base(Base):
         with self._lock:
             if self._goal is None:
                 self._open_loop = ([vx, vy, wz], time.monotonic() + hold)
+                if vx or vy or wz:
+                    self._fixes = []               # the base will move: fixes from before no longer apply
 
     def goto(self, waiter: Waiter, x: float, y: float, theta: float, tolerance: float, angle_tolerance: float,
              speed: float) -> Dict[str, Any]:
@@ -390,6 +405,7 @@ class Cia402Base(Base):
         with self._lock:
             self._goal = goal
             self._open_loop = None
+            self._fixes = []
         waiter.on_cancel(self.halt)
         try:
             while not goal["reached"].is_set():

@@ -15,7 +15,7 @@ command arguments).
 """
 import math
 import re
-from typing import Any, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 from py_trees.common import Status
 
@@ -362,15 +362,40 @@ def _facing(normal: List[float], yaw_offset: float) -> float:
     return _norm_angle(math.atan2(-normal[1], -normal[0]) + yaw_offset)
 
 
+def _joint_ends(j: Dict[str, Any], max_tilt: float) -> Tuple[List[float], List[float]]:
+    """Start and end of a stored joint as the robot tapes it. Plasterboard joints are plumb (vertical joints) or
+    level (horizontal ones): a vertical joint measured within ``max_tilt`` rad of plumb is taped plumb through
+    the mean horizontal position of its two ends, a horizontal one within ``max_tilt`` of level at their mean
+    height. The scanner's independent errors on the two ends then neither tilt the tape path nor add up at one
+    end (the mean halves their variance); a joint tilted more than ``max_tilt`` is taped as measured, and
+    ``max_tilt`` 0 keeps every measured line."""
+    start, end = [float(v) for v in j["start"]], [float(v) for v in j["end"]]
+    if max_tilt < 0.0:
+        raise PortError("max_tilt must be >= 0 rad, got %g" % max_tilt)
+    horizontal = math.hypot(end[0] - start[0], end[1] - start[1])
+    rise = abs(end[2] - start[2])
+    if j.get("kind") == "vertical" and math.atan2(horizontal, rise) <= max_tilt and max_tilt > 0.0:
+        mx, my = (start[0] + end[0]) / 2.0, (start[1] + end[1]) / 2.0
+        return [mx, my, start[2]], [mx, my, end[2]]
+    if j.get("kind") == "horizontal" and math.atan2(rise, horizontal) <= max_tilt and max_tilt > 0.0:
+        mz = (start[2] + end[2]) / 2.0
+        return [start[0], start[1], mz], [end[0], end[1], mz]
+    return start, end
+
+
 class GetTapingPosition(Leaf):
     DESCRIPTION = ("Approach pose [x, y, theta] (map frame) of the base for taping a joint line: in front of the "
-                   "line's foot (vertical) or middle (horizontal), standoff from the wall along its normal, "
+                   "line's foot (vertical) or middle (horizontal) as straightened within max_tilt, standoff from "
+                   "the wall along its normal, "
                    "shifted along the wall by lateral_offset, facing the wall plus yaw_offset.")
     PORTS = (
         input_port("line_id", STRING, None, "", "stored joint id"),
         input_port("standoff", FLOAT, "{@cfg.taping.base_standoff}", "m", "base centre distance from the wall"),
         input_port("lateral_offset", FLOAT, "{@cfg.taping.lateral_offset}", "m", "shift along the wall"),
         input_port("yaw_offset", FLOAT, "{@cfg.taping.yaw_offset}", "rad", "added to the wall-facing heading"),
+        input_port("max_tilt", FLOAT, "{@cfg.taping.plumb_tolerance}", "rad",
+                   "a vertical joint within this angle of plumb (a horizontal one of level) is taped plumb (level) "
+                   "through the mean of its ends; 0: as measured"),
         output_port("approach_pose", FLOAT_LIST, None, "m, m, rad", "x y theta for GOTO"),
     )
 
@@ -378,10 +403,11 @@ class GetTapingPosition(Leaf):
         hdh = self.ctx.require("data_handler", self.name)
         j = hdh.feature(self.get("line_id"), "joint")
         t, nrm = _wall_frame(hdh, j["wall"])
+        start, end = _joint_ends(j, self.get("max_tilt"))
         if j["kind"] == "vertical":
-            fx, fy = j["start"][0], j["start"][1]
+            fx, fy = start[0], start[1]
         else:
-            fx, fy = (j["start"][0] + j["end"][0]) / 2.0, (j["start"][1] + j["end"][1]) / 2.0
+            fx, fy = (start[0] + end[0]) / 2.0, (start[1] + end[1]) / 2.0
         nxy = math.hypot(nrm[0], nrm[1])
         if nxy < 1e-9:
             return self.fail("wall '%s' normal has no horizontal part" % j["wall"])
@@ -393,11 +419,15 @@ class GetTapingPosition(Leaf):
 
 
 class GetTapePath(Leaf):
-    DESCRIPTION = ("Tape path of a joint line in the map frame: start and end points moved off the wall by "
-                   "surface_offset along the wall normal, the normal itself and the length.")
+    DESCRIPTION = ("Tape path of a joint line in the map frame: start and end points (straightened to plumb or "
+                   "level within max_tilt) moved off the wall by surface_offset along the wall normal, the normal "
+                   "itself and the length.")
     PORTS = (
         input_port("line_id", STRING, None, "", "stored joint id"),
         input_port("surface_offset", FLOAT, "{@cfg.taping.surface_offset}", "m", "tool point off the wall"),
+        input_port("max_tilt", FLOAT, "{@cfg.taping.plumb_tolerance}", "rad",
+                   "a vertical joint within this angle of plumb (a horizontal one of level) is taped plumb (level) "
+                   "through the mean of its ends; 0: as measured"),
         output_port("path_start", FLOAT_LIST, None, "m", "x y z"),
         output_port("path_end", FLOAT_LIST, None, "m", "x y z"),
         output_port("normal", FLOAT_LIST, None, "", "inward wall normal nx ny nz"),
@@ -409,8 +439,9 @@ class GetTapePath(Leaf):
         j = hdh.feature(self.get("line_id"), "joint")
         _t, n = _wall_frame(hdh, j["wall"])
         off = self.get("surface_offset")
-        s = [j["start"][i] + n[i] * off for i in range(3)]
-        e = [j["end"][i] + n[i] * off for i in range(3)]
+        start, end = _joint_ends(j, self.get("max_tilt"))
+        s = [start[i] + n[i] * off for i in range(3)]
+        e = [end[i] + n[i] * off for i in range(3)]
         self.set("path_start", s)
         self.set("path_end", e)
         self.set("normal", n)
@@ -437,6 +468,9 @@ class GetTapeSegments(Leaf):
         input_port("lateral_offset", FLOAT, "{@cfg.taping.lateral_offset}", "m", "shift along the wall"),
         input_port("yaw_offset", FLOAT, "{@cfg.taping.yaw_offset}", "rad", "added to the wall-facing heading"),
         input_port("surface_offset", FLOAT, "{@cfg.taping.surface_offset}", "m", "tool point off the wall"),
+        input_port("max_tilt", FLOAT, "{@cfg.taping.plumb_tolerance}", "rad",
+                   "a vertical joint within this angle of plumb (a horizontal one of level) is taped plumb (level) "
+                   "through the mean of its ends; 0: as measured"),
         output_port("segments", JSON, None, "", "list of {approach, start, end, normal, length}"),
         output_port("count", INT, None, "", "number of pieces"),
         output_port("skipped", FLOAT, None, "m", "joint length outside the reachable band (not taped)"),
@@ -458,7 +492,7 @@ class GetTapeSegments(Leaf):
         nx, ny = nrm[0] / nxy, nrm[1] / nxy
         d, lat, off = self.get("standoff"), self.get("lateral_offset"), self.get("surface_offset")
         heading = _facing([nx, ny], self.get("yaw_offset"))
-        start, end = [float(v) for v in j["start"]], [float(v) for v in j["end"]]
+        start, end = _joint_ends(j, self.get("max_tilt"))
         total = math.dist(start, end)
         pieces = []  # (a, b, foot) in map, before the surface offset
         if j["kind"] == "vertical":

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""rostest (PENDING: move to test/ros/ once the full job completes): validate_lines true, the automatic operator
+"""rostest: validate_lines true, the automatic operator
 rejects one joint (reject_lines): that joint goes to manual taping and is manual in the report, every other joint
 is taped by the robot, every joint was validated once, and the interventions add up."""
 import os
@@ -7,7 +7,7 @@ import sys
 import unittest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:0] = [HERE, os.path.dirname(HERE)]   # job_support.py lives in test/ros
+sys.path[:0] = [HERE]                          # job_support.py lives beside this file
 
 import rostest  # noqa: E402
 

@@ -1,6 +1,5 @@
 #!/usr/bin/env python3
-"""rostest (PENDING: move to test/ros/ once the full job completes and hicem respawns in plasterboard.launch):
-``kill -9`` of the HICEM node while it tapes a joint (the second TAPE_LINE, arm moving).
+"""rostest: ``kill -9`` of the HICEM node while it tapes a joint (the second TAPE_LINE, arm moving).
 
 Checked: roslaunch starts a new HICEM (another pid) that resumes the interrupted taping process from its HDICT
 (phase ``resuming``); the job completes; no joint is taped twice: PEMKRE records every joint taped exactly once
@@ -14,7 +13,7 @@ import time
 import unittest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:0] = [HERE, os.path.dirname(HERE)]   # job_support.py lives in test/ros
+sys.path[:0] = [HERE]                          # job_support.py lives beside this file
 
 import rostest  # noqa: E402
 
