@@ -34,6 +34,8 @@ SITE = {
                "width": 4.8, "height": 2.5}],
 }
 
+# keyword arguments that take a word (LOCEM's Arg.choice), with the words allowed
+CHOICES = {"contact": ("position", "force")}
 # name -> number of positional numeric args (None = any count of numbers, key=value allowed)
 GRAMMAR = {"SCAN": 0, "HOME": 0, "GET_POSE": 0, "STOP": 0, "WAIT": 1, "STATUS": 0, "GOTO": 3, "MOUNT_TOOL": "word", "MOVE_HOME": "word", "WALL_READY": 0,
            "APPLY_TAPE_START": 9, "APPLY_TAPE": 9, "SPRAY_AREA": 11, "SAND_AREA": 11}
@@ -103,7 +105,11 @@ class LocemDouble(LocemClient):
             return None if len(pos) == 1 else LocemReply(False, "INVALID_ARGUMENT", "%s takes one name" % name)
         if len(pos) != spec:
             return LocemReply(False, "INVALID_ARGUMENT", "%s takes %s arguments, got %d" % (name, spec, len(pos)))
-        for w in pos + [w.split("=", 1)[1] for w in words[1:] if "=" in w]:
+        for key, value in [w.split("=", 1) for w in words[1:] if "=" in w]:
+            if key in CHOICES and value not in CHOICES[key]:
+                return LocemReply(False, "INVALID_ARGUMENT", "%s must be one of %s, got %r" % (
+                    key, "|".join(CHOICES[key]), value))
+        for w in pos + [w.split("=", 1)[1] for w in words[1:] if "=" in w and w.split("=", 1)[0] not in CHOICES]:
             try:
                 float(w)
             except ValueError:

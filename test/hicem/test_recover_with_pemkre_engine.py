@@ -82,9 +82,11 @@ def test_a_spray_area_that_fails_once_is_recovered_and_every_area_ends_sprayed(t
                                     ("SPRAY_AREA", "failed"), ("RECOVER", "succeeded"), ("SPRAY_AREA", "succeeded"),
                                     ("GO_HOME", "succeeded")]
     assert LINK_DOWN in log[3][2] and log[4][2] == "recovered"       # the half-sprayed area is reported
-    # LOCEM saw: area 1 (4 sections), area 2 up to the failure (2), RECOVER, area 2 again (4 sections)
+    # LOCEM saw: area 1 (4 sections), area 2 up to the failure (2), RECOVER, area 2 again from the failed
+    # section on (3): its finished first section is not sprayed a second time
     sprays = [c for c in locem.sent if c.startswith("SPRAY_AREA ")]
-    assert len(sprays) == 4 + 2 + 4
+    assert len(sprays) == 4 + 2 + 3
+    assert sprays[6] == sprays[5] and sprays[4] not in sprays[6:] and len(set(sprays[6:])) == 3
     i_fail = [i for i, c in enumerate(locem.sent) if c.startswith("SPRAY_AREA ")][5]
     after = locem.sent[i_fail + 1:]
     assert after[:6] == ["WALL_READY", "STATUS", "WAIT 1", "STATUS", "WAIT 1", "STATUS"]

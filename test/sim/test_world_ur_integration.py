@@ -68,3 +68,26 @@ def test_arm_collision_with_wall_triggers_protective_stop(site_with_ur, robot_cf
     assert any(part.startswith("arm:") for part, _ in ws.world.in_contact)
     assert _wait(lambda: "PROTECTIVE" in str(ws.ur.get_state()["safety_mode_name"]).upper())
     assert ws.outcome()["collisions"] >= 1
+
+
+def test_the_arm_feels_the_walls_force_reading_and_contact_depth(site_with_ur):
+    """The worksite gives the UR stand-in the world's walls as contact surfaces: a flange pressed 3 mm into
+    wall_1 reads 20 kN/m x 3 mm = 60 N along the wall's normal (UR base axes); 5 mm in front of it, nothing."""
+    ws = site_with_ur
+    wall = next(w for w in ws.world.site.walls if w.id == "wall_1")
+    face = wall.from_wall_coords(2.4, 1.0, 0.0)                     # map point on wall_1's face, 1 m high
+    ws.world.set_base_pose(face[0] + 0.95 * wall.n[0], face[1] + 0.95 * wall.n[1],
+                           math.atan2(-wall.n[1], -wall.n[0]))      # 0.95 m in front, facing the wall
+    normal_in_base = np.subtract(ws.world.map_to_arm_base(face + wall.n), ws.world.map_to_arm_base(face))
+
+    def press(depth):
+        q = ws.world.ik_tcp(face - depth * wall.n, -wall.n, seed=ws.ur.get_joint_positions())
+        ws.ur.set_joint_positions(q)
+        assert _wait(lambda: np.allclose(ws.world.joint_positions(), q, atol=1e-9))
+        return ws.world.wall_contact(ws.ur.get_tcp_pose())
+
+    depth, normal = press(0.003)
+    assert depth == pytest.approx(0.003, abs=2e-4) and np.allclose(normal, normal_in_base, atol=1e-6)
+    assert _wait(lambda: np.allclose(ws.ur.get_tcp_force()[:3], 20000.0 * depth * normal_in_base, atol=1.0))
+    assert press(-0.005) is None                                     # in front of the wall: no contact
+    assert _wait(lambda: np.allclose(ws.ur.get_tcp_force(), 0.0, atol=1e-9))

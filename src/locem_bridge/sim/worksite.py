@@ -108,6 +108,8 @@ class Worksite:
                 self.arm = KinematicArm(q0)
             self.world = World(self.site_cfg, self.robot_cfg, self.clock, arm=self.arm, drives=self.drives,
                                compressor=self.compressor)
+            if self.ur is not None:              # the arm feels the walls (force mode, actual_TCP_force)
+                self.ur.set_contact_provider(self.world.wall_contact)
             if self.ur is not None and self.protective_stop_on_collision:
                 self.world.on_collision.append(self._protective_stop)
             self.world.start()

@@ -279,6 +279,10 @@ class World:
         mount = self.robot["arm"]["mount"]
         mpos, morn = pb.multiplyTransforms(pos, orn, mount["xyz"], pb.getQuaternionFromEuler(mount["rpy"]))
         pb.resetBasePositionAndOrientation(self.arm_body, mpos, morn, physicsClientId=c)
+        # map <- UR controller base (base_link turned by pi about z), read by wall_contact on the UR's thread
+        rot = np.asarray(pb.getMatrixFromQuaternion(morn), dtype=float).reshape(3, 3).dot(
+            np.diag([-1.0, -1.0, 1.0]))
+        self._ur_base_in_map = (rot, np.asarray(mpos, dtype=float))
         for j, qv in zip(self.arm_joints, self._q):
             pb.resetJointState(self.arm_body, j, qv, physicsClientId=c)
         if self.mounted_tool is not None:
@@ -326,6 +330,25 @@ class World:
             pos, orn = pb.getBasePositionAndOrientation(self.arm_body, physicsClientId=self._cid)
             p, q = pb.multiplyTransforms(pos, orn, [0, 0, 0], pb.getQuaternionFromEuler([0, 0, math.pi]))
             return list(p), list(q)
+
+    def wall_contact(self, tcp_pose: Sequence[float]) -> Optional[Tuple[float, List[float]]]:
+        """Contact provider for the UR stand-in (``set_contact_provider``): how deep the TCP (a pose in the UR
+        base frame, as the controller reports it) is inside a wall of the site, and that wall's normal out of
+        the wall (into the room) in the UR base frame; None when the TCP touches no wall. Called on the
+        controller's thread: it reads the robot placement cached by the last world step, no PyBullet call."""
+        placed = getattr(self, "_ur_base_in_map", None)
+        if placed is None:
+            return None
+        rot, origin = placed
+        p = rot.dot(np.asarray(tcp_pose[:3], dtype=float)) + origin
+        best: Optional[Tuple[float, List[float]]] = None
+        for wall in self.site.walls:
+            s, t, d = wall.to_wall_coords(p)
+            if d >= 0.0 or d < -wall.thickness or not (0.0 <= s <= wall.length and 0.0 <= t <= wall.height):
+                continue
+            if best is None or -d > best[0]:
+                best = (-d, rot.T.dot(wall.n).tolist())
+        return best
 
     def tcp_pose(self) -> Tuple[List[float], List[float]]:
         """TCP position and its z axis in map (mounted tool's TCP offset applied)."""

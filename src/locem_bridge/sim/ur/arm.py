@@ -61,6 +61,9 @@ PROTECTIVE_STOP_UNLOCK_DELAY = 5.0
 #: deceleration (rad/s^2) of a category-2 stop (protective stop, program stop)
 SAFETY_STOP_DECELERATION = 20.0
 
+#: outside force mode the contact force reading (actual_TCP_force) is refreshed every this many control cycles
+CONTACT_READING_DIVIDER = 10
+
 # command ids of the ur_rtde control script
 CMD_NONE, CMD_MOVEJ, CMD_MOVEJ_IK, CMD_MOVEL, CMD_MOVEL_FK = 0, 1, 2, 3, 4
 CMD_FORCE_MODE, CMD_FORCE_MODE_STOP = 6, 7
@@ -139,6 +142,7 @@ class ArmCore:
         self.contact_provider: Optional[ContactProvider] = None
         self.contact_stiffness = DEFAULT_STIFFNESS
         self.force: Optional[ForceMode] = None
+        self._contact_cycle = 0
         self.force_offset = np.zeros(3)
         self._q_nom: Optional[np.ndarray] = None
         self.raw_force = np.zeros(3)
@@ -420,7 +424,11 @@ class ArmCore:
                 self.qd = np.zeros(6)
             if self.force is not None and mdt > 0:
                 self._force_step(mdt)
-            if self.contact_provider is not None:
+            self._contact_cycle += 1
+            if self.contact_provider is not None and (self.force is not None or self._contact_cycle
+                                                      % CONTACT_READING_DIVIDER == 0):
+                # every cycle in force mode; otherwise the streamed force reading is refreshed every
+                # CONTACT_READING_DIVIDER-th cycle (50 Hz), which keeps a world provider off the 500 Hz path
                 self.raw_force = contact_force(self.contact_provider, se3_to_pose(self.kin.fk_se3(self.q)),
                                                self.contact_stiffness)
                 self._update_force_values()
