@@ -62,7 +62,7 @@ def test_sand_area_uses_the_sanding_parameters():
     st, locem, *_ = run("SAND_AREA", area="wall_1_area_1")
     assert st == Status.SUCCESS
     sands = [c for c in locem.sent if c.startswith("SAND_AREA")]
-    assert len(sands) == 8 and sands[0].endswith("spacing=0.18 speed=0.35 force=20 contact=position")
+    assert len(sands) == 8 and sands[0].endswith("spacing=0.18 speed=0.35 force=20 contact=force")
 
 
 def test_tape_line_on_a_horizontal_joint():

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
-"""rostest: the whole plasterboard job on the default
-site, validate_lines false, automatic operator; report.json meets every outcome goal of issue 7."""
+"""rostest: the whole plasterboard job on the default site, validate_lines false, automatic operator;
+report.json meets every outcome goal of issue 7, every joint is taped once by the robot, and the sander held
+the set contact force (LOCEM's SAND_AREA results on /locem/status)."""
 import os
 import sys
 import unittest
@@ -10,8 +11,8 @@ sys.path[:0] = [HERE]                          # job_support.py lives beside thi
 
 import rostest  # noqa: E402
 
-from job_support import (SANDING, TAPING, TERMINAL, HicemTimeline, SimCalls, init_test_node,  # noqa: E402
-                         kpi_count, outcome_goal_failures, setting, wait_for_report)
+from job_support import (SANDING, TAPING, TERMINAL, HicemTimeline, LocemResults, SimCalls,  # noqa: E402
+                         init_test_node, kpi_count, outcome_goal_failures, setting, wait_for_report)
 
 PKG = "locem_bridge"
 
@@ -24,6 +25,7 @@ class JobFullTest(unittest.TestCase):
         init_test_node("job_full_test")
         cls.results_dir = setting("results_dir")
         cls.timeline = HicemTimeline()
+        cls.locem = LocemResults()
         cls.sim = SimCalls()
         cls.walls = sorted({a["wall"] for a in cls.sim.call("scan")["areas"]})
         cls.sanding_end = cls.timeline.wait_for(lambda s: s["process"] == SANDING and s["phase"] in TERMINAL,
@@ -47,7 +49,15 @@ class JobFullTest(unittest.TestCase):
         self.assertEqual(kpi_count(self.report, "TAPE_LINE", "failed"), 0)
         self.assertEqual(len([a for a, _t in self.timeline.actions(TAPING) if a == "TAPE_LINE"]), o["joints_total"])
 
-    def test_4_report_files(self):
+    def test_4_sanded_under_force_control(self):
+        # the shipped parameters sand with contact=force at sand.force = 20 N: every section's lanes held it
+        sands = self.locem.of("SAND_AREA")
+        self.assertGreaterEqual(len(sands), 2 * len(self.walls), sands)
+        for r in sands:
+            self.assertEqual(r.get("contact"), "force", r)
+            self.assertTrue(16.0 <= r["force_min_n"] <= r["force_max_n"] <= 24.0, r)
+
+    def test_5_report_files(self):
         folder = os.path.join(self.results_dir, self.report["run"])
         self.assertTrue(os.path.isfile(os.path.join(folder, "report.md")))
         self.assertEqual(sorted(self.report["pictures"]), ["%s.png" % w for w in self.walls])

@@ -43,7 +43,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 import rospy
 from geometry_msgs.msg import Pose2D
 
-from locem_bridge.msg import HicemPrompt, HicemState
+from locem_bridge.msg import HicemPrompt, HicemState, Status as LocemStatus
 from locem_bridge.srv import JsonCall
 
 ONT = "https://locem-bridge.example.org/ont/plasterboard#"
@@ -97,6 +97,29 @@ def wait_until(predicate: Callable[[], Any], timeout: float, period: float = 0.0
 
 
 # ---------------------------------------------------------------------------------------------------- HICEM
+class LocemResults:
+    """Results of the LOCEM commands that succeeded, from /locem/status (name -> list of result objects)."""
+
+    def __init__(self, ns: str = "/locem") -> None:
+        self._lock = threading.Lock()
+        self._results: Dict[str, List[Dict[str, Any]]] = {}
+        self._sub = rospy.Subscriber(ns + "/status", LocemStatus, self._on_status, queue_size=500)
+
+    def _on_status(self, m: Any) -> None:
+        if m.state != "succeeded":
+            return
+        try:
+            result = json.loads(m.result or "{}")
+        except ValueError:
+            result = {"unparsed": m.result}
+        with self._lock:
+            self._results.setdefault(m.name, []).append(result)
+
+    def of(self, name: str) -> List[Dict[str, Any]]:
+        with self._lock:
+            return list(self._results.get(name, []))
+
+
 class HicemTimeline:
     """Records ``/hicem/state`` (latched) and ``/hicem/prompts`` with monotonic arrival times."""
 
