@@ -16,7 +16,8 @@ command with ``HARDWARE_ERROR`` within one second (the valve is closed when the 
 """
 
 import math
-from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence
+import time
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -150,23 +151,64 @@ class LaneSwitch:
     switches the tool's process output on while the TCP is between ``f_on`` and ``f_off`` of the lane ``a -> b``
     (fractions of the straight line, arm base frame), off outside. The arm thus accelerates and brakes with the
     tool off and passes the worked stretch at constant speed: no extra compound or sanding where a lane starts
-    or ends."""
+    or ends.
+
+    Dead time: the TCP sample is already ``age`` old when it is read (the arm's state poll), and the output
+    changes only some time into the switch request (a Modbus write to the compressor, an RTDE output). Without
+    compensation the tool would switch ``speed x dead time`` too late at both ends of the stretch (a few mm at
+    0.5 m/s on hardware; centimetres in a time-scaled simulation, where the arm moves faster in wall time). The
+    decision is therefore taken on the TCP predicted ``age + LATENCY_SHARE x switch duration`` ahead along its
+    measured velocity (both in wall time; the switch duration is a running average of the requests' own
+    durations), at most ``MAX_LEAD_S``."""
+
+    #: share of a switch request's duration after which the output has changed (request out, answer back)
+    LATENCY_SHARE = 0.5
+    #: longest prediction (s of wall time); a stalled state poll is not extrapolated further
+    MAX_LEAD_S = 0.1
 
     def __init__(self, ctx: Any, arm: Any, switch: Callable[[bool], None], a: Sequence[float], b: Sequence[float],
-                 f_on: float, f_off: float) -> None:
-        self._ctx, self._arm, self._switch = ctx, arm, switch
+                 f_on: float, f_off: float, clock: Callable[[], float] = time.time) -> None:
+        """``clock``: wall time in s, the clock of the arm state's ``stamp``."""
+        self._ctx, self._arm, self._raw_switch, self._clock = ctx, arm, switch, clock
         self._a = np.asarray(a[:3], dtype=float)
         self._ab = np.asarray(b[:3], dtype=float) - self._a
         self._len2 = max(float(self._ab.dot(self._ab)), 1e-12)
         self._f_on, self._f_off = f_on, f_off
         self.on = False
         self.switched_on_at: Optional[float] = None
+        self._last: Optional[Tuple[float, np.ndarray]] = None     # (stamp, TCP position) of the previous sample
+        self._velocity = np.zeros(3)
+        self.switch_s = 0.0                                        # running average of a switch request (s)
+
+    def _switch(self, on: bool) -> None:
+        t0 = self._clock()
+        self._raw_switch(on)
+        took = max(0.0, self._clock() - t0)
+        self.switch_s = took if self.switch_s == 0.0 else 0.7 * self.switch_s + 0.3 * took
+
+    def _predicted_tcp(self) -> Optional[np.ndarray]:
+        """The TCP position (arm base frame) expected when a switch requested now takes effect."""
+        state = self._arm.cached_state()
+        tcp = state.get("tcp")
+        if not tcp:
+            return None
+        p = np.asarray(tcp[:3], dtype=float)
+        stamp = state.get("stamp")
+        if stamp is None:
+            return p
+        stamp = float(stamp)
+        if self._last is not None and stamp > self._last[0]:
+            self._velocity = (p - self._last[1]) / (stamp - self._last[0])
+        if self._last is None or stamp > self._last[0]:
+            self._last = (stamp, p)
+        lead = min(self.MAX_LEAD_S, max(0.0, self._clock() - stamp) + self.LATENCY_SHARE * self.switch_s)
+        return p + self._velocity * lead
 
     def _update(self) -> None:
-        tcp = self._arm.cached_state().get("tcp")
-        if not tcp:
+        p = self._predicted_tcp()
+        if p is None:
             return
-        f = float((np.asarray(tcp[:3], dtype=float) - self._a).dot(self._ab)) / self._len2
+        f = float((p - self._a).dot(self._ab)) / self._len2
         want = self._f_on <= f <= self._f_off
         if want != self.on:
             self._switch(want)
@@ -190,21 +232,21 @@ class LaneSwitch:
 
 
 class RasterSwitch(LaneSwitch):
-    """:class:`LaneSwitch` for a whole raster driven as one blended path: the tool is on while the TCP is on the
-    worked stretch of any lane (fraction 0..1 of the stretch, within ``reach`` of its line)."""
+    """:class:`LaneSwitch` for a whole raster driven as one blended path: the tool is on while the (predicted)
+    TCP is on the worked stretch of any lane (fraction 0..1 of the stretch, within ``reach`` of its line)."""
 
     def __init__(self, ctx: Any, arm: Any, switch: Callable[[bool], None],
-                 stretches: Sequence[Sequence[Sequence[float]]], reach: float) -> None:
-        super().__init__(ctx, arm, switch, stretches[0][0], stretches[0][1], 0.0, 1.0)
+                 stretches: Sequence[Sequence[Sequence[float]]], reach: float,
+                 clock: Callable[[], float] = time.time) -> None:
+        super().__init__(ctx, arm, switch, stretches[0][0], stretches[0][1], 0.0, 1.0, clock)
         self._lines = [(np.asarray(a[:3], dtype=float), np.asarray(b[:3], dtype=float) - np.asarray(a[:3], dtype=float))
                        for a, b in stretches]
         self._reach = reach
 
     def _update(self) -> None:
-        tcp = self._arm.cached_state().get("tcp")
-        if not tcp:
+        p = self._predicted_tcp()
+        if p is None:
             return
-        p = np.asarray(tcp[:3], dtype=float)
         want = False
         for a, ab in self._lines:
             f = float((p - a).dot(ab)) / max(float(ab.dot(ab)), 1e-12)
@@ -361,7 +403,6 @@ class WallCommands:
 
     def apply_tape(self, ctx: Any, x0: float, y0: float, z0: float, x1: float, y1: float, z1: float, nx: float,
                    ny: float, nz: float, speed: float, offset: float, approach: float) -> Dict[str, Any]:
-        import time
         self._need_tool("taping_tool")
         arm = self._need("arm")
         n = self._unit([nx, ny, nz], "normal")
@@ -395,7 +436,6 @@ class WallCommands:
         move that starts ``run-up`` before the worked stretch [-run_in, width + run_in] and ends as far after
         it (the distance the arm needs to reach ``speed`` at ``LANE_ACCEL``); the tool is on only over the
         worked stretch (:class:`LaneSwitch`)."""
-        import time
         arm = self._need("arm")
         n = self._unit(normal, "normal")
         uu = self._unit(u, "u")
@@ -439,7 +479,6 @@ class WallCommands:
         """The serpentine as ONE blended controller path (MOVE_PATH semantics): each lane's ends, run-up
         included, are waypoints; the turns between lanes are rounded (blend within the run-up, so the worked
         stretches are straight and at speed); the tool is switched by position (:class:`RasterSwitch`)."""
-        import time
         arm = self._need("arm")
         spacing = abs(heights[1] - heights[0])
         blend = min(PATH_BLEND, 0.45 * spacing)
@@ -508,7 +547,6 @@ class WallCommands:
             out["force_n"] = force
             out["contact"] = "position"
             return out
-        import time
         if force <= 0:
             raise BadRequest("SAND_AREA: contact=force needs force > 0 N", argument="force")
         standoff, approach_speed, tolerance = 0.01, 0.02, max(1.0, 0.1 * force)     # m, m/s along the axis, N

@@ -152,7 +152,8 @@ class World:
         self.on_collision: List[Callable[[Dict[str, Any]], None]] = []
         self.mounted_tool: Optional[str] = None
         self.steps = 0
-        self._samples: Deque[List[float]] = deque(maxlen=2000)
+        # arm samples (joint positions, tool process on at that moment) from the controller's step listener
+        self._samples: Deque[Tuple[List[float], bool]] = deque(maxlen=2000)
         self._last_sample: Optional[List[float]] = None
         self._t = self.clock.now()
         x, y, yaw = self.site.robot_start
@@ -468,12 +469,19 @@ class World:
 
     # -- stepping ----------------------------------------------------------------------------------------------
     def _on_arm_step(self, q: Sequence[float]) -> None:
+        """Controller step listener (the controller's thread): queue the joint sample together with whether the
+        tool's process is on at this moment, so a valve or output switched between two world steps takes effect
+        at the right place along the path (a world step spans many controller cycles, the more so when time-scaled)."""
         q = [float(x) for x in q]
-        last = self._samples[-1] if self._samples else self._last_sample
+        last = self._samples[-1][0] if self._samples else self._last_sample
         if last is not None and max(abs(a - b) for a, b in zip(last, q)) <= 1e-9:
             return                                       # controller idling: nothing new
         self._last_sample = q
-        self._samples.append(q)
+        try:
+            on = self.tool_active()
+        except Exception:                                # a stand-in shutting down: judged at the step instead
+            on = False
+        self._samples.append((q, on))
 
     def step(self) -> None:
         """Advance the world to ``clock()`` (see the module docstring)."""
@@ -499,29 +507,29 @@ class World:
                         self._pose = [x + math.cos(ym) * dx - math.sin(ym) * dy,
                                       y + math.sin(ym) * dx + math.cos(ym) * dy, yaw + dth]
                         moved = True
-            qs: List[List[float]] = []
+            active = self.tool_active() if self.mounted_tool is not None else False
+            qs: List[Tuple[List[float], bool]] = []
             while self._samples:
                 qs.append(self._samples.popleft())
             if self.arm_source is not None:
                 q_now = [float(x) for x in self.arm_source.joint_positions()]
-                if not qs or max(abs(a - b) for a, b in zip(qs[-1], q_now)) > 1e-9:
-                    qs.append(q_now)
-            if qs and max(abs(a - b) for a, b in zip(qs[-1], self._q)) <= 1e-9 and len(qs) == 1:
+                if not qs or max(abs(a - b) for a, b in zip(qs[-1][0], q_now)) > 1e-9:
+                    qs.append((q_now, active))
+            if qs and max(abs(a - b) for a, b in zip(qs[-1][0], self._q)) <= 1e-9 and len(qs) == 1:
                 qs = []
-            active = self.tool_active() if self.mounted_tool is not None else False
             if not (moved or qs or self._dirty or active):
                 return                                   # idle: nothing changed, nothing to measure
             self._dirty = False
             if moved:
                 self._place_robot()
             if not qs:
-                qs = [self._q]
+                qs = [(self._q, active)]
             elif self.mounted_tool is None:
                 qs = [qs[-1]]                            # nothing to measure along the way
             # thin out dense controller steps: keep every sample that moved the TCP >= 2 mm
             n = len(qs)
             pending_dt = 0.0                             # time of thinned-out samples goes to the next segment
-            for i, q in enumerate(qs):
+            for i, (q, on) in enumerate(qs):
                 self._q = q
                 for j, qv in zip(self.arm_joints, q):
                     pb.resetJointState(self.arm_body, j, qv, physicsClientId=self._cid)
@@ -531,7 +539,7 @@ class World:
                     if i < n - 1 and self._tcp_prev is not None and np.linalg.norm(pos - self._tcp_prev) < 0.002:
                         continue
                     if self._tcp_prev is not None:
-                        self.outcome.record(self.mounted_tool, active, self._tcp_prev, pos, z, pending_dt)
+                        self.outcome.record(self.mounted_tool, on, self._tcp_prev, pos, z, pending_dt)
                     pending_dt = 0.0
                     self._tcp_prev = pos
             if self.mounted_tool is not None:

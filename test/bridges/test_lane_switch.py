@@ -1,0 +1,78 @@
+"""The raster lane switch compensates its dead time: the tool's output changes where the lane's worked stretch
+starts and ends, not one sample age plus one request later (a fake clock, arm and output: exact times)."""
+import numpy as np
+import pytest
+
+from locem_bridge.bridges.commands_wall import LaneSwitch, RasterSwitch
+
+SPEED = 2.0          # m/s of wall time (0.2 m/s at time scale 10 ... or a fast arm)
+AGE = 0.012          # s, how old the arm's state is when read
+REQUEST = 0.02       # s, one output request (Modbus write) from call to answer
+PERIOD = 0.01        # s, the motion loop's wait
+
+
+class Clock:
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+
+class Rig:
+    """A TCP moving along +x at SPEED from x = -0.2 m; the output records where the TCP truly was when it
+    changed (half way through the request)."""
+
+    def __init__(self):
+        self.clock = Clock()
+        self.t0 = self.clock.t
+        self.changes = []
+
+    def x(self, t):
+        return -0.2 + SPEED * (t - self.t0)
+
+    def cached_state(self):
+        stamp = self.clock.t - AGE
+        return {"tcp": [self.x(stamp), 0.0, 0.5, 0.0, 0.0, 0.0], "stamp": stamp}
+
+    def switch(self, on):
+        self.changes.append((on, self.x(self.clock.t + REQUEST / 2)))
+        self.clock.t += REQUEST
+
+    def sleep(self, seconds):
+        self.clock.t += seconds
+
+    def check(self):
+        pass
+
+
+def _run(make, until_x=1.2):
+    rig = Rig()
+    sw = make(rig)
+    sw.switch_s = REQUEST                    # the running average a previous lane left
+    while rig.x(rig.clock.t) < until_x:
+        sw.sleep(PERIOD)
+    return rig.changes
+
+
+def test_the_output_changes_where_the_stretch_starts_and_ends():
+    changes = _run(lambda r: LaneSwitch(r, r, r.switch, [0, 0, 0.5], [1, 0, 0.5], 0.2, 0.8, clock=r.clock))
+    assert [on for on, _x in changes] == [True, False]
+    # left: only the loop's own step (SPEED x PERIOD = 2 cm), either side
+    assert changes[0][1] == pytest.approx(0.2, abs=SPEED * PERIOD)
+    assert changes[1][1] == pytest.approx(0.8, abs=SPEED * PERIOD)
+
+
+def test_without_compensation_the_output_would_change_late():
+    class Uncompensated(LaneSwitch):
+        MAX_LEAD_S = 0.0
+    changes = _run(lambda r: Uncompensated(r, r, r.switch, [0, 0, 0.5], [1, 0, 0.5], 0.2, 0.8, clock=r.clock))
+    late = SPEED * (AGE + REQUEST / 2)       # 4.4 cm: the error the compensation removes
+    assert changes[0][1] - 0.2 >= late - 1e-9 and changes[1][1] - 0.8 >= late - 1e-9
+
+
+def test_raster_switch_predicts_the_same_way_over_several_stretches():
+    stretches = [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5])]
+    changes = _run(lambda r: RasterSwitch(r, r, r.switch, stretches, reach=0.05, clock=r.clock))
+    assert [on for on, _x in changes] == [True, False, True, False]
+    assert np.allclose([x for _on, x in changes], [0.0, 0.3, 0.6, 0.9], atol=SPEED * PERIOD)
