@@ -173,6 +173,35 @@ def test_drive_heartbeats_stop_when_the_simulator_process_is_killed(free_port_fa
             parent.wait()
 
 
+def test_ctrl_c_to_the_process_group_leaves_the_helper_to_its_parent(free_port_factory):
+    """roslaunch's SIGINT (or Ctrl-C) reaches the helper with its parent: it keeps sending until the parent
+    closes it, then ends with exit code 0 (no KeyboardInterrupt traceback in the launch output)."""
+    from locem_bridge.sim.heartbeat import HeartbeatProcess
+    group, can_port = _group(), free_port_factory()
+    hp = HeartbeatProcess({"interface": "udp_multicast", "channel": group, "port": can_port})
+    listener = can.Bus(interface="udp_multicast", channel=group, port=can_port, fd=False)
+    try:
+        hp.start()
+        hp.send_periodic(0x77D, bytes([0x05]), 0.05)
+        proc = hp._proc
+
+        def beats(window):
+            end, n = time.monotonic() + window, 0
+            while time.monotonic() < end:
+                msg = listener.recv(0.05)
+                n += msg is not None and msg.arbitration_id == 0x77D
+            return n
+        assert beats(0.5) >= 3
+        os.kill(hp.pid, signal.SIGINT)
+        beats(0.1)
+        assert proc.poll() is None and beats(0.5) >= 3          # still beating: its parent decides
+        hp.close()
+        assert proc.returncode == 0
+    finally:
+        listener.shutdown()
+        hp.close()
+
+
 def _reference_pose(kin, start, wheel_targets, accel, t_end, h=1e-4):
     """Pose after ``t_end`` s of every wheel ramping from rest to its target at ``accel`` (fine integration)."""
     x, y, th = start

@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import os
 import select
+import signal
 import subprocess
 import sys
 import threading
@@ -196,6 +197,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         print("usage: python -m locem_bridge.sim.heartbeat '{\"interface\": ..., \"channel\": ..., \"port\": ...}'",
               file=sys.stderr)
         return 2
+    # Ctrl-C or roslaunch's SIGINT reaches the whole process group: the helper's lifetime is its parent's
+    # (it stops when its stdin closes), so it ends quietly with the parent instead of with a traceback
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     return _serve(json.loads(argv[0]))
 
 
