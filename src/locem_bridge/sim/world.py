@@ -155,6 +155,8 @@ class World:
         # arm samples (joint positions, tool process on at that moment) from the controller's step listener
         self._samples: Deque[Tuple[List[float], bool]] = deque(maxlen=2000)
         self._last_sample: Optional[List[float]] = None
+        # map <- UR controller base as (rotation, origin), set by _place_robot, read by wall_contact
+        self._ur_base_in_map: Optional[Tuple[np.ndarray, np.ndarray]] = None
         self._t = self.clock.now()
         x, y, yaw = self.site.robot_start
         self._pose = [float(x), float(y), float(yaw)]
@@ -280,7 +282,7 @@ class World:
         mount = self.robot["arm"]["mount"]
         mpos, morn = pb.multiplyTransforms(pos, orn, mount["xyz"], pb.getQuaternionFromEuler(mount["rpy"]))
         pb.resetBasePositionAndOrientation(self.arm_body, mpos, morn, physicsClientId=c)
-        # map <- UR controller base (base_link turned by pi about z), read by wall_contact on the UR's thread
+        # map <- UR controller base (base_link turned by pi about z)
         rot = np.asarray(pb.getMatrixFromQuaternion(morn), dtype=float).reshape(3, 3).dot(
             np.diag([-1.0, -1.0, 1.0]))
         self._ur_base_in_map = (rot, np.asarray(mpos, dtype=float))
@@ -337,7 +339,7 @@ class World:
         base frame, as the controller reports it) is inside a wall of the site, and that wall's normal out of
         the wall (into the room) in the UR base frame; None when the TCP touches no wall. Called on the
         controller's thread: it reads the robot placement cached by the last world step, no PyBullet call."""
-        placed = getattr(self, "_ur_base_in_map", None)
+        placed = self._ur_base_in_map
         if placed is None:
             return None
         rot, origin = placed
