@@ -197,9 +197,9 @@ class LaneSwitch:
         if stamp is None:
             return p
         stamp = float(stamp)
-        if self._last is not None and stamp > self._last[0]:
-            self._velocity = (p - self._last[1]) / (stamp - self._last[0])
-        if self._last is None or stamp > self._last[0]:
+        if self._last is None or stamp > self._last[0]:       # a new sample
+            if self._last is not None:
+                self._velocity = (p - self._last[1]) / (stamp - self._last[0])
             self._last = (stamp, p)
         lead = min(self.MAX_LEAD_S, max(0.0, self._clock() - stamp) + self.LATENCY_SHARE * self.switch_s)
         return p + self._velocity * lead

@@ -372,12 +372,14 @@ def _joint_ends(j: Dict[str, Any], max_tilt: float) -> Tuple[List[float], List[f
     start, end = [float(v) for v in j["start"]], [float(v) for v in j["end"]]
     if max_tilt < 0.0:
         raise PortError("max_tilt must be >= 0 rad, got %g" % max_tilt)
+    if max_tilt == 0.0:
+        return start, end
     horizontal = math.hypot(end[0] - start[0], end[1] - start[1])
     rise = abs(end[2] - start[2])
-    if j.get("kind") == "vertical" and math.atan2(horizontal, rise) <= max_tilt and max_tilt > 0.0:
+    if j.get("kind") == "vertical" and math.atan2(horizontal, rise) <= max_tilt:
         mx, my = (start[0] + end[0]) / 2.0, (start[1] + end[1]) / 2.0
         return [mx, my, start[2]], [mx, my, end[2]]
-    if j.get("kind") == "horizontal" and math.atan2(rise, horizontal) <= max_tilt and max_tilt > 0.0:
+    if j.get("kind") == "horizontal" and math.atan2(rise, horizontal) <= max_tilt:
         mz = (start[2] + end[2]) / 2.0
         return [start[0], start[1], mz], [end[0], end[1], mz]
     return start, end

@@ -155,7 +155,8 @@ class World:
         # arm samples (joint positions, tool process on at that moment) from the controller's step listener
         self._samples: Deque[Tuple[List[float], bool]] = deque(maxlen=2000)
         self._last_sample: Optional[List[float]] = None
-        # map <- UR controller base as (rotation, origin), set by _place_robot, read by wall_contact
+        # map <- UR controller base as (rotation, origin), set by _place_robot (from _build on), read by
+        # arm_base_pose and, on the controller's thread, wall_contact
         self._ur_base_in_map: Optional[Tuple[np.ndarray, np.ndarray]] = None
         self._t = self.clock.now()
         x, y, yaw = self.site.robot_start
@@ -328,11 +329,10 @@ class World:
             self._dirty = True
 
     def arm_base_pose(self) -> Tuple[List[float], List[float]]:
-        """Position and quaternion (x, y, z, w) of the UR controller ``base`` frame in map."""
-        with self._lock:
-            pos, orn = pb.getBasePositionAndOrientation(self.arm_body, physicsClientId=self._cid)
-            p, q = pb.multiplyTransforms(pos, orn, [0, 0, 0], pb.getQuaternionFromEuler([0, 0, math.pi]))
-            return list(p), list(q)
+        """Position and quaternion (x, y, z, w) of the UR controller ``base`` frame in map (the placement the
+        last :meth:`_place_robot` cached)."""
+        rot, origin = self._ur_base_in_map
+        return origin.tolist(), list(_quat_from_matrix(rot))
 
     def wall_contact(self, tcp_pose: Sequence[float]) -> Optional[Tuple[float, List[float]]]:
         """Contact provider for the UR stand-in (``set_contact_provider``): how deep the TCP (a pose in the UR
@@ -509,7 +509,7 @@ class World:
                         self._pose = [x + math.cos(ym) * dx - math.sin(ym) * dy,
                                       y + math.sin(ym) * dx + math.cos(ym) * dy, yaw + dth]
                         moved = True
-            active = self.tool_active() if self.mounted_tool is not None else False
+            active = self.tool_active()
             qs: List[Tuple[List[float], bool]] = []
             while self._samples:
                 qs.append(self._samples.popleft())
