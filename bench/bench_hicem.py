@@ -10,7 +10,7 @@
    LOCEM calls - idle waits between ticks. With the HDICT on a real SQLite file (synchronous FULL: a disk
    sync per commit, the default; NORMAL: no sync per commit) and with memory only. Goal: <= 20 ms per action.
 
-Run: /tmp/tv/bin/python bench/bench_hicem.py   (add --quick for fewer repetitions)
+Run: tools/run.sh python bench/bench_hicem.py   (add --quick for fewer repetitions)
 """
 import os
 import statistics

@@ -22,7 +22,7 @@ The same numbers go to ``<results_dir>/<run>/bench.json`` (the job's report fold
 job wrote none). Exit status: 0 when every process of the job succeeded, 1 when the job failed, timed out or
 never ran (the split is still printed for what ran), 2 when the benchmark could not start.
 
-Run:  cd /work/main && . <env-ws-....sh> && python bench/bench_job.py [--time-scale 5] [--site FILE]
+Run:  tools/run.sh python bench/bench_job.py [--time-scale 5] [--site FILE]
       [--validate-lines true|false] [--keep] [--timeout 600]
 Without --keep, the run's PEMKRE store, HDICT and ROS logs are deleted at the end; the results folder (report,
 pictures, bench.json), launch.log and the PEMKRE call log stay.

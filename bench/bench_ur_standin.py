@@ -15,7 +15,7 @@
    distance of the sampled TCP from the ideal geometry (straight segments joined by the tangent circular arcs),
    end error; and the cost of the script re-upload: moveL(path) call vs a single moveL call (async, both).
 
-Run: /tmp/tv/bin/python bench/bench_ur_standin.py [--seconds 10] [--address 127.62.0.1] [--paths-only]
+Run: tools/run.sh python bench/bench_ur_standin.py [--seconds 10] [--address 127.62.0.1] [--paths-only]
 """
 import argparse
 import os

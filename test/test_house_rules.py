@@ -28,17 +28,41 @@ def _has_python_shebang(path):
         return handle.readline().startswith(b"#!") and b"python" in open(path, "rb").readline()
 
 
-def ros_imports(tree):
+def _is_ros(name):
+    return name.split(".")[0] in ROS_MODULES or name in ("locem_bridge.msg", "locem_bridge.srv") or \
+        name.startswith(("locem_bridge.msg.", "locem_bridge.srv."))
+
+
+def ros_imports(tree, package="locem_bridge"):
+    """(line, module) for every import of ROS or of the generated messages in ``tree``: plain, from-, relative
+    (resolved against ``package``, the dotted package of the file) and ``importlib.import_module`` /
+    ``__import__`` with a literal name."""
     for node in ast.walk(tree):
         names = []
         if isinstance(node, ast.Import):
             names = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names = [node.module]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                parts = parts[:len(parts) - (node.level - 1)] if node.level > 1 else parts
+                base = ".".join(parts + ([node.module] if node.module else []))
+            names = [base] + [base + "." + a.name for a in node.names]
+        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) and \
+                isinstance(node.args[0].value, str):
+            func = node.func
+            called = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", "")
+            if called in ("import_module", "__import__"):
+                names = [node.args[0].value]
         for name in names:
-            top = name.split(".")[0]
-            if top in ROS_MODULES or name.startswith(("locem_bridge.msg", "locem_bridge.srv")):
+            if _is_ros(name):
                 yield node.lineno, name
+                break
+
+
+def _package_of(path):
+    rel = os.path.relpath(os.path.dirname(path), os.path.join(REPO, "src"))
+    return rel.replace(os.sep, ".")
 
 
 def test_core_never_imports_ros():
@@ -47,13 +71,19 @@ def test_core_never_imports_ros():
         if os.sep + "ros" + os.sep in path[len(PACKAGE):] + os.sep and path[len(PACKAGE):].startswith(os.sep + "ros"):
             continue
         tree = ast.parse(open(path, encoding="utf-8").read(), path)
-        offenders += ["%s:%d imports %s" % (os.path.relpath(path, REPO), line, name) for line, name in ros_imports(tree)]
+        offenders += ["%s:%d imports %s" % (os.path.relpath(path, REPO), line, name)
+                      for line, name in ros_imports(tree, _package_of(path))]
     assert not offenders, "ROS imports outside src/locem_bridge/ros/:\n" + "\n".join(offenders)
 
 
 def test_the_ros_rule_detects_a_violation(tmp_path):
-    tree = ast.parse("import os\nfrom rospy import Time\nfrom locem_bridge.srv import Command\n")
-    assert [n for _, n in ros_imports(tree)] == ["rospy", "locem_bridge.srv"]
+    tree = ast.parse("import os\nfrom rospy import Time\nfrom locem_bridge.srv import Command\n"
+                     "from locem_bridge import msg\nfrom .. import srv\nfrom ..msg import CommandAction\n"
+                     "from . import grammar\nimport importlib\nimportlib.import_module('actionlib')\n"
+                     "__import__('geometry_msgs.msg')\nimportlib.import_module('json')\n")
+    found = [n for _, n in ros_imports(tree, "locem_bridge.locem")]
+    assert found == ["rospy", "locem_bridge.srv", "locem_bridge.msg", "locem_bridge.srv", "locem_bridge.msg",
+                     "actionlib", "geometry_msgs.msg"], found
 
 
 def py38_problems(source, path):

@@ -5,7 +5,7 @@
 #   3. a catkin workspace (outside the repository, never in git) whose src/ links to this checkout, built with
 #      catkin_make.
 # Each step records what it was built from and is skipped when nothing changed. Prints the environment file to
-# source at the end (tools/env.sh does that for you).
+# source at the end (tools/run.sh CMD sets up, sources it and runs CMD).
 #
 # Environment: LOCEM_HOME (default ~/.cache/locem_bridge) holds the venv and the workspace.
 set -euo pipefail
@@ -24,7 +24,21 @@ SUDO=""
 if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
 
 # ---------------------------------------------------------------- 1. distribution packages
-if [ "${ID:-}" = ubuntu ] && [ -f /opt/ros/noetic/setup.bash ]; then
+if [ "${ID:-}" = ubuntu ] && [ ! -f /opt/ros/noetic/setup.bash ]; then
+  if [ "${VERSION_CODENAME:-}" != focal ]; then
+    say "ROS 1 Noetic needs Ubuntu 20.04 (focal); this is Ubuntu ${VERSION_ID:-?}. Use Debian bookworm's ROS packages or focal."
+    exit 1
+  fi
+  # Ubuntu 20.04 without Noetic yet: add the ROS package repository (packages.ros.org), then install below.
+  say "adding the ROS Noetic apt repository (packages.ros.org)"
+  $SUDO env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+  $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends curl gnupg ca-certificates >/dev/null
+  curl -fsSL https://raw.githubusercontent.com/ros/rosdistro/master/ros.key \
+    | $SUDO gpg --batch --yes --dearmor -o /usr/share/keyrings/ros-archive-keyring.gpg
+  echo "deb [signed-by=/usr/share/keyrings/ros-archive-keyring.gpg] http://packages.ros.org/ros/ubuntu focal main" \
+    | $SUDO tee /etc/apt/sources.list.d/ros1-latest.list >/dev/null
+fi
+if [ "${ID:-}" = ubuntu ]; then
   ROS_SETUP=/opt/ros/noetic/setup.bash
   APT_PACKAGES="python3-venv python3-pip cmake g++ ros-noetic-catkin ros-noetic-rospy ros-noetic-rostest
     ros-noetic-roslaunch ros-noetic-rosservice ros-noetic-rostopic ros-noetic-rosnode ros-noetic-rosbash

@@ -21,6 +21,7 @@ PROBE = CommandSpec("PROBE", "Accepts every argument type.", args=(
     Arg.choice("tool", ("taping_tool", "spray_gun"), "a tool", default="spray_gun", keyword_only=True),
     Arg.word("tag", "a name", default="home", keyword_only=True)), category="probe", resources=frozenset({"arm"}))
 CALLS = []
+EXAMPLES = []
 LOCK = threading.Lock()
 
 
@@ -72,7 +73,8 @@ def valid_for_probe(values):
 @settings(max_examples=10000, deadline=None, derandomize=True, database=None,
           suppress_health_check=list(HealthCheck))
 @given(ANY_TEXT, st.sampled_from(list(Interface)))
-def test_generated_strings_never_escape_and_never_reach_a_device_invalid(text, interface):
+def generated_strings_never_escape_and_never_reach_a_device_invalid(text, interface):
+    EXAMPLES.append(text)
     if text.strip().upper().startswith("WAIT"):
         # validate only: running a valid WAIT would sleep
         try:
@@ -93,6 +95,11 @@ def test_generated_strings_never_escape_and_never_reach_a_device_invalid(text, i
         assert response.result_json.startswith("{")
 
 
-def test_the_fuzzer_did_reach_the_device():
-    # guards against a strategy that never produces a valid PROBE (the property above would pass vacuously)
-    assert len(CALLS) > 20
+def test_10000_generated_strings_never_escape_and_never_reach_a_device_invalid():
+    del EXAMPLES[:], CALLS[:]
+    generated_strings_never_escape_and_never_reach_a_device_invalid()
+    # the property ran on (at least) 10,000 strings, many of them distinct ...
+    assert len(EXAMPLES) >= 10000, len(EXAMPLES)
+    assert len(set(EXAMPLES)) > 5000, len(set(EXAMPLES))
+    # ... and a strategy that never produced a valid PROBE would make it pass vacuously: some reached the device
+    assert len(CALLS) > 20, len(CALLS)
