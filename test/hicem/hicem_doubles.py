@@ -7,7 +7,12 @@
 - :class:`PemkreDouble`: a tiny process engine following docs/contracts.md for the taping process (SCAN →
   GET_TOOL → per joint VALIDATE_TAPE_LINE → TAPE_LINE or MANUAL_TAPING → GO_HOME → ended). It refuses status
   updates for tasks that are not running, like the real PEMKRE must, and can persist its state to a JSON file
-  so it survives the HICEM process being killed.
+  so it survives the HICEM process being killed. What follows a failed task is a constructor choice,
+  ``after_failure``: ``"continue"`` (the default, kept for the benchmark and the other suites that use this
+  double) goes on with the next pending task, which the real taping process does NOT do; ``"fail_process"``
+  behaves like the real PEMKRE taping process (no failure transition: the next ``next_action`` answers
+  ``failed`` with ``task <iri> (TYPE) failed: <detail>``). A test whose expectation depends on what happens
+  after a failed task passes ``after_failure`` explicitly, or uses the real engine (test_with_pemkre_engine.py).
 """
 import json
 import os
@@ -161,8 +166,13 @@ class PemkreDouble(PemkreClient):
 
     PROCESS = "http://example.org/proc#TapingProcess"
 
+    AFTER_FAILURE = ("continue", "fail_process")
+
     def __init__(self, state_path: Optional[str] = None, validate_lines: bool = True,
-                 extra_actions: Optional[List[str]] = None) -> None:
+                 extra_actions: Optional[List[str]] = None, after_failure: str = "continue") -> None:
+        if after_failure not in self.AFTER_FAILURE:
+            raise ValueError("after_failure must be one of %s, got %r" % (", ".join(self.AFTER_FAILURE), after_failure))
+        self.after_failure = after_failure
         self.state_path = state_path
         self.validate_lines = validate_lines
         self.extra_actions = extra_actions or []
@@ -188,7 +198,7 @@ class PemkreDouble(PemkreClient):
             self.validate_lines = bool(options["validateLines"])
         if process_iri != self.PROCESS:
             raise PemkreError("unknown process IRI %r" % process_iri)
-        self.s.update(started=True, pending=[["SCAN", {}]] + [[a, {}] for a in self.extra_actions]
+        self.s.update(started=True, failed=None, pending=[["SCAN", {}]] + [[a, {}] for a in self.extra_actions]
                       + [["GET_TOOL", {"tool": "taping_tool"}]])
         self._save()
         return "http://example.org/run#p1"
@@ -206,6 +216,8 @@ class PemkreDouble(PemkreClient):
         self.calls.append(("next_action",))
         if not self.s["started"]:
             return {"status": "failed", "detail": "no process"}
+        if self.s.get("failed"):
+            return {"status": "failed", "detail": self.s["failed"]}
         cur = self.s["current"]
         if cur is not None and cur["status"] in ("offered", "in_progress"):
             return {"status": "action", "action_type": cur["type"], "task": cur["task"],
@@ -235,6 +247,8 @@ class PemkreDouble(PemkreClient):
                 raise PemkreError("task %s is not running (it is %s)" % (task, cur["status"]))
             cur["status"] = status
             self.s["statuses"].append([cur["type"], task, status, detail, cur["params"]])
+            if status == "failed" and self.after_failure == "fail_process":
+                self.s["failed"] = "task <%s> (%s) failed: %s" % (task, cur["type"], detail)
             if status == "succeeded" and cur["type"] == "VALIDATE_TAPE_LINE":
                 nxt = "TAPE_LINE" if detail == "valid" else "MANUAL_TAPING"
                 self.s["pending"].insert(0, [nxt, cur["params"]])

@@ -1,15 +1,19 @@
 """Each shipped action tree, run against the LOCEM test double with the shipped parameters and a scanned site:
 the LOCEM commands it sends, with the numbers computed from the scan and the parameters."""
 import math
+import threading
+import time
 
 import pytest
 from py_trees.common import Status
 
-from hicem_doubles import SITE, LocemDouble
+from hicem_doubles import SITE, Heartbeats, LocemDouble, PemkreDouble
 from hicem_rig import TREES, params
 from locem_bridge.hicem.blackboard import Blackboard
 from locem_bridge.hicem.datahandler import DataHandler
 from locem_bridge.hicem.datastore import DataManager
+from locem_bridge.hicem.errors import OperatorError
+from locem_bridge.hicem.executive import create_executive
 from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
 from locem_bridge.hicem.node_base import NodeContext
 from locem_bridge.hicem.operator import OperatorDesk
@@ -19,19 +23,25 @@ LIB = TreeLibrary()
 LIB.load_directory(TREES)
 
 
-def run(action_type, answers=None, **param_values):
+def build(action_type, desk=None, **param_values):
+    """The shipped tree for ``action_type`` with the shipped parameters, a scanned site and PEMKRE parameters."""
     locem = LocemDouble()
     store = DataManager()
     hdh = DataHandler(store)
     hdh.ingest_scan(SITE)
-    desk = OperatorDesk()
-    desk.add_listener(lambda ev, p: ev == "opened" and desk.reply(p.id, (answers or {})[p.kind]))
+    desk = desk or OperatorDesk()
     ctx = NodeContext(locem=locem, store=store, health=HealthMonitor([ModuleSpec("locem", crucial=True)]),
                       operator=desk, data_handler=hdh)
     bb = Blackboard()
     bb.update(params().blackboard_entries())
     bb.update({"param_%s" % k: v for k, v in param_values.items()})
-    tree = LIB.build(action_type, ctx, bb)
+    return LIB.build(action_type, ctx, bb), locem, bb, ctx, hdh
+
+
+def run(action_type, answers=None, **param_values):
+    desk = OperatorDesk()
+    desk.add_listener(lambda ev, p: ev == "opened" and desk.reply(p.id, (answers or {})[p.kind]))
+    tree, locem, bb, ctx, hdh = build(action_type, desk, **param_values)
     for _ in range(100):
         st = tree.tick()
         if st != Status.RUNNING:
@@ -109,3 +119,95 @@ def test_bad_parameters_fail_before_any_command(action_type, params, reason):
     st, locem, bb, ctx, _ = run(action_type, **params)
     assert st == Status.FAILURE and locem.sent == []
     assert reason in ctx.last_failure()[1]
+
+
+MANUAL_TEXT = "Please tape joint wall_1_joint_2 by hand, then answer done."
+
+
+def _manual_taping_waiting_for_the_operator():
+    """MANUAL_TAPING for wall_1_joint_2 (given as PEMKRE's IRI) ticked until it waits on its prompt."""
+    desk = OperatorDesk()
+    tree, locem, bb, ctx, hdh = build("MANUAL_TAPING", desk, line="http://example.org/world#wall_1_joint_2")
+    for _ in range(20):
+        assert tree.tick() == Status.RUNNING, ctx.failures
+        if desk.open_prompts():
+            break
+    (prompt,) = desk.open_prompts()
+    return tree, locem, bb, ctx, hdh, desk, prompt
+
+
+def test_manual_taping_asks_the_operator_and_succeeds_on_done():
+    tree, locem, bb, ctx, hdh, desk, prompt = _manual_taping_waiting_for_the_operator()
+    # the arm is retracted out of the operator's way first, then the operator is asked to tape the line by hand
+    assert locem.sent == ["WALL_READY"] and locem.running() == []
+    assert (prompt.kind, prompt.text, prompt.choices) == ("manual_taping", MANUAL_TEXT, ("done",))
+    # it waits for the answer: more ticks send nothing and record nothing
+    for _ in range(5):
+        assert tree.tick() == Status.RUNNING
+    assert locem.sent == ["WALL_READY"] and hdh.feature("wall_1_joint_2")["status"] != "manual"
+    assert not bb.has("task_detail")
+    desk.reply(prompt.id, "done")
+    assert tree.tick() == Status.SUCCESS, ctx.failures
+    assert bb.get("task_detail") == "manual" and hdh.feature("wall_1_joint_2")["status"] == "manual"
+    assert prompt.state == "answered" and desk.open_prompts() == [] and locem.sent == ["WALL_READY"]
+
+
+def test_manual_taping_refuses_an_answer_it_did_not_offer():
+    tree, locem, bb, ctx, hdh, desk, prompt = _manual_taping_waiting_for_the_operator()
+    with pytest.raises(OperatorError) as ei:
+        desk.reply(prompt.id, "skip")
+    assert "answer 'skip' is not allowed" in str(ei.value) and "allowed: done" in str(ei.value)
+    assert tree.tick() == Status.RUNNING and prompt.state == "open"
+
+
+def test_manual_taping_halted_while_waiting_withdraws_the_prompt_and_records_nothing():
+    tree, locem, bb, ctx, hdh, desk, prompt = _manual_taping_waiting_for_the_operator()
+    tree.halt()  # what the controller does on /hicem/stop or a health fault
+    assert prompt.state == "cancelled" and desk.open_prompts() == []
+    assert tree.root.status == Status.INVALID
+    assert hdh.feature("wall_1_joint_2")["status"] != "manual" and not bb.has("task_detail")
+    assert locem.running() == [] and ctx.outstanding() == []
+    with pytest.raises(OperatorError) as ei:  # a late answer from the HMI is refused, not applied
+        desk.reply(prompt.id, "done")
+    assert "is already cancelled" in str(ei.value)
+
+
+def test_manual_taping_stopped_by_the_operator_is_reported_failed(tmp_path):
+    """Through the controller (PEMKRE double: 'invalid' sends the joint to MANUAL_TAPING): /hicem/stop while the
+    manual-taping prompt is open fails the task with the stop reason, withdraws the prompt, makes the devices
+    safe and records no manual taping."""
+    pemkre = PemkreDouble()
+    ex = create_executive(pemkre, LocemDouble(), str(tmp_path / "hdict.sqlite"), params=params(), library=LIB)
+    prompts = []
+
+    def operator(event, p):
+        if event != "opened":
+            return
+        prompts.append(p)
+        if p.kind == "mount_tool":
+            threading.Thread(target=ex.controller.operator_reply, args=(p.id, "done")).start()
+        elif p.kind == "validate_line":
+            threading.Thread(target=ex.controller.operator_reply, args=(p.id, "invalid")).start()
+        # manual_taping: left open, the operator presses stop instead
+    ex.operator.add_listener(operator)
+    ex.health.heartbeat("locem")
+    beats = Heartbeats(ex.health)
+    try:
+        ex.controller.start_process(PemkreDouble.PROCESS)
+        deadline = time.monotonic() + 10
+        while not any(p.kind == "manual_taping" for p in prompts) and time.monotonic() < deadline:
+            time.sleep(0.005)
+        (manual,) = [p for p in prompts if p.kind == "manual_taping"]
+        assert manual.text == "Please tape joint wall_1_joint_1 by hand, then answer done."
+        assert ex.controller.state()["tree"] == "MANUAL_TAPING"
+        ex.controller.stop("operator pressed stop")
+        assert ex.controller.join(5)
+        assert ex.controller.state()["phase"] == "stopped"
+        (task,) = pemkre.executed("MANUAL_TAPING")
+        assert task[2:4] == ["failed", "stopped: operator pressed stop"]
+        assert manual.state == "cancelled" and ex.operator.open_prompts() == []
+        assert ex.data_handler.feature("wall_1_joint_1")["status"] != "manual"
+        assert ex.controller.locem.sent[-1] == "STOP" and ex.controller.locem.running() == []
+    finally:
+        beats.stop()
+        ex.close()

@@ -3,10 +3,13 @@ import time
 
 import pytest
 
-from hicem_doubles import PemkreDouble
-from hicem_rig import System
+from hicem_doubles import AutoOperator, Heartbeats, LocemDouble, PemkreDouble
+from hicem_rig import TREES, System, params
 from locem_bridge.hicem.controller import HHLC
 from locem_bridge.hicem.errors import ControllerError, OperatorError
+from locem_bridge.hicem.executive import create_executive
+from locem_bridge.hicem.interfaces import LocemReply
+from locem_bridge.hicem.xml_loader import TreeLibrary
 
 P = PemkreDouble.PROCESS
 
@@ -132,14 +135,35 @@ def test_action_type_without_tree_fails_process_and_tells_pemkre(tmp_path):
         s.close()
 
 
-def test_unexpected_locem_code_fails_the_action_and_the_process_goes_on(system):
-    from locem_bridge.hicem.interfaces import LocemReply
-    system.locem.fail_next["APPLY_TAPE"] = LocemReply(False, "WEIRD_CODE", "firmware says no")
-    assert system.ctrl.run_process(P) == "ended"
-    tapes = system.pemkre.executed("TAPE_LINE")
-    assert tapes[0][2] == "failed" and "unexpected code 'WEIRD_CODE'" in tapes[0][3]
-    assert [t[2] for t in tapes[1:]] == ["succeeded", "succeeded"]
-    assert system.locem.running() == []
+def test_unexpected_locem_code_fails_the_action_and_pemkre_fails_the_taping_process(tmp_path):
+    # after_failure="fail_process": what the real taping process does with a failed TAPE_LINE
+    s = System(tmp_path, pemkre=PemkreDouble(after_failure="fail_process"))
+    try:
+        s.locem.fail_next["APPLY_TAPE"] = LocemReply(False, "WEIRD_CODE", "firmware says no")
+        assert s.ctrl.run_process(P) == "failed"
+        (tape,) = s.pemkre.executed("TAPE_LINE")
+        assert tape[2] == "failed" and "unexpected code 'WEIRD_CODE'" in tape[3]
+        st = s.ctrl.state()
+        assert "(TAPE_LINE) failed" in st["detail"] and "WEIRD_CODE" in st["detail"]
+        assert len([c for c in s.locem.sent if c.startswith("APPLY_TAPE ")]) == 1  # no other joint taped
+        assert s.locem.running() == []
+    finally:
+        s.close()
+
+
+def test_unexpected_locem_code_fails_the_action_and_a_process_that_goes_on_continues(tmp_path):
+    # after_failure="continue": a process model with a failure transition (as spraying's) asks for more work;
+    # HICEM must then run the next actions normally
+    s = System(tmp_path, pemkre=PemkreDouble(after_failure="continue"))
+    try:
+        s.locem.fail_next["APPLY_TAPE"] = LocemReply(False, "WEIRD_CODE", "firmware says no")
+        assert s.ctrl.run_process(P) == "ended"
+        tapes = s.pemkre.executed("TAPE_LINE")
+        assert tapes[0][2] == "failed" and "unexpected code 'WEIRD_CODE'" in tapes[0][3]
+        assert [t[2] for t in tapes[1:]] == ["succeeded", "succeeded"]
+        assert s.locem.running() == []
+    finally:
+        s.close()
 
 
 class BrokenPemkre(PemkreDouble):
@@ -243,13 +267,19 @@ def test_resume_recovery_abandoned_reports_failed(system):
     assert first[0] == "TAPE_LINE" and first[2] == "failed" and "finished_by_hand" in first[3]
 
 
-def test_resume_policy_fail_does_not_repeat_the_action(system):
-    _crashed_state(system, "running", "SPRAY_AREA", {"area": "wall_1_area_1"})
-    system.pemkre.s["home_done"] = True
-    assert system.ctrl.resume() == "ended"
-    first = system.pemkre.executed()[0]
-    assert first[0] == "SPRAY_AREA" and first[2] == "failed" and first[3].startswith("interrupted")
-    assert not any(c.startswith("SPRAY_AREA") for c in system.locem.sent)
+def test_resume_policy_fail_does_not_repeat_the_action(tmp_path):
+    # the spraying process goes on after a failed area (its failure transition to RECOVER); the double is told
+    # to go on explicitly (after_failure="continue") so the test can check nothing is sprayed again after it
+    system = System(tmp_path, pemkre=PemkreDouble(after_failure="continue"))
+    try:
+        _crashed_state(system, "running", "SPRAY_AREA", {"area": "wall_1_area_1"})
+        system.pemkre.s["home_done"] = True
+        assert system.ctrl.resume() == "ended"
+        first = system.pemkre.executed()[0]
+        assert first[0] == "SPRAY_AREA" and first[2] == "failed" and first[3].startswith("interrupted")
+        assert not any(c.startswith("SPRAY_AREA") for c in system.locem.sent)
+    finally:
+        system.close()
 
 
 def test_resume_without_interrupted_process(system):
@@ -275,3 +305,34 @@ def test_resume_when_pemkre_already_has_the_outcome(system):
     assert [e[0] for e in system.pemkre.executed()] == ["TAPE_LINE"]  # reported once, nothing repeated
     assert not any(c.startswith("APPLY_TAPE") for c in system.locem.sent)
     assert system.ex.store.value(HHLC, "action")["phase"] == "reported"
+
+
+def test_a_log_node_in_an_action_tree_writes_to_the_controller_log_not_the_state(tmp_path, caplog):
+    """Log lines of a running tree go to the HICEM controller's logger (the ROS node's log), filled with the
+    action's blackboard (task, PEMKRE parameters, cfg); /hicem/state only names the node, never the text."""
+    caplog.set_level("INFO", logger="locem_bridge.hicem.controller")
+    lib = TreeLibrary()
+    lib.load_directory(TREES)
+    lib.load_string('<root BTCPP_format="4"><BehaviorTree ID="NOTE"><Sequence>'
+                    '<Log name="note_line" message="note for {task}: {action_type} at speed {@cfg.taping.speed}" '
+                    'level="warning"/><SetBlackboard output_key="task_detail" value="noted"/>'
+                    '</Sequence></BehaviorTree></root>', "note.xml")
+    pemkre = PemkreDouble(extra_actions=["NOTE"])
+    ex = create_executive(pemkre, LocemDouble(), str(tmp_path / "hdict.sqlite"), params=params(), library=lib)
+    states = []
+    ex.controller.add_state_listener(states.append)
+    ex.operator.add_listener(AutoOperator(ex.controller, {"mount_tool": "done", "validate_line": "valid"}))
+    ex.health.heartbeat("locem")
+    beats = Heartbeats(ex.health)
+    try:
+        assert ex.controller.run_process(P) == "ended"
+    finally:
+        beats.stop()
+        ex.close()
+    (note,) = pemkre.executed("NOTE")
+    assert note[2:4] == ["succeeded", "noted"]
+    expected = "note for %s: NOTE at speed 0.15" % note[1]
+    assert [(r.levelname, r.getMessage()) for r in caplog.records
+            if r.name == "locem_bridge.hicem.controller" and r.getMessage().startswith("note for")] == [
+        ("WARNING", expected)]
+    assert not any("note for" in str(v) for s in states for v in s.values())

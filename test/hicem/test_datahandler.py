@@ -80,6 +80,10 @@ def test_unreachable_pemkre_keeps_update_in_outbox_until_flushed(tmp_path):
     (lambda s: s["areas"][0].update(width="wide"), "areas[0].width must be a finite number"),
     (lambda s: s.update(robots=[]), "unknown keys ['robots']"),
     (lambda s: s["joints"].append(dict(s["joints"][0])), "appears twice"),
+    (lambda s: s["areas"][0].update(finish="painted"),
+     "areas[0].finish must be one of bare, sprayed, sanded, got 'painted'"),
+    (lambda s: s["areas"][0].update(finish=1), "areas[0].finish must be one of bare, sprayed, sanded, got 1"),
+    (lambda s: s["areas"][0].update(finish="Sanded"), "areas[0].finish must be one of bare, sprayed, sanded"),
 ])
 def test_bad_scan_is_rejected_naming_the_field_and_nothing_is_stored(tmp_path, mutate, msg):
     hdh, sink, store = make(tmp_path)
@@ -103,3 +107,59 @@ def test_status_and_diagnostics_feed_the_health_monitor(tmp_path):
     with pytest.raises(Exception) as ei:
         hdh.ingest_status({"level": 0})
     assert "'module'" in str(ei.value)
+
+
+def _finish(scan, fid, finish):
+    out = copy.deepcopy(scan)
+    for a in out["areas"]:
+        if a["id"] == fid:
+            a["finish"] = finish
+    return out
+
+
+def test_area_finish_is_stored_and_a_changed_finish_is_forwarded_like_a_geometry_change(tmp_path):
+    hdh, sink, store = make(tmp_path)
+    res = hdh.ingest_scan(_finish(SITE, "wall_1_area_1", "bare"))
+    assert hdh.feature("wall_1_area_1", "area")["finish"] == "bare"
+    assert sink.updates[-1]["areas"][0]["finish"] == "bare"
+    # the same area, the same geometry, compound on it now: a change, forwarded with the finish
+    res = hdh.ingest_scan(_finish(SITE, "wall_1_area_1", "sprayed"))
+    assert res.new == [] and res.changed == ["wall_1_area_1"]
+    assert sink.updates[-1]["joints"] == [] and sink.updates[-1]["walls"] == []
+    (fwd,) = sink.updates[-1]["areas"]
+    assert fwd["id"] == "wall_1_area_1" and fwd["finish"] == "sprayed" and fwd["width"] == 4.8
+    assert store.persistent.value("features", "wall_1_area_1")["finish"] == "sprayed"
+    n = len(sink.updates)
+    hdh.ingest_scan(_finish(SITE, "wall_1_area_1", "sprayed"))  # seen again: nothing new
+    hdh.ingest_scan(SITE)                                        # not reported: the stored finish stays
+    assert len(sink.updates) == n
+    assert hdh.feature("wall_1_area_1")["finish"] == "sprayed"
+    res = hdh.ingest_scan(_finish(SITE, "wall_1_area_1", "sanded"))
+    assert res.changed == ["wall_1_area_1"] and sink.updates[-1]["areas"][0]["finish"] == "sanded"
+
+
+def test_area_finish_reaches_the_pemkre_engine(tmp_path):
+    """Through the in-process PEMKRE client into the real engine: a known area reported sprayed becomes sprayed."""
+    from locem_bridge.hicem.pemkre_local import EngineClient
+    from locem_bridge.pemkre import PPR, JournaledStore, ProcessEngine
+    from locem_bridge.pemkre.vocab import SITE as SITE_NS
+
+    pstore = JournaledStore(str(tmp_path / "pemkre"))
+    try:
+        engine = ProcessEngine(pstore)
+        store = DataManager(MemoryStore(), SqliteStore(str(tmp_path / "h.sqlite")), ["features", "scan", "outbox"],
+                            [PruneRule("features", below=("scan_seq", "scan", "latest_seq"))])
+        hdh = DataHandler(store, EngineClient(engine))
+        area = SITE_NS.wall_1_area_1
+
+        def status():
+            return pstore.value(area, PPR.sprayingStatus), pstore.value(area, PPR.sandingStatus)
+        assert hdh.ingest_scan(SITE).forwarded
+        assert status() == (PPR.unprocessed, PPR.unprocessed)
+        assert hdh.ingest_scan(_finish(SITE, "wall_1_area_1", "sprayed")).forwarded
+        assert status() == (PPR.processed, PPR.unprocessed)
+        assert hdh.ingest_scan(_finish(SITE, "wall_1_area_1", "bare")).forwarded    # forwarded, never a downgrade
+        assert status() == (PPR.processed, PPR.unprocessed)
+        assert engine.check_consistency(full_inference=True) == []
+    finally:
+        pstore.close()

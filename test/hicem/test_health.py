@@ -3,11 +3,15 @@ command and reports the action failed with the reason; the process waits for hea
 import time
 
 import pytest
+from rdflib import URIRef
 
 from hicem_doubles import PemkreDouble
 from hicem_rig import System
 from locem_bridge.hicem.errors import HealthError
 from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
+from locem_bridge.hicem.pemkre_local import EngineClient
+
+pemkre = pytest.importorskip("locem_bridge.pemkre")
 
 HALT_BOUND_S = 0.200  # the requirement (issue 6): halt within 200 ms of the fault
 
@@ -36,9 +40,9 @@ def test_levels_heartbeats_and_listener_fires_once_per_fault():
         ModuleSpec.from_dict({"name": "x", "timeout": 1})
 
 
-def _run_until_applying(system):
-    system.ctrl.start_process(PemkreDouble.PROCESS)
-    deadline = time.monotonic() + 10
+def _run_until_applying(system, process=PemkreDouble.PROCESS, options=None):
+    system.ctrl.start_process(process, options)
+    deadline = time.monotonic() + 20
     while time.monotonic() < deadline:
         running = [h for h in system.locem.running() if h.command.startswith("APPLY_TAPE ")]
         if running:
@@ -47,33 +51,98 @@ def _run_until_applying(system):
     raise AssertionError("APPLY_TAPE never started; sent: %s" % system.locem.sent)
 
 
-def test_error_report_halts_tree_and_cancels_locem_command_within_bound(tmp_path):
-    s = System(tmp_path, durations={"APPLY_TAPE": 30.0})
+def _wait_cancelled(h, timeout=2.0):
+    deadline = time.monotonic() + timeout
+    while h.cancel_time is None and time.monotonic() < deadline:
+        time.sleep(0.001)
+    assert h.cancel_time is not None, "LOCEM command was not cancelled"
+
+
+def _wait_idle(system, timeout=10.0):
+    deadline = time.monotonic() + timeout
+    while system.ctrl.running and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert not system.ctrl.running, system.ctrl.state()
+
+
+def _task_log(engine, process):
+    """PEMKRE's task log of one process as [(seq, action type, {statuses}, {details})], one entry per task (the
+    query gives a row per combination of multi-valued fields)."""
+    tasks = {}
+    for r in engine.query("task_log", {"process": URIRef(process)}).rows:
+        seq, a, st, d = tasks.setdefault(str(r["task"]), (int(r["seq"]), str(r["actionType"]), set(), set()))
+        st.add(str(r["status"]))
+        if r.get("detail") is not None:
+            d.add(str(r["detail"]))
+    return sorted(tasks.values(), key=lambda t: t[0])
+
+
+@pytest.fixture
+def engine(tmp_path):
+    store = pemkre.OxigraphStore(str(tmp_path / "pemkre_db"))
+    yield pemkre.ProcessEngine(store)
+    store.close()
+
+
+def test_error_report_halts_tree_and_cancels_locem_command_within_bound(tmp_path, engine):
+    """With the real PEMKRE engine and the shipped taping process: the fault halts the taping within the bound,
+    PEMKRE records the TAPE_LINE task failed with the module's reason, HICEM asks for nothing while the module
+    is unhealthy, and once it is back PEMKRE fails the process (taping has no failure transition: a partly taped
+    joint is never taped again), so no other joint is taped."""
+    s = System(tmp_path, durations={"APPLY_TAPE": 30.0}, pemkre=EngineClient(engine))
     try:
-        s.pemkre.validate_lines = False
-        h = _run_until_applying(s)
+        h = _run_until_applying(s, str(pemkre.PLB.TapingProcess), {"validateLines": False})
         t_fault = time.monotonic()
         s.ex.health.report("locem", "ERROR", "UR protective stop")
-        deadline = time.monotonic() + 2
-        while h.cancel_time is None and time.monotonic() < deadline:
-            time.sleep(0.001)
-        assert h.cancel_time is not None, "LOCEM command was not cancelled"
+        _wait_cancelled(h)
         latency = h.cancel_time - t_fault
         print("halt latency after ERROR report: %.1f ms" % (latency * 1000))
         assert latency < HALT_BOUND_S
+        assert s.locem.running() == []
+        deadline = time.monotonic() + 2
+        while s.ctrl.state()["phase"] != "waiting_for_health" and time.monotonic() < deadline:
+            time.sleep(0.005)
+        time.sleep(0.1)
+        assert s.ctrl.state()["phase"] == "waiting_for_health"  # no new action while unhealthy
+        process = s.ctrl.state()["specific_process"]
+        log = _task_log(engine, process)
+        assert [(a, st) for _seq, a, st, _d in log] == [("SCAN", {"succeeded"}), ("GET_TOOL", {"succeeded"}),
+                                                        ("TAPE_LINE", {"failed"})]
+        assert any("health fault" in d and "UR protective stop" in d for d in log[-1][3]), log[-1]
+        s.ex.health.report("locem", "OK", "")
+        _wait_idle(s)
+        st = s.ctrl.state()
+        assert st["phase"] == "failed" and "TAPE_LINE" in st["detail"] and "UR protective stop" in st["detail"]
+        assert len([c for c in s.locem.sent if c.startswith("APPLY_TAPE ")]) == 1
+        assert len(_task_log(engine, process)) == 3  # nothing was issued after the failed taping
+        assert s.locem.running() == []
+    finally:
+        s.close()
+
+
+def test_after_a_fault_the_next_action_waits_for_health_in_a_process_that_goes_on(tmp_path):
+    """A process whose model continues after a failed task (as spraying and sanding do through their failure
+    transition; the PEMKRE double is told so explicitly with after_failure="continue", unlike the real taping
+    process above): HICEM runs nothing while the crucial module is faulty and carries on once it is back."""
+    s = System(tmp_path, durations={"APPLY_TAPE": 30.0},
+               pemkre=PemkreDouble(validate_lines=False, after_failure="continue"))
+    try:
+        h = _run_until_applying(s)
+        s.ex.health.report("locem", "ERROR", "UR protective stop")
+        _wait_cancelled(h)
         deadline = time.monotonic() + 2
         while not s.pemkre.executed("TAPE_LINE") and time.monotonic() < deadline:
             time.sleep(0.005)
         (tape,) = s.pemkre.executed("TAPE_LINE")
         assert tape[2] == "failed" and "UR protective stop" in tape[3]
         assert s.locem.running() == []
-        time.sleep(0.1)
+        n_sent = len(s.locem.sent)
+        time.sleep(0.2)
         assert s.ctrl.state()["phase"] == "waiting_for_health"  # no new action while unhealthy
+        assert len(s.locem.sent) == n_sent and len(s.pemkre.executed()) == 3  # SCAN, GET_TOOL, failed TAPE_LINE
         s.locem.durations["APPLY_TAPE"] = 0.0
         s.ex.health.report("locem", "OK", "")
-        deadline = time.monotonic() + 5
-        while s.ctrl.running and time.monotonic() < deadline:
-            time.sleep(0.01)
+        _wait_idle(s, 5)
         assert s.ctrl.state()["phase"] == "ended"
         assert [x[2] for x in s.pemkre.executed("TAPE_LINE")] == ["failed", "succeeded", "succeeded"]
     finally:

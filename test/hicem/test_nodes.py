@@ -1,4 +1,5 @@
 """The node library against the data store, the HEM, the operator desk and the LOCEM test double."""
+import logging
 import math
 
 import pytest
@@ -8,6 +9,7 @@ from hicem_doubles import SITE, LocemDouble
 from locem_bridge.hicem.blackboard import Blackboard
 from locem_bridge.hicem.datahandler import DataHandler
 from locem_bridge.hicem.datastore import DataManager
+from locem_bridge.hicem.errors import TreeLoadError
 from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
 from locem_bridge.hicem.interfaces import LocemReply
 from locem_bridge.hicem.node_base import NodeContext
@@ -244,3 +246,57 @@ def test_select_entry_with_fallback_and_unknown_key():
     assert rig.tree.tick() == S and rig.bb.get("v") == [0.0, 0.0, 3.1]
     rig = Rig(body, cfg=dict(locs, param_location="garage"))
     assert rig.tree.tick() == F and "no entry 'garage'; the table has: dock, home" in rig.reason()
+
+
+# --------------------------------------------------------------------------------------------------- Log --
+LOG_BODY = ('<Log message="tape {line} from {pose} ({note}), speed {@cfg.taping.speed} m/s, first section at '
+            '{sec.origin}" level="%s"/>')
+LOG_CFG = {"line": "wall_1_joint_1", "pose": [1.2, -0.5, math.pi / 2], "note": "second pass, by request",
+           "cfg.taping.speed": 0.15, "sec": {"origin": [0.0, 3.0, 1e-9]}}
+LOG_TEXT = ("tape wall_1_joint_1 from 1.2 -0.5 1.570796 (second pass, by request), speed 0.15 m/s, first "
+            "section at 0 3 0")
+
+
+def _records(caplog, logger="locem_bridge.hicem"):
+    return [(r.levelname, r.getMessage()) for r in caplog.records if r.name == logger]
+
+
+@pytest.mark.parametrize("level", ["debug", "info", "warning", "error"])
+def test_log_writes_its_message_with_blackboard_values_at_its_level_and_succeeds(caplog, level):
+    caplog.set_level("DEBUG", logger="locem_bridge.hicem")
+    rig = Rig(LOG_BODY % level, cfg=LOG_CFG)
+    assert rig.tree.tick() == S
+    # numbers in plain decimal, lists space-separated, a field of an entry, and texts with spaces kept whole
+    assert _records(caplog) == [(level.upper(), LOG_TEXT)]
+    # a log line commands nothing, asks nothing and records no failure
+    assert rig.locem.sent == [] and rig.operator.open_prompts() == [] and rig.ctx.failures == []
+
+
+def test_log_level_defaults_to_info_and_goes_to_the_injected_logger(caplog):
+    caplog.set_level("DEBUG")
+    lib = TreeLibrary()
+    lib.load_string('<root BTCPP_format="4"><BehaviorTree ID="T"><Log message="done with {line}"/></BehaviorTree>'
+                    '</root>')
+    bb = Blackboard()
+    bb.set("line", "wall_2_joint_1")
+    t = lib.build("T", NodeContext(log=logging.getLogger("test.hicem.operator_log")), bb)
+    assert t.tick() == S
+    assert _records(caplog, "test.hicem.operator_log") == [("INFO", "done with wall_2_joint_1")]
+    assert _records(caplog) == []  # nothing on the default HICEM logger
+
+
+def test_log_with_an_unset_key_fails_naming_it_and_writes_nothing(caplog):
+    caplog.set_level("DEBUG", logger="locem_bridge.hicem")
+    rig = Rig('<Log message="tape {line} now" level="warning"/>')
+    assert rig.tree.tick() == F
+    assert rig.reason() == "blackboard key 'line' is not set (or has no such field)"
+    assert [m for lvl, m in _records(caplog) if "tape" in m] == []
+
+
+def test_log_level_outside_its_choices_is_a_load_error():
+    with pytest.raises(TreeLoadError) as ei:
+        TreeLibrary().load_string('<root BTCPP_format="4"><BehaviorTree ID="T">\n<Log message="x" level="loud"/>'
+                                  '</BehaviorTree></root>', "log.xml")
+    e = ei.value
+    assert (e.file, e.line) == ("log.xml", 2) and "port 'level'" in str(e)
+    assert "debug, info, warning, error" in str(e)

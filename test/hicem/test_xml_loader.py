@@ -57,15 +57,40 @@ def test_multiple_trees_main_tree_and_include(tmp_path):
 
 
 def test_port_forms_literal_default_blackboard_and_root_reference():
-    lib = library(tree_xml('<Sequence><Typed f="2.5" fl="[1, 2]" out="{o}"/>'
+    lib = library(tree_xml('<Sequence><Typed name="top" f="2.5" fl="[1, 2]" s="{who}" out="{o}"/>'
                            '<SubTree ID="S"/></Sequence>',
-                           extra='<BehaviorTree ID="S"><Typed i="{@cfg.count}" s="{@name}"/></BehaviorTree>'))
+                           extra='<BehaviorTree ID="S"><Typed name="inner" i="{@cfg.count}" s="{@name}"/>'
+                                 '</BehaviorTree>'))
     bb = Blackboard()
-    bb.update({"cfg.count": 3, "name": "n1"})
+    bb.update({"cfg.count": 3, "name": "n1", "who": "operator"})
     t = lib.build("T", NodeContext(), bb)
     assert t.tick() == Status.SUCCESS
-    assert bb.get("o") == 2.5  # literal converted by the declared float type
-    # default {@cfg.count} of port i resolved at the root, from inside a subtree scope
+    nodes = {n.name: n for n in t.root.iterate()}
+    # top level: literals converted by the declared types, {who} read from the blackboard, every other port at
+    # its declared default (i's default is the root reference {@cfg.count})
+    assert bb.get("seen") == {"f": 2.5, "i": 3, "b": False, "fl": [1.0, 2.0], "j": {}, "s": "operator",
+                              "mode": "fast"}
+    assert bb.get("o") == 2.5  # output port written through its {o} pointer
+    # inside the subtree (its own isolated scope): {@cfg.count} and {@name} resolve at the root blackboard
+    inner_scope = nodes["inner"].ports.blackboard
+    assert inner_scope is not bb and not inner_scope.has("name")  # the plain key is not visible in there
+    assert inner_scope.get("seen") == {"f": 1.5, "i": 3, "b": False, "fl": [0.0, 0.0], "j": {}, "s": "n1",
+                                       "mode": "fast"}
+    # the root values are read at tick time, not copied at build time
+    bb.update({"cfg.count": 7, "name": "n2", "who": "lead"})
+    assert t.tick() == Status.SUCCESS
+    assert inner_scope.get("seen")["i"] == 7 and inner_scope.get("seen")["s"] == "n2"
+    assert bb.get("seen")["i"] == 7 and bb.get("seen")["s"] == "lead"
+
+
+def test_plain_key_inside_an_isolated_subtree_is_not_the_root_entry():
+    lib = library(tree_xml('<SubTree ID="S"/>', extra='<BehaviorTree ID="S"><Typed s="{name}"/></BehaviorTree>'))
+    bb = Blackboard()
+    bb.update({"cfg.count": 3, "name": "n1"})
+    ctx = NodeContext()
+    t = lib.build("T", ctx, bb)
+    assert t.tick() == Status.FAILURE  # without '@' the subtree's own (empty) scope is read
+    assert "blackboard key 'name', which is not set" in ctx.last_failure()[1]
 
 
 def test_real_trees_directory_loads_every_action_type():
@@ -104,7 +129,8 @@ def test_unknown_explicit_action_id():
 
 def test_unknown_port_lists_the_allowed_ones():
     e = load_error(tree_xml('<Sequence>\n<Timeout msec="5" sec="1"><AlwaysSuccess/></Timeout></Sequence>'))
-    assert e.line == 4 and e.name == "Timeout" and "unknown port 'sec'" in str(e) and "msec" in str(e)
+    assert (e.file, e.line, e.name) == ("bad.xml", 4, "Timeout")
+    assert str(e).startswith("bad.xml:4: ") and "unknown port 'sec'" in str(e) and "msec" in str(e)
 
 
 def test_scripting_attributes_are_rejected():

@@ -53,6 +53,45 @@ def test_unknown_process_iri(engine):
 def test_malformed_iris(engine, bad):
     _rejected(engine, lambda: engine.start_process(bad, abort_running=True), MalformedIriError, "IRI")
     _rejected(engine, lambda: engine.set_task_status(bad, "succeeded"), MalformedIriError, "task IRI")
+    if bad:  # next_action("") / next_action(None) means "the running process" (the ROS request's empty field)
+        _rejected(engine, lambda: engine.next_action(bad), MalformedIriError, "process IRI",
+                  repr(bad.strip("<>"))[1:-1][:20])
+    # an IRI binding of a predefined query (a URIRef, as scripts pass world instances) is checked like any IRI
+    _rejected(engine, lambda: engine.query("feature_status", {"feature": URIRef(bad)}), MalformedIriError,
+              "binding 'feature'", "IRI")
+    _rejected(engine, lambda: engine.query("kpi_by_process", {"process": URIRef(bad)}), MalformedIriError,
+              "binding 'process'", "IRI")
+    # the running process is untouched: the same task is still the next action
+    assert engine.next_action().action_type == "VALIDATE_TAPE_LINE"
+
+
+def test_free_text_detail_survives_a_restart_unchanged(make_engine, tmp_path):
+    """Quotes, braces, ``>``, newlines, triple quotes and a backslash in ``detail`` are data: stored as given,
+    replayed from the journal as given, nothing else touched."""
+    e = make_engine("detail_db")
+    e.update_world(scan_result(joints_per_wall=1))
+    e.start_process(TAPING, {"validateLines": False})
+    a = e.next_action()                                              # GET_TOOL
+    detail = ('operator said: "tool {A} > tool {B}" \\ \n ok\n'
+              '"""long string""" } ; DROP ALL ; { <urn:x> <urn:y> <urn:z> .\r\n\ttab, \\" end\\')
+    assert all(c in detail for c in ('"', "{", "}", ">", "\n", '"""', "\\"))
+    e.set_task_status(a.task, "in_progress")
+    e.set_task_status(a.task, "succeeded", detail)
+    from locem_bridge.pemkre.vocab import PROC
+    assert e.store.value(URIRef(a.task), PROC.detail) == Literal(detail)
+    before = quads_snapshot(e.store)
+    e.store.close()
+    store = JournaledStore(str(tmp_path / "detail_db"))
+    try:
+        assert store.replayed_records > 0 and store.dropped_bytes == 0     # read back from the journal
+        assert quads_snapshot(store) == before                             # nothing else changed
+        assert store.value(URIRef(a.task), PROC.detail) == Literal(detail)  # the detail, character for character
+        e2 = ProcessEngine(store, clock=e.clock)
+        assert e2.check_consistency(full_inference=True) == []
+        nxt = e2.next_action()
+        assert nxt.action_type == "TAPE_LINE" and nxt.task != a.task       # the run continues where it stopped
+    finally:
+        store.close()
 
 
 def test_statuses_for_tasks_that_are_not_running(engine):
@@ -116,6 +155,11 @@ def test_bad_scan_results_name_the_path(engine):
     s["joints"][0]["kind"] = "diagonal"
     _rejected(engine, lambda: engine.update_world(s), WorldUpdateError, "joints[0].kind", "horizontal", "vertical")
     _rejected(engine, lambda: engine.update_world("{not json"), WorldUpdateError, "not valid JSON")
+    for finish in ("painted", "SPRAYED", "", 1, True, ["sprayed"]):
+        s = scan_result()
+        s["areas"][0]["finish"] = finish
+        _rejected(engine, lambda: engine.update_world(s), WorldUpdateError, "areas[0].finish", "bare, sprayed, sanded",
+                  repr(finish))
     s = scan_result()
     s["walls"][0]["height"] = float("inf")
     _rejected(engine, lambda: engine.update_world(json_dumps(s).replace("Infinity", "1e999")), WorldUpdateError,
@@ -199,16 +243,29 @@ def test_binding_query_without_a_value(make_engine):
     _rejected(e, e.next_action, BindingError, "'tool'", "taping_getTool", "p_tapingTool")
 
 
-def test_process_model_errors_name_the_node(tmp_path):
+def test_process_model_errors_name_the_node(tmp_path, make_engine):
+    e = make_engine("db4")                               # a store in use: world, a finished run, a running one
+    e.update_world(scan_result(joints_per_wall=1))
+    e.start_process(TAPING, {"validateLines": False})
+    a = e.next_action()
+    e.set_task_status(a.task, "succeeded")
+    before = quads_snapshot(e.store)
+    e.store.close()
     d = _copy_ontologies(tmp_path)
     p = d / "plasterboard.ttl"
     text = p.read_text()
-    p.write_text(text.replace("plb:taping_t20 a proc:Transition, owl:NamedIndividual ; proc:source plb:taping_goHome ; "
-                              "proc:target plb:taping_end .", ""))
+    old = ("plb:taping_t20 a proc:Transition, owl:NamedIndividual ; proc:source plb:taping_goHome ; "
+           "proc:target plb:taping_end .")
+    assert old in text
+    p.write_text(text.replace(old, ""))
     store = JournaledStore(str(tmp_path / "db4"))
     try:
         with pytest.raises(ProcessModelError, match="taping_goHome.*no outgoing transition"):
             ProcessEngine(store, sorted(str(x) for x in d.iterdir()))
+        assert quads_snapshot(store) == before           # nothing written
+        e2 = ProcessEngine(store, clock=e.clock)         # the shipped files still load on the untouched store
+        assert e2.check_consistency(full_inference=True) == []
+        assert e2.next_action().action_type == "TAPE_LINE"
     finally:
         store.close()
 

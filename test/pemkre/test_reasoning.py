@@ -169,3 +169,71 @@ def test_incremental_inference_matches_a_full_recompute_after_many_changes(make_
     e.update_world(scan)
     assert e.check_consistency(full_inference=True) == []
     assert e.store.value(URIRef(str(e.site) + "wall_1"), PPR.hasFeature) is not None  # inverse inferred
+
+
+class SteppingClock:
+    """A monotonic clock for the reasoning bound: each reading advances by ``step`` seconds (0 = time stands still)."""
+
+    def __init__(self) -> None:
+        self.t = 100.0
+        self.step = 0.0
+        self.readings = 0
+
+    def __call__(self) -> float:
+        self.readings += 1
+        self.t += self.step
+        return self.t
+
+
+def test_incremental_time_bound_hit_writes_nothing_and_keeps_the_last_good_state(make_engine):
+    rc = SteppingClock()
+    e = make_engine(reasoning_max_seconds=5.0, reasoning_clock=rc)
+    e.update_world(scan_result(walls=1, joints_per_wall=2))         # time stands still: within the bound
+    snap = quads_snapshot(e.store)
+    rc.step = 10.0                                                  # every reading: 10 s later, over the 5 s bound
+    n = rc.readings
+    with pytest.raises(ReasoningBoundError, match=r"time bound of 5\.000 s; nothing was written"):
+        e.update_world(scan_result(walls=2, joints_per_wall=3))
+    assert rc.readings > n                                          # the bound was decided on the injected clock
+    assert quads_snapshot(e.store) == snap                          # nothing written
+    rc.step = 0.0
+    assert e.check_consistency(full_inference=True) == []
+    assert [r["id"].toPython() for r in e.query("pending_joint_lines").rows] == ["wall_1_joint_1", "wall_1_joint_2"]
+    # the same update within the bound goes through on the kept state
+    assert e.update_world(scan_result(walls=2, joints_per_wall=3)) > 0
+    assert len(e.query("pending_joint_lines").rows) == 6
+    assert e.check_consistency(full_inference=True) == []
+
+
+def test_time_bound_hit_during_set_task_status_leaves_the_store_unchanged(make_engine):
+    rc = SteppingClock()
+    e = make_engine(reasoning_max_seconds=5.0, reasoning_clock=rc)
+    e.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    scan = e.next_action()
+    assert scan.action_type == "SCAN"
+    e.set_task_status(scan.task, "in_progress")
+    snap = quads_snapshot(e.store)
+    rc.step = 10.0
+    # the SCAN result as detail: task status, world features and their inferences in one change -- refused whole
+    with pytest.raises(ReasoningBoundError, match="time bound"):
+        e.set_task_status(scan.task, "succeeded", json_dumps(scan_result(joints_per_wall=2)))
+    assert quads_snapshot(e.store) == snap
+    again = e.next_action()
+    assert (again.task, again.task_status) == (scan.task, "in_progress")   # still the running SCAN task
+    rc.step = 0.0
+    assert e.check_consistency(full_inference=True) == []
+    # reported again within the bound: accepted, and the run goes on with the scanned lines
+    e.set_task_status(scan.task, "succeeded", json_dumps(scan_result(joints_per_wall=2)))
+    tool = e.next_action()
+    assert tool.action_type == "GET_TOOL"
+    # a plain status report (effects only, no world merge) hitting the bound is refused the same way
+    snap = quads_snapshot(e.store)
+    rc.step = 10.0
+    with pytest.raises(ReasoningBoundError, match="time bound"):
+        e.set_task_status(tool.task, "succeeded")
+    assert quads_snapshot(e.store) == snap
+    rc.step = 0.0
+    assert e.next_action().task == tool.task                         # GET_TOOL is still the current task
+    e.set_task_status(tool.task, "succeeded")
+    assert e.next_action().params() == {"line": "wall_1_joint_1"}
+    assert e.check_consistency(full_inference=True) == []

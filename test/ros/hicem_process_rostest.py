@@ -4,12 +4,18 @@
 A whole taping process driven through /hicem/start_process with operator answers through /hicem/operator_reply;
 bad input; /hicem/stop mid-action; a crucial module failing on /diagnostics; kill -9 of HICEM mid-taping and
 the restarted node resuming without taping the interrupted joint again.
+
+Both hicem_process.test (PEMKRE embedded in the HICEM node) and hicem_pemkre_ros.test (a PEMKRE node) run this
+file; :class:`PemkreLog` reads PEMKRE's execution log the way each suite offers it.
 """
+import collections
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
+import tempfile
 import threading
 import time
 import unittest
@@ -18,12 +24,71 @@ import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from locem_bridge.msg import HicemPrompt, HicemState, Status
-from locem_bridge.srv import Command, HicemOperatorReply, HicemStartProcess, HicemStop
+from locem_bridge.srv import Command, HicemOperatorReply, HicemStartProcess, HicemStop, PemkreQuery
 
 from rostest_support import result_of, rosservice_call, wait_until
 
 TAPING = "https://locem-bridge.example.org/ont/plasterboard#TapingProcess"
 TAPE_CMD = "WAIT 2 hold=arm"  # what the rostest TAPE_LINE tree sends (cfg.test.tape_s = 2.0)
+
+
+class PemkreLog:
+    """PEMKRE's execution log of one specific process, read through whichever PEMKRE the suite runs.
+
+    ``pemkre: ros`` (hicem_pemkre_ros.test): the task log comes from the PEMKRE node's ``/pemkre/query``
+    service (predefined query ``task_log``). ``pemkre: embedded`` (hicem_process.test): the engine lives inside
+    the HICEM node, so a copy of its store directory (``~pemkre_store``) is opened with the real
+    :class:`ProcessEngine` and the same query is run there. The task parameters (not part of ``task_log``) are
+    read from a copy of the store in both cases: the task's own triples in the log graph. Copies are taken
+    while HICEM is idle (between processes), so nothing is written meanwhile.
+    """
+
+    def __init__(self):
+        self.mode = rospy.get_param("/hicem/pemkre")
+
+    def _store_copy(self):
+        from locem_bridge.pemkre import JournaledStore, OxigraphStore
+        if self.mode == "embedded":
+            path, kind = rospy.get_param("/hicem/pemkre_store"), "rocksdb"
+        else:
+            path, kind = rospy.get_param("/pemkre/store_path"), rospy.get_param("/pemkre/store", "journal")
+        tmp = tempfile.mkdtemp(prefix="pemkre_log_copy_")
+        copy = os.path.join(tmp, "store")
+        shutil.copytree(path, copy, ignore=shutil.ignore_patterns("LOCK"))
+        store = JournaledStore(copy) if kind == "journal" else OxigraphStore(copy)
+        return store, tmp
+
+    def tasks(self, process):
+        """[{task, seq, action_type, statuses, details, parameters}] in issue order, one entry per task."""
+        from locem_bridge.pemkre import ProcessEngine
+        from locem_bridge.pemkre.store import G_LOG
+        from rdflib import URIRef
+        store, tmp = self._store_copy()
+        try:
+            if self.mode == "embedded":
+                rows = [{k: str(v) for k, v in r.items() if v is not None}
+                        for r in ProcessEngine(store).query("task_log", {"process": URIRef(process)}).rows]
+            else:
+                resp = rospy.ServiceProxy("/pemkre/query", PemkreQuery)("task_log", ["process"], ["<%s>" % process])
+                assert resp.success, resp.message
+                rows = [{k: v["value"] for k, v in b.items()} for b in json.loads(resp.results)["results"]["bindings"]]
+            tasks = collections.OrderedDict()
+            for r in sorted(rows, key=lambda r: int(r["seq"])):
+                t = tasks.setdefault(r["task"], {"task": r["task"], "seq": int(r["seq"]), "action_type": r["actionType"],
+                                                 "statuses": set(), "details": set()})
+                t["statuses"].add(r["status"])
+                if "detail" in r:
+                    t["details"].add(r["detail"])
+            proc = "https://locem-bridge.example.org/ont/process#"
+            rdf_type = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
+            for t in tasks.values():
+                t["parameters"] = tuple(sorted((str(p).rsplit("#", 1)[-1], str(o))
+                                               for _s, p, o, _g in store.quads(URIRef(t["task"]), None, None, [G_LOG])
+                                               if not str(p).startswith(proc) and str(p) != rdf_type))
+            return list(tasks.values())
+        finally:
+            store.close()
+            shutil.rmtree(tmp, ignore_errors=True)
 
 
 class HicemProcessTest(unittest.TestCase):
@@ -48,6 +113,7 @@ class HicemProcessTest(unittest.TestCase):
         cls.stop = rospy.ServiceProxy("/hicem/stop", HicemStop)
         cls.reply = rospy.ServiceProxy("/hicem/operator_reply", HicemOperatorReply)
         cls.extra_node = None
+        cls.pemkre_log = PemkreLog()
 
     @classmethod
     def tearDownClass(cls):
@@ -174,6 +240,8 @@ class HicemProcessTest(unittest.TestCase):
 
     def test_4_crucial_module_failure_halts_within_200_ms(self):
         ev, _ = self.mark()
+        with self.lock:
+            states_at = len(self.states)
         self.start_taping(False)
         self.wait_tape_running(ev)
         t_fault = rospy.Time.now()
@@ -192,11 +260,28 @@ class HicemProcessTest(unittest.TestCase):
         self.assertIn("simulated RTDE failure", st.detail)
         self.diag.publish(DiagnosticArray(status=[DiagnosticStatus(level=DiagnosticStatus.OK, name="locem",
                                                                    message="recovered")]))
-        st = self.wait_phase(("failed", "ended"), 30)  # PEMKRE fails a process whose task failed
+        st = self.wait_phase(("failed", "ended"), 30)
+        # taping has no failure transition: PEMKRE fails the process with the failed TAPE_LINE task
+        self.assertEqual(st.phase, "failed", st.detail)
+        self.assertIn("(TAPE_LINE) failed", st.detail)
         self.assertIn("simulated RTDE failure", st.detail)
+        with self.lock:  # HICEM reported the action failed with the module's reason
+            reported = [m for _t, m in self.states[states_at:] if m.phase == "reporting" and m.action_type == "TAPE_LINE"]
+        self.assertEqual(len(reported), 1, [(m.task, m.detail) for m in reported])
+        self.assertIn("simulated RTDE failure", reported[0].detail)
+        # ... and PEMKRE recorded it so: the taping task failed with that reason, nothing issued after it
+        log = self.pemkre_log.tasks(st.specific_process)
+        self.assertEqual([t["action_type"] for t in log][-1], "TAPE_LINE", log)
+        tape = log[-1]
+        self.assertEqual(tape["task"], reported[0].task)
+        self.assertEqual(tape["statuses"], {"failed"}, tape)
+        self.assertTrue(any("simulated RTDE failure" in d for d in tape["details"]), tape)
+        self.assertTrue(all(t["statuses"] == {"succeeded"} for t in log[:-1]), log)
 
     def test_5_kill_9_mid_taping_then_resume_without_taping_twice(self):
         ev, pr = self.mark()
+        with self.lock:
+            states_at = len(self.states)
         self.start_taping(False)
         self.wait_tape_running(ev, n=2)  # second joint being taped
         info = subprocess.run(["rosnode", "info", "/hicem"], capture_output=True, text=True, timeout=30).stdout
@@ -215,6 +300,26 @@ class HicemProcessTest(unittest.TestCase):
         self.assertTrue(any("finish_interrupted" in k for k in kinds))  # the operator finished the interrupted joint by hand
         self.assertEqual(len(self.started(TAPE_CMD, ev)), 3)  # joints 1, 2 (interrupted), 3: none taped twice
         self.assertEqual(self.locem_running(), [])
+        # PEMKRE's log: no task of any type succeeded twice with the same parameters, the interrupted TAPE_LINE
+        # task was settled (finished by hand) rather than issued again, and three joints were taped
+        log = self.pemkre_log.tasks(st.specific_process)
+        self.assertTrue(all(t["statuses"] == {"succeeded"} for t in log), log)
+        done = collections.Counter((t["action_type"], t["parameters"]) for t in log)
+        self.assertEqual([k for k, n in done.items() if n > 1], [], log)
+        tapes = [t for t in log if t["action_type"] == "TAPE_LINE"]
+        self.assertEqual(len(tapes), 3, log)
+        self.assertEqual(len({t["parameters"] for t in tapes}), 3, tapes)
+        self.assertTrue(all(dict(t["parameters"]).get("line") for t in tapes), tapes)
+        self.assertEqual([t["action_type"] for t in log][-1], "GO_HOME", log)
+        self.assertLessEqual(len([t for t in log if t["action_type"] == "SCAN"]), 1, log)
+        # the operator was not asked to mount a tool twice (prompt events, and the open prompts the latched state
+        # listed while the restarted node's events may not have reached this subscriber yet)
+        with self.lock:
+            mounts = {p.id: p.text for p in self.prompts[pr:] if p.event == "opened" and p.kind == "mount_tool"}
+            for _t, m in self.states[states_at:]:
+                mounts.update({p["id"]: p["text"] for p in json.loads(m.prompts or "[]") if p["kind"] == "mount_tool"})
+        self.assertLessEqual(len(mounts), 1, mounts)
+        self.assertLessEqual(len([t for t in log if t["action_type"] == "GET_TOOL"]), 1, log)
 
 
 if __name__ == "__main__":

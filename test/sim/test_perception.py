@@ -73,3 +73,64 @@ def test_site_without_joints_scans_walls_and_areas_only(robot_cfg):
     assert out["joints"] == []
     assert [w["id"] for w in out["walls"]] == ["wall_1"]
     assert out["areas"][0]["width"] == pytest.approx(3.0) and out["areas"][0]["height"] == pytest.approx(2.5)
+
+
+def _wall_work(site, robot_cfg, site_cfg):
+    """An OutcomeRecorder of the site and helpers that pass the spray gun / the sander over wall_1 (through record)."""
+    from locem_bridge.sim.outcome import OutcomeRecorder
+    rec = OutcomeRecorder(site, robot_cfg["robot"]["tools"], site_cfg["simulation"]["outcome"])
+    wall = next(w for w in site.work_walls if w.id == "wall_1")
+    standoff = robot_cfg["robot"]["tools"]["spray_gun"]["standoff"]
+
+    def spray(s0, s1, t0, t1, spacing=0.1, speed=0.1):   # horizontal lanes, nozzle at the standoff, aimed at the wall
+        for t in np.arange(t0, t1 + 1e-9, spacing):
+            p0 = wall.from_wall_coords(s0, t) + standoff * wall.n
+            p1 = wall.from_wall_coords(s1, t) + standoff * wall.n
+            rec.record("spray_gun", True, p0, p1, -wall.n, (s1 - s0) / speed)
+
+    def sand(s0, s1, t0, t1, spacing=0.2):                # pad on the surface
+        for t in np.arange(t0, t1 + 1e-9, spacing):
+            rec.record("sander", True, wall.from_wall_coords(s0, t), wall.from_wall_coords(s1, t), -wall.n, 1.0)
+    return rec, spray, sand
+
+
+def test_scan_reports_each_area_finish_from_the_recorded_outcome(site_cfg, robot_cfg):
+    from locem_bridge.sim.perception import FINISHED_FRACTION, area_coverage
+    site = Site(site_cfg)
+    rec, spray, sand = _wall_work(site, robot_cfg, site_cfg)
+    sc = WallScanner(site, robot_cfg["robot"]["scanner"], outcome=rec)
+    pose = [2.4, 1.6, math.pi / 2]
+
+    def finishes():
+        return {a["id"]: a["finish"] for a in sc.scan(pose)["areas"]}
+    assert finishes() == {"wall_1_area_1": "bare", "wall_1_area_2": "bare", "wall_2_area_1": "bare"}
+    spray(-0.1, 2.5, 0.0, 2.5)                            # all of area_1 (s 0..2.4), a fringe of area_2
+    a1, a2 = next(w for w in site.work_walls if w.id == "wall_1").areas
+    cov1, cov2 = area_coverage(rec, a1), area_coverage(rec, a2)
+    assert cov1[0] >= FINISHED_FRACTION and 0.0 < cov2[0] < 0.2
+    # the per-area numbers add up to the recorder's own per-wall coverage (two equal areas)
+    assert (cov1[0] + cov2[0]) / 2 == pytest.approx(rec.summary()["walls"]["wall_1"]["spray_coverage"])
+    assert finishes() == {"wall_1_area_1": "sprayed", "wall_1_area_2": "bare", "wall_2_area_1": "bare"}
+    spray(2.4, 4.9, 0.0, 2.3)                             # area_2 short of its top strip: under 98 %, still bare
+    assert 0.9 < area_coverage(rec, a2)[0] < FINISHED_FRACTION
+    assert finishes()["wall_1_area_2"] == "bare"
+    spray(2.4, 4.9, 2.4, 2.5)
+    assert finishes()["wall_1_area_2"] == "sprayed"
+    sand(0.0, 2.4, 0.0, 2.5)
+    assert area_coverage(rec, a1)[1] >= FINISHED_FRACTION
+    assert finishes() == {"wall_1_area_1": "sanded", "wall_1_area_2": "sprayed", "wall_2_area_1": "bare"}
+    # without a recorder the scan leaves finish out (the contract default applies)
+    plain = WallScanner(site, robot_cfg["robot"]["scanner"]).scan(pose)
+    assert all("finish" not in a for a in plain["areas"]) and plain["areas"]
+
+
+def test_sanded_bare_board_is_not_reported_sanded(site_cfg, robot_cfg):
+    from locem_bridge.sim.perception import FINISHED_FRACTION, area_coverage
+    site = Site(site_cfg)
+    rec, spray, sand = _wall_work(site, robot_cfg, site_cfg)
+    sand(0.0, 2.4, 0.0, 2.5)
+    a1 = next(w for w in site.work_walls if w.id == "wall_1").areas[0]
+    spray_cov, sand_cov = area_coverage(rec, a1)
+    assert spray_cov == 0.0 and sand_cov >= FINISHED_FRACTION
+    out = WallScanner(site, robot_cfg["robot"]["scanner"], outcome=rec).scan([2.4, 1.6, math.pi / 2])
+    assert next(a for a in out["areas"] if a["id"] == "wall_1_area_1")["finish"] == "bare"

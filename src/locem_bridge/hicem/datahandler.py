@@ -6,7 +6,10 @@
   and the processing ``status`` carried over from earlier scans), the scan counter ``scan/latest_seq`` is
   advanced and outdated features (not seen by the latest scan) are pruned by the HDM rules. New or changed
   features are forwarded to PEMKRE (``report_world``) in the SCAN shape; if PEMKRE cannot be reached the update
-  waits in the persistent ``outbox`` and is retried by :meth:`flush_outbox`.
+  waits in the persistent ``outbox`` and is retried by :meth:`flush_outbox`. An area's optional ``finish``
+  (``bare`` / ``sprayed`` / ``sanded``: what the perception sees on the surface) is stored and forwarded with its
+  geometry; a finish different from the stored one makes a known area *changed* (PEMKRE then upgrades its
+  spraying/sanding status, never downgrades it). An area reported without ``finish`` keeps the stored one.
 - :meth:`ingest_status` / :meth:`ingest_diagnostics` / :meth:`heartbeat`: module health into the HEM.
 - :meth:`feature` / :meth:`mark_feature`: what trees read and write about features.
 """
@@ -20,6 +23,8 @@ from .errors import DataStoreError, HicemError, ScanFormatError
 
 FEATURES = "features"
 _ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+#: values of an area's optional ``finish`` (docs/contracts.md), from bare board to finished
+FINISHES = ("bare", "sprayed", "sanded")
 
 
 def _num(v: Any, where: str) -> float:
@@ -98,10 +103,16 @@ def validate_scan(scan: Any, known_walls: Sequence[str] = ()) -> Dict[str, List[
         i = fid(a, where)
         if a.get("wall") not in walls:
             raise ScanFormatError("%s.wall %r is not a known wall" % (where, a.get("wall")))
-        out["areas"].append({"id": i, "wall": a["wall"], "origin": _vec(a.get("origin"), 3, where + ".origin"),
-                             "u": _unit(_vec(a.get("u"), 3, where + ".u"), where + ".u"),
-                             "width": _pos(a.get("width"), where + ".width"),
-                             "height": _pos(a.get("height"), where + ".height")})
+        area = {"id": i, "wall": a["wall"], "origin": _vec(a.get("origin"), 3, where + ".origin"),
+                "u": _unit(_vec(a.get("u"), 3, where + ".u"), where + ".u"),
+                "width": _pos(a.get("width"), where + ".width"),
+                "height": _pos(a.get("height"), where + ".height")}
+        finish = a.get("finish")
+        if finish is not None:
+            if not isinstance(finish, str) or finish not in FINISHES:
+                raise ScanFormatError("%s.finish must be one of %s, got %r" % (where, ", ".join(FINISHES), finish))
+            area["finish"] = finish
+        out["areas"].append(area)
     return out
 
 
@@ -135,6 +146,8 @@ class DataHandler:
                 for item in items:
                     old = self.store.value(FEATURES, item["id"])
                     geometry = dict(item)
+                    if kind == "area" and "finish" not in geometry and old is not None and "finish" in old:
+                        geometry["finish"] = old["finish"]   # not reported this time: keep what was seen
                     value = dict(geometry, type=kind, scan_seq=seq,
                                  status=(old or {}).get("status", "detected"))
                     if old is None:

@@ -19,6 +19,10 @@ and finds the process that was running when the store was last used. Then, from 
 Every state change is one atomic :meth:`TripleStore.apply` holding the asserted triples and the inferred triples
 that follow from them (:class:`IncrementalReasoner`), so the store is consistent after any crash. Errors leave the
 store untouched and name the culprit (see :mod:`locem_bridge.pemkre.errors`). The engine does not own the store.
+The inference of each change is bounded by ``reasoning_max_seconds`` (read on ``reasoning_clock``, a monotonic
+clock) and ``reasoning_max_triples``: a change that hits a bound -- a world update, a status report, a next action
+-- raises :class:`~locem_bridge.pemkre.errors.ReasoningBoundError` and writes nothing, so the store keeps the last
+good state and the same call can be repeated.
 """
 import datetime
 import logging
@@ -131,7 +135,8 @@ class ProcessEngine:
                  clock: Callable[[], float] = time.time, reasoning_max_seconds: float = 5.0,
                  reasoning_max_triples: int = 500_000, schema_max_seconds: float = 300.0,
                  schema_max_triples: int = 2_000_000, max_walk_steps: int = 10_000,
-                 allow_unsupported_owl: bool = False) -> None:
+                 allow_unsupported_owl: bool = False,
+                 reasoning_clock: Callable[[], float] = time.monotonic) -> None:
         self.store = store
         self.site = Namespace(str(check_iri(site_namespace, "site namespace"))) if site_namespace else SITE
         self.log_ns = Namespace(str(check_iri(log_namespace, "log namespace"))) if log_namespace else LOG
@@ -153,7 +158,8 @@ class ProcessEngine:
             model = compile_model(closed, store, self.prefixes)  # before any write: a bad model changes nothing
             store.replace_graph(G_ONTOLOGY, loaded.schema)
             store.replace_graph(G_SCHEMA_INFERRED, inferred_part(loaded.schema, closed))
-            self.reasoner = IncrementalReasoner(rules, reasoning_max_seconds, reasoning_max_triples)
+            self.reasoner = IncrementalReasoner(rules, reasoning_max_seconds, reasoning_max_triples,
+                                                 reasoning_clock)
             cs = self.reasoner.recompute_all(store, max_seconds=schema_max_seconds, max_triples=schema_max_triples)
             cs.remove += [(s, p, o, G_META) for s, p, o, _ in store.quads(META.ontology, META.schemaHash, None, (G_META,))]
             cs.add.append((META.ontology, META.schemaHash, Literal(loaded.schema_hash), G_META))
@@ -165,7 +171,8 @@ class ProcessEngine:
             rules = SchemaRules(closed, loaded.schema)
             self._check_unsupported(rules, allow_unsupported_owl)
             model = compile_model(closed, store, self.prefixes)
-            self.reasoner = IncrementalReasoner(rules, reasoning_max_seconds, reasoning_max_triples)
+            self.reasoner = IncrementalReasoner(rules, reasoning_max_seconds, reasoning_max_triples,
+                                                 reasoning_clock)
         self.model: ProcessModel = model
         self.rules = rules
         seed_hash = store.value(META.ontology, META.seedHash, (G_META,))

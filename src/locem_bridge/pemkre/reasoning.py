@@ -15,7 +15,8 @@ Two parts with one contract: *what is true after reasoning is what owlrl's OWL 2
 * :class:`IncrementalReasoner` turns a change of asserted ABox triples into the matching change of inferred triples
   by recomputing the closure *locally*, for the individuals the change touches only (their own triples plus one
   witness per range-bearing property pointing at them), and diffing it with what is stored. Bounded by time and
-  size like the full closure; on a bound nothing is written.
+  size like the full closure; on a bound nothing is written. Time is read from an injected monotonic ``clock``
+  (default :func:`time.monotonic`), so the bound can be tested without depending on the machine's speed.
 """
 import time
 from collections import defaultdict
@@ -236,8 +237,12 @@ def _transitive(start: Node, edges: Dict[Node, Set[Node]]) -> Set[Node]:
 
 
 class _Budget:
-    def __init__(self, max_seconds: float, max_triples: int) -> None:
-        self.deadline = time.monotonic() + max_seconds
+    """The time and size bound of one inference: :meth:`tick` per derived triple (the clock is read every 256
+    ticks), :meth:`check_time` at the end; either raises :class:`ReasoningBoundError` before anything is written."""
+
+    def __init__(self, max_seconds: float, max_triples: int, clock: Callable[[], float] = time.monotonic) -> None:
+        self.clock = clock
+        self.deadline = clock() + max_seconds
         self.max_seconds = max_seconds
         self.max_triples = max_triples
         self.count = 0
@@ -247,12 +252,12 @@ class _Budget:
         if self.count > self.max_triples:
             raise ReasoningBoundError("ABox inference exceeded its size bound of %d triples; nothing was written"
                                       % self.max_triples)
-        if self.count % 256 == 0 and time.monotonic() > self.deadline:
+        if self.count % 256 == 0 and self.clock() > self.deadline:
             raise ReasoningBoundError("ABox inference exceeded its time bound of %.3f s; nothing was written"
                                       % self.max_seconds)
 
     def check_time(self) -> None:
-        if time.monotonic() > self.deadline:
+        if self.clock() > self.deadline:
             raise ReasoningBoundError("ABox inference exceeded its time bound of %.3f s; nothing was written"
                                       % self.max_seconds)
 
@@ -270,10 +275,12 @@ class IncrementalReasoner:
     property fall back to :meth:`recompute_all`.
     """
 
-    def __init__(self, rules: SchemaRules, max_seconds: float = 5.0, max_triples: int = 500_000) -> None:
+    def __init__(self, rules: SchemaRules, max_seconds: float = 5.0, max_triples: int = 500_000,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.rules = rules
         self.max_seconds = max_seconds
         self.max_triples = max_triples
+        self.clock = clock
         r = rules
         self._domain_of: Dict[Node, Set[Node]] = defaultdict(set)   # class -> properties with it as domain
         self._range_of: Dict[Node, Set[Node]] = defaultdict(set)    # class -> properties with it as range
@@ -338,7 +345,7 @@ class IncrementalReasoner:
     def infer(self, store: TripleStore, changes: ChangeSet, max_seconds: Optional[float] = None,
               max_triples: Optional[int] = None) -> ChangeSet:
         budget = _Budget(self.max_seconds if max_seconds is None else max_seconds,
-                         self.max_triples if max_triples is None else max_triples)
+                         self.max_triples if max_triples is None else max_triples, self.clock)
         asserted_set = frozenset(ASSERTED_GRAPHS)
         removed = {(s, p, o) for s, p, o, g in changes.remove if g in asserted_set}
         added = {(s, p, o) for s, p, o, g in changes.add if g in asserted_set}
@@ -530,7 +537,7 @@ class IncrementalReasoner:
         from .store import G_LOG, G_WORLD
 
         budget = _Budget(self.max_seconds if max_seconds is None else max_seconds,
-                         self.max_triples if max_triples is None else max_triples)
+                         self.max_triples if max_triples is None else max_triples, self.clock)
         removed: Set[Triple] = set()
         added: Set[Triple] = set()
         if pending is not None:

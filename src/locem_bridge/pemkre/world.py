@@ -4,6 +4,13 @@
 and what is allowed) and returns the :class:`ChangeSet` that merges it into the world graph: new features get the
 ``unprocessed`` state for every process that works on them and the next ``scanOrder``; known features (same id,
 stable across scans) keep their state and get their geometry refreshed. Nothing is written here.
+
+An area may carry ``finish`` (``bare`` -- the default --, ``sprayed`` or ``sanded``): what the perception sees on
+the surface. On first sight it sets the area's ``sprayingStatus`` / ``sandingStatus`` (``sprayed``: spraying
+``processed``, sanding ``unprocessed``; ``sanded``: both ``processed`` -- the values the SPRAY_AREA / SAND_AREA
+effects write), so a sanding run on a fresh store finds the areas someone else sprayed. For a known area a finish
+further along than the stored status upgrades it; a scan never downgrades a status (``bare`` on a sprayed area
+changes nothing: the perception may miss thin compound, the execution log does not).
 """
 import json
 import math
@@ -19,6 +26,11 @@ from .vocab import GEO, PPR
 
 _JOINT_CLASS = {"vertical": PPR.VerticalJointLine, "horizontal": PPR.HorizontalJointLine}
 _GEOMETRY_PROPS = (PPR.geometry, PPR.height, PPR.width, PPR.thickness, PPR.kind, PPR.onWall, PPR.lastScannedAt)
+#: ``finish`` of an area -> (spraying done, sanding done)
+FINISHES = {"bare": (False, False), "sprayed": (True, False), "sanded": (True, True)}
+_FINISH_ORDER = ("bare", "sprayed", "sanded")
+#: statuses that count as done: a scan never replaces them
+_DONE = frozenset((PPR.processed, PPR.processedManually))
 
 
 def _num(v: Any, path: str) -> float:
@@ -53,6 +65,14 @@ def _wkt_line(points: Sequence[Sequence[float]]) -> Literal:
 def _wkt_polygon(points: Sequence[Sequence[float]]) -> Literal:
     ring = list(points) + [points[0]]
     return Literal("POLYGON Z ((%s))" % ", ".join(" ".join(_fmt(c) for c in p) for p in ring), datatype=GEO.wktLiteral)
+
+
+def _finish(v: Any, path: str) -> str:
+    if v is None:
+        return "bare"
+    if not isinstance(v, str) or v not in FINISHES:
+        raise WorldUpdateError("%s must be one of %s, got %r" % (path, ", ".join(_FINISH_ORDER), v))
+    return v
 
 
 def parse_scan(scan: Union[str, bytes, Mapping[str, Any]]) -> Dict[str, Any]:
@@ -171,6 +191,7 @@ def scan_changes(scan: Union[str, bytes, Mapping[str, Any]], store: TripleStore,
         width, height = _num(a.get("width"), path + ".width"), _num(a.get("height"), path + ".height")
         if width <= 0 or height <= 0:
             raise WorldUpdateError("%s: width and height must be > 0 m, got %r x %r" % (path, width, height))
+        spray_done, sand_done = FINISHES[_finish(a.get("finish"), path + ".finish")]
         c1 = [origin[k] + width * u[k] for k in range(3)]
         corners = [origin, c1, [c1[0], c1[1], c1[2] + height], [origin[0], origin[1], origin[2] + height]]
         node = iri(fid)
@@ -178,9 +199,18 @@ def scan_changes(scan: Union[str, bytes, Mapping[str, Any]], store: TripleStore,
                                             (PPR.width, Literal(width, datatype=XSD.double)),
                                             (PPR.height, Literal(height, datatype=XSD.double))]):
             cs.add.append((node, PPR.scanOrder, Literal(order), G_WORLD))
-            cs.add.append((node, PPR.sprayingStatus, PPR.unprocessed, G_WORLD))
-            cs.add.append((node, PPR.sandingStatus, PPR.unprocessed, G_WORLD))
+            cs.add.append((node, PPR.sprayingStatus, PPR.processed if spray_done else PPR.unprocessed, G_WORLD))
+            cs.add.append((node, PPR.sandingStatus, PPR.processed if sand_done else PPR.unprocessed, G_WORLD))
             order += 1
+        else:  # known area: a finish further along upgrades the stored status, never the other way
+            for prop, done in ((PPR.sprayingStatus, spray_done), (PPR.sandingStatus, sand_done)):
+                if not done:
+                    continue
+                stored = [q for q in store.quads(node, prop, None, (G_WORLD,))]
+                if any(q[2] in _DONE for q in stored):
+                    continue
+                cs.remove += [(s2, p2, o2, G_WORLD) for s2, p2, o2, _ in stored]
+                cs.add.append((node, prop, PPR.processed, G_WORLD))
     # geometry triples that are removed and re-added unchanged: keep them out of the change set
     rem, add = set(cs.remove), set(cs.add)
     both = rem & add

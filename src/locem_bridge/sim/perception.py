@@ -7,6 +7,13 @@ its clipped visible part is not empty; the reported start/end are that visible p
 for every visible wall. Positions get zero-mean Gaussian noise of standard deviation ``position_noise``
 (in the wall plane, along the wall and in height), drawn from a seeded generator so runs repeat. Ids are the
 ground-truth ids, stable across scans. Output is the SCAN JSON shape of ``docs/contracts.md``.
+
+With an :class:`~locem_bridge.sim.outcome.OutcomeRecorder` attached (constructor argument or the ``outcome``
+attribute) every reported area carries ``finish``, what a camera would see on the surface: ``sanded`` when at
+least :data:`FINISHED_FRACTION` of its cells are sprayed to the target thickness *and* sanded, ``sprayed`` when at
+least that fraction is sprayed, else ``bare`` (cells as in the recorder's coverage numbers: centres inside the
+area). Sanding bare board is not a sanded finish: ``sanded`` tells PEMKRE that spraying is done too. Without a
+recorder ``finish`` is left out (the contract's default, ``bare``, applies).
 """
 from __future__ import annotations
 
@@ -15,7 +22,34 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .site import Site, Wall, _r
+from .site import Area, Site, Wall, _r
+
+#: fraction of an area's cells that must be sprayed (sanded) for the scan to report it sprayed (sanded)
+FINISHED_FRACTION = 0.98
+
+
+def area_coverage(outcome: Any, area: Area) -> Tuple[float, float]:
+    """``(spray, sand)`` coverage of ``area`` in ``outcome`` (an OutcomeRecorder): the fraction of the cells whose
+    centre lies in the area that hold at least the target thickness, resp. are sanded. (0, 0) if not recorded."""
+    m = outcome.maps.get(area.wall)
+    if m is None:
+        return 0.0, 0.0
+    along = (m.sc >= area.s0) & (m.sc <= area.s0 + area.width)
+    up = (m.tc >= area.t0) & (m.tc <= area.t0 + area.height)
+    cells = up[:, None] & along[None, :]
+    n = int(cells.sum())
+    if n == 0:
+        return 0.0, 0.0
+    sprayed = (m.thickness >= outcome.target) & cells
+    return float(sprayed.sum()) / n, float((m.sanded & cells).sum()) / n
+
+
+def area_finish(outcome: Any, area: Area) -> str:
+    """``bare`` / ``sprayed`` / ``sanded`` for ``area`` (see the module docstring)."""
+    spray, sand = area_coverage(outcome, area)
+    if spray < FINISHED_FRACTION:
+        return "bare"
+    return "sanded" if sand >= FINISHED_FRACTION else "sprayed"
 
 
 def _angle_wrap(a: float) -> float:
@@ -29,12 +63,15 @@ class WallScanner:
     :param scanner_cfg: ``robot.scanner`` section (mount, range, fov).
     :param position_noise: standard deviation in m (``simulation.perception.position_noise``).
     :param seed: seed of the noise generator.
+    :param outcome: optional OutcomeRecorder of the same site; when set, areas carry ``finish``.
     """
 
     SAMPLES_PER_M = 50  # resolution used to clip walls and joints to the visible region
 
-    def __init__(self, site: Site, scanner_cfg: Dict[str, Any], position_noise: float = 0.0, seed: int = 1) -> None:
+    def __init__(self, site: Site, scanner_cfg: Dict[str, Any], position_noise: float = 0.0, seed: int = 1,
+                 outcome: Any = None) -> None:
         self.site = site
+        self.outcome = outcome
         self.mount_xyz = list(scanner_cfg["mount"]["xyz"])
         self.mount_yaw = float(scanner_cfg["mount"].get("yaw", 0.0))
         self.range = float(scanner_cfg["range"])
@@ -108,5 +145,9 @@ class WallScanner:
                 jc["start"] = [_r(x) for x in self._noisy(start, wall)]
                 jc["end"] = [_r(x) for x in self._noisy(end, wall)]
                 joints.append(jc)
-            areas.extend(a.to_contract() for a in wall.areas)
+            for a in wall.areas:
+                ac = a.to_contract()
+                if self.outcome is not None:
+                    ac["finish"] = area_finish(self.outcome, a)
+                areas.append(ac)
         return {"stamp": float(stamp), "walls": walls, "joints": joints, "areas": areas}

@@ -138,8 +138,10 @@ class World:
         self.tools_cfg = robot["tools"]
         w = robot["base"]["wheel"]
         self.mecanum = MecanumKinematics(w["radius"], w["half_wheelbase"], w["half_track"])
-        self.scanner = WallScanner(self.site, robot["scanner"], sim["perception"]["position_noise"], sim["seed"])
         self.outcome = OutcomeRecorder(self.site, self.tools_cfg, sim["outcome"])
+        # the scanner reports each area's finish (bare / sprayed / sanded) from what the outcome recorded
+        self.scanner = WallScanner(self.site, robot["scanner"], sim["perception"]["position_noise"], sim["seed"],
+                                   outcome=self.outcome)
         self._lock = threading.RLock()
         self._gui = sim["gui"] if gui is None else bool(gui)
         self._cid = pb.connect(pb.GUI if self._gui else pb.DIRECT)
@@ -466,8 +468,10 @@ class World:
 
     # -- perception --------------------------------------------------------------------------------------------
     def scan(self) -> Dict[str, Any]:
-        """SCAN result (contract JSON shape) from the current base pose."""
-        return self.scanner.scan(self.base_pose(), stamp=self.clock.now())
+        """SCAN result (contract JSON shape) from the current base pose (under the world's lock: the scanner reads
+        the outcome recorder, which the stepping thread writes)."""
+        with self._lock:
+            return self.scanner.scan(self.base_pose(), stamp=self.clock.now())
 
     # -- stepping ----------------------------------------------------------------------------------------------
     def _on_arm_step(self, q: Sequence[float]) -> None:
