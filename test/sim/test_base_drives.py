@@ -237,3 +237,50 @@ def test_master_can_remap_an_rpdo_over_sdo(base_rig):
     assert drives.drives[0].snapshot()["velocity"] == pytest.approx(1.5, abs=1e-6)
     node.rpdo[2]["Target velocity"].raw = 0
     node.rpdo[2].transmit()
+
+
+def test_velocity_actual_value_0x606c_follows_the_wheel_by_sdo_and_tpdo(base_rig):
+    """0x606C (velocity actual value) reports the wheel's actual velocity, not an echo of the target 0x60FF: it
+    ramps up, matches the commanded velocity once the ramp is done (by SDO and in TPDO2, which maps it), and is 0
+    after the stop."""
+    world, drives, net, nodes, cfg = base_rig
+    for node in nodes:
+        _enable(node)
+    scale = cfg["velocity_units_per_rad_s"]
+    speed = 3.0                                                    # rad/s at every wheel, forward
+    # a slow ramp on drive 1 (0.5 rad/s^2: 6 s to full speed): mid-ramp, the actual value is below the target
+    default_accel = nodes[0].sdo[0x6083].raw
+    nodes[0].sdo[0x6083].raw = int(0.5 * scale)
+    t0 = time.monotonic()
+    _command(nodes, cfg, [speed] * 4)
+    time.sleep(0.3)
+    ramping = nodes[0].sdo[0x606C].raw
+    elapsed = time.monotonic() - t0
+    assert 0 < ramping < 0.8 * speed * scale, "mid-ramp 0x606C %r after %.2f s" % (ramping, elapsed)
+    assert ramping <= 0.5 * elapsed * scale + 10                   # no faster than the ramp allows
+    nodes[0].sdo[0x6083].raw = default_accel                       # the rest of the ramp at the default
+    # at speed: every drive reports the commanded velocity (drive sign = polarity), by SDO and in TPDO2
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and nodes[0].sdo[0x606C].raw != speed * scale:
+        time.sleep(0.1)
+    for node, w, d in zip(nodes, cfg["wheels"], drives.drives):
+        expected = w["polarity"] * speed * scale
+        assert node.sdo[0x606C].raw == pytest.approx(expected, abs=1), node.id
+        assert node.sdo[0x60FF].raw == expected
+        assert node.tpdo[2].wait_for_reception(1.0) is not None
+        assert node.tpdo_values[0x606C] == pytest.approx(expected, abs=1), node.id
+        assert node.tpdo[2]["Velocity actual value"].raw == pytest.approx(expected, abs=1)
+        assert d.snapshot()["velocity"] * scale == pytest.approx(expected, abs=1)    # the stand-in's own state
+    # the position feedback advances at that velocity (counts per s = velocity x counts_per_rad)
+    p0, ta = nodes[1].sdo[0x6064].raw, time.monotonic()
+    time.sleep(0.5)
+    p1, tb = nodes[1].sdo[0x6064].raw, time.monotonic()
+    rate = (p1 - p0) / (tb - ta) / cfg["counts_per_rad"]
+    assert rate == pytest.approx(-speed, rel=0.2)                  # front_right: polarity -1
+    # stop: 0 by SDO and in the next TPDO of every drive
+    _command(nodes, cfg, [0.0] * 4)
+    assert _wait_still(drives, timeout=10.0)
+    for node in nodes:
+        assert node.sdo[0x606C].raw == 0
+        assert node.tpdo[2].wait_for_reception(1.0) is not None
+        assert node.tpdo_values[0x606C] == 0

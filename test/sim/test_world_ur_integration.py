@@ -82,6 +82,9 @@ def test_the_arm_feels_the_walls_force_reading_and_contact_depth(site_with_ur):
 
     def press(depth):
         q = ws.world.ik_tcp(face - depth * wall.n, -wall.n, seed=ws.ur.get_joint_positions())
+        # pressing the flange into the wall is also a collision: the protective stop it raises brakes the arm
+        # for a moment, and a teleport is refused while the arm moves
+        assert _wait(lambda: not ws.ur.arm.is_moving())
         ws.ur.set_joint_positions(q)
         assert _wait(lambda: np.allclose(ws.world.joint_positions(), q, atol=1e-9))
         return ws.world.wall_contact(ws.ur.get_tcp_pose())

@@ -87,3 +87,18 @@ def test_contact_provider_from_the_world_drives_the_force_reading(ur_address):
         assert np.allclose(ctl.get_tcp_force(), 0.0)
     finally:
         ctl.stop()
+
+
+def test_protective_stop_of_an_arm_at_rest_leaves_it_at_rest(ur_address):
+    """A protective stop while nothing moves starts no stop motion: the arm is not reported moving, and the world
+    may still set the joints (a collision detected by the world while it places the arm once made the next
+    set_joint_positions fail with 'cannot set joint positions while the arm moves'). Not started: no control
+    thread, so nothing can end a stop motion in between."""
+    ctl = UrControllerStandIn(ur_address, time_scale=2.0)
+    ctl.inject_protective_stop("collision: arm:wrist_3_link with wall_1")
+    state = ctl.get_state()
+    assert state["safety_mode_name"] == "PROTECTIVE_STOP"
+    assert state["moving"] is False
+    q = [0.1, -1.4, 1.5, -1.6, -1.5, 0.2]
+    ctl.set_joint_positions(q)
+    assert np.allclose(ctl.get_joint_positions(), q)

@@ -126,6 +126,8 @@ class ArmCore:
         self.safety_popup = False
         self.protective_stop_time = 0.0
         self.motion_time = 0.0
+        #: motion_time at the end of the last control cycle in which the arm moved (ground truth for stop tests)
+        self.last_moving_time = 0.0
         self.speed_fraction = 1.0
         self.std_do = 0          # standard digital outputs 0..7
         self.conf_do = 0         # configurable digital outputs 0..7
@@ -283,7 +285,9 @@ class ArmCore:
             self.protective_stop_time = self.motion_time
             self.safety_popup = True
             self._end_force_mode()
-            self.motion = JointStop(self.qd, SAFETY_STOP_DECELERATION)
+            if self.motion is not None or np.any(self.qd != 0):
+                # an arm at rest stays at rest: no stop motion (it would report "moving" until the next cycle)
+                self.motion = JointStop(self.qd, SAFETY_STOP_DECELERATION)
             prog = self.program
             if prog is not None:
                 if prog.async_motion is not None:
@@ -432,6 +436,8 @@ class ArmCore:
                 self.raw_force = contact_force(self.contact_provider, se3_to_pose(self.kin.fk_se3(self.q)),
                                                self.contact_stiffness)
                 self._update_force_values()
+            if self.is_moving():
+                self.last_moving_time = self.motion_time
             self._update_outputs(dt)
             snap = None
             if listeners:

@@ -204,7 +204,9 @@ class UrControllerStandIn:
             self.arm._update_io_values()
 
     def get_state(self) -> dict:
-        """Modes and flags: robot_mode, safety_mode, runtime_state (ints) and their names, last_error."""
+        """Modes and flags: robot_mode, safety_mode, runtime_state (ints) and their names, last_error; ``moving``,
+        ``motion_time`` (the controller's sim time, s) and ``last_moving_time`` (motion_time at the end of the last
+        control cycle in which the arm moved)."""
         from .arm import ROBOT_MODE_NAMES, RUNTIME_NAMES, SAFETY_MODE_NAMES
         a = self.arm
         with a.lock:
@@ -212,7 +214,8 @@ class UrControllerStandIn:
                     "safety_mode": a.safety_mode, "safety_mode_name": SAFETY_MODE_NAMES.get(a.safety_mode),
                     "runtime_state": a.runtime_state, "runtime_state_name": RUNTIME_NAMES.get(a.runtime_state),
                     "program": a.program.name if a.program else None, "moving": a.is_moving(),
-                    "motion_time": a.motion_time, "last_error": a.last_error}
+                    "motion_time": a.motion_time, "last_moving_time": a.last_moving_time,
+                    "last_error": a.last_error}
 
     @property
     def refused(self) -> List[str]:
