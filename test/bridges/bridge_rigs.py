@@ -68,6 +68,27 @@ def next_ur_address():
     raise RuntimeError("no free loopback address for a UR stand-in")
 
 
+_PAYLOAD_READER = """
+import json, sys
+import rtde_receive
+r = rtde_receive.RTDEReceiveInterface(sys.argv[1])
+print(json.dumps({"mass": r.getPayload(), "cog": list(r.getPayloadCog())}))
+r.disconnect()
+"""
+
+
+def rtde_payload(address, timeout=30.0):
+    """The payload the UR controller at ``address`` reports in its RTDE outputs ``payload`` / ``payload_cog``, read
+    by a plain ur_rtde RTDEReceiveInterface in a child process (ur_rtde holds the GIL while it connects, which
+    would stall the in-process stand-ins of a rig)."""
+    import json
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-c", _PAYLOAD_READER, address], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, universal_newlines=True, timeout=timeout, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def arm_cfg(robot, address):
     cfg = dict(robot["arm"])
     cfg["controller"] = dict(cfg["controller"], host=address)
@@ -108,6 +129,52 @@ class BaseRig:
         if self.world is not None:
             self.world.close()
         self.drives.stop()
+
+
+def last_motion(drives, t_from, t_to, step=0.001):
+    """Ground truth of the wheels: sim time of the last instant in ``[t_from, t_to]`` (a grid of ``step`` s of sim
+    time) at which any wheel of ``drives`` (a DriveSet) turned, from each drive's recorded motion segments
+    (``Cia402Drive.states_at``, exact whatever the time scale); ``t_from`` when none turned after it. The true
+    standstill lies within one ``step`` after the returned time."""
+    assert 0.0 <= t_to - t_from <= 600.0, "last_motion over %r .. %r s sim: not a stop window" % (t_from, t_to)
+    n = max(1, int(round((t_to - t_from) / step)))
+    times = [t_from + (t_to - t_from) * k / n for k in range(n + 1)]
+    last = t_from
+    for d in drives.drives:
+        for t, (v, _) in zip(times, d.states_at(times)):
+            if abs(v) > 1e-9 and t > last:
+                last = t
+    return last
+
+
+def sim_time_of(clock, wall_stamp):
+    """Sim time of ``clock`` (a SimClock) at the wall-clock instant ``wall_stamp`` (``time.time()`` seconds)."""
+    return clock.now() - clock.wall_to_sim(time.time() - wall_stamp)
+
+
+class HeartbeatWatch:
+    """A python-can listener on the rig's CAN channel that records when each drive's heartbeat (0x700 + node id)
+    was last sent (the bus's send timestamp, wall clock ``time.time()``)."""
+
+    def __init__(self, can_cfg):
+        import threading
+        import can
+        self.last = {}
+        self._bus = can.Bus(interface=can_cfg["interface"], channel=can_cfg["channel"], receive_own_messages=False)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        while not self._stop.is_set():
+            msg = self._bus.recv(0.01)
+            if msg is not None and 0x701 <= msg.arbitration_id <= 0x77F:
+                self.last[msg.arbitration_id - 0x700] = msg.timestamp
+
+    def close(self):
+        self._stop.set()
+        self._thread.join(1.0)
+        self._bus.shutdown()
 
 
 SHORT_WALL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sites", "short_wall.yaml")
@@ -169,12 +236,31 @@ class WorksiteRig:
                            arm=StandInArmSource(self.standin), drives=self.drives, compressor=self.model, gui=False)
         self.world.start()
 
-    def nothing_running(self):
-        """No arm motion, no digital output on, valve closed, wheels still."""
+    def running(self):
+        """What is still running on any device (empty: nothing): arm motion, force mode, digital outputs on,
+        spray valve open, compressor motor on, wheels turning."""
         state = self.standin.get_state()
-        return (not state["moving"] and not any(self.standin.get_standard_digital_outputs())
-                and not self.model.snapshot()["valve_open"]
-                and all(abs(v) < 1e-9 for v in self.drives.wheel_speeds()))
+        compressor = self.model.snapshot()
+        out = []
+        if state["moving"]:
+            out.append("arm moving")
+        if self.standin.get_force_mode() is not None:
+            out.append("arm force mode")
+        outputs = self.standin.get_standard_digital_outputs()
+        if any(outputs):
+            out.append("digital outputs %s" % [i for i, v in enumerate(outputs) if v])
+        if compressor["valve_open"]:
+            out.append("spray valve open")
+        if compressor["motor_on"]:
+            out.append("compressor motor on")
+        speeds = self.drives.wheel_speeds()
+        if any(abs(v) >= 1e-9 for v in speeds):
+            out.append("wheels %s" % [round(v, 4) for v in speeds])
+        return out
+
+    def nothing_running(self):
+        """No arm motion, no force mode, no digital output on, valve closed, compressor motor off, wheels still."""
+        return not self.running()
 
     def area_coverage(self, wall_id, s_range, t_range):
         m = self.world.outcome.maps[wall_id]

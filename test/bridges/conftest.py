@@ -13,7 +13,7 @@ if _HERE not in sys.path:
 
 from locem_bridge.bridges.config import load_robot_config  # noqa: E402
 from locem_bridge.locem.core import LocemCore  # noqa: E402
-from bridge_rigs import CompressorRig, ROBOT_YAML  # noqa: E402
+from bridge_rigs import CompressorRig, ROBOT_YAML, WorksiteRig  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -40,3 +40,26 @@ def compressor_rig(robot):
     rig = CompressorRig(robot)
     yield rig
     rig.close()
+
+
+@pytest.fixture
+def site(robot):
+    """Every stand-in on one sim clock (WorksiteRig) and the robot built from the YAML with their addresses."""
+    from locem_bridge.bridges.robot import build_robot
+    rig = WorksiteRig(robot)
+    built = build_robot(rig.robot, site=rig.site_path, initial_pose=tuple(rig.world.base_pose()))
+    built.start()
+    yield rig, built
+    built.close()
+    rig.close()
+
+
+@pytest.fixture
+def wall(site, core):
+    """:func:`site` with every command set installed in ``core`` and every backend up."""
+    rig, built = site
+    for command_set in built.command_sets:
+        core.install(command_set)
+    for kind in ("arm", "compressor", "base"):
+        assert built.get(kind).wait_ready(20.0), (kind, built.get(kind).health())
+    return rig, built

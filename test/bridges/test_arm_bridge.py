@@ -5,10 +5,11 @@ import numpy as np
 import pytest
 
 from locem_bridge.bridges.commands_arm import ArmCommands
+from locem_bridge.bridges.interfaces import HEALTH_ERROR, HEALTH_OK, health_level
 from locem_bridge.bridges.ur_arm import UrRtdeArm
 from locem_bridge.locem.registry import Interface
 
-from bridge_rigs import arm_cfg, next_ur_address, wait_until
+from bridge_rigs import arm_cfg, next_ur_address, rtde_payload, wait_until
 
 pytest.importorskip("rtde_control")
 pytestmark = pytest.mark.slow
@@ -16,11 +17,14 @@ pytestmark = pytest.mark.slow
 HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
 
 
-def make(robot, core, time_scale):
+def make(robot, core, time_scale, deadline=None):
     from locem_bridge.sim.ur.process import StandInProcess
     address = next_ur_address()
     standin = StandInProcess(address, time_scale=time_scale).start()
-    arm = UrRtdeArm(arm_cfg(robot, address))
+    cfg = arm_cfg(robot, address)
+    if deadline is not None:
+        cfg["deadline"] = deadline
+    arm = UrRtdeArm(cfg)
     arm.start()
     core.install(ArmCommands(arm))
     assert arm.wait_ready(20.0), arm.health()
@@ -30,6 +34,16 @@ def make(robot, core, time_scale):
 @pytest.fixture
 def rig(robot, core):
     standin, arm = make(robot, core, 10.0)
+    yield standin, arm
+    arm.close()
+    standin.close()
+
+
+@pytest.fixture
+def rig_short_deadline(robot, core):
+    """Motion deadlines at 5 % of the nominal path time, no margin (robot.arm.deadline), time scale 10: every
+    motion overruns its deadline at about half of its way."""
+    standin, arm = make(robot, core, 10.0, deadline={"scale": 0.05, "margin": 0.0})
     yield standin, arm
     arm.close()
     standin.close()
@@ -144,6 +158,26 @@ def test_action_cancel_stops_the_arm(rig, core):
     assert wait_until(lambda: nothing_running(standin), timeout=2.0)
 
 
+def _unlock_on_the_dashboard(standin, timeout=10.0):
+    """What someone at the teach pendant would do: 'unlock protective stop' on the controller's dashboard server
+    (port 29999, ur_rtde's DashboardClient), retried until the controller's 5 s unlock delay has passed."""
+    import dashboard_client
+    dash = dashboard_client.DashboardClient(standin.address)
+    dash.connect()
+    try:
+        end = time.monotonic() + timeout
+        while standin.get_state()["safety_mode"] != 1 and time.monotonic() < end:
+            try:
+                dash.unlockProtectiveStop()
+            except RuntimeError:             # "Cannot unlock protective stop until 5s after occurrence"
+                pass
+            time.sleep(0.1)
+    finally:
+        dash.disconnect()
+    state = standin.get_state()
+    assert state["safety_mode"] == 1 and state["runtime_state_name"] == "PLAYING", state
+
+
 def test_protective_stop_is_latched_until_reset_arm(rig, core):
     standin, arm = rig
     start = standin.get_tcp_pose()
@@ -156,15 +190,61 @@ def test_protective_stop_is_latched_until_reset_arm(rig, core):
     r = execution.wait(5.0)
     assert r is not None and r.code.value == "HARDWARE_ERROR" and "protective stop" in r.message
     assert wait_until(lambda: nothing_running(standin), timeout=2.0)
-    # later moves are refused, even after the controller itself could move again
+    health = core.dispatcher.health()["arm"]           # the source of the node's /diagnostics
+    assert health_level(health) == HEALTH_ERROR and "protective stop" in health["last_error"], health
+    # the controller is back to normal (unlocked on its own dashboard, not through LOCEM) ...
+    _unlock_on_the_dashboard(standin)
+    assert wait_until(lambda: arm.cached_state().get("safety_mode") == 1 and arm.cached_state()["program_running"],
+                      timeout=3.0), arm.cached_state()
+    # ... and the bridge still refuses every move until an operator sends RESET_ARM
+    q0 = standin.get_joint_positions()
     refused = run(core, "MOVE_HOME")
     assert refused.code.value == "HARDWARE_ERROR" and "RESET_ARM" in refused.message
+    refused = run(core, "MOVE_L %s speed=0.1" % " ".join("%.6f" % v for v in start))
+    assert refused.code.value == "HARDWARE_ERROR" and "RESET_ARM" in refused.message
+    time.sleep(0.2)
+    assert standin.get_joint_positions() == q0 and not standin.get_state()["moving"]
     assert "safety stop" in run(core, "STATUS").result["health"]["arm"]["device"]
+    assert health_level(core.dispatcher.health()["arm"]) == HEALTH_ERROR
     reset = run(core, "RESET_ARM")
     assert reset.success, reset.message
     assert "protective stop" in reset.result["cleared"]
+    assert health_level(core.dispatcher.health()["arm"]) == HEALTH_OK
     ok = run(core, "MOVE_HOME")
     assert ok.success, ok.message
+
+
+def test_set_payload_reaches_the_controller(rig, core):
+    standin, _ = rig
+    assert rtde_payload(standin.address) == {"mass": 0.0, "cog": [0.0, 0.0, 0.0]}
+    r = run(core, "SET_PAYLOAD 1.75 0.01 -0.02 0.065")
+    assert r.success, r.message
+    assert r.result == {"mass": 1.75, "cog": [0.01, -0.02, 0.065]}
+    # read back by a plain RTDE client from the controller's outputs 'payload' / 'payload_cog'
+    seen = rtde_payload(standin.address)
+    assert seen["mass"] == pytest.approx(1.75) and seen["cog"] == pytest.approx([0.01, -0.02, 0.065])
+    bad = run(core, "SET_PAYLOAD 20 0 0 0")
+    assert bad.code.value == "INVALID_ARGUMENT" and "mass" in bad.message
+    assert rtde_payload(standin.address)["mass"] == pytest.approx(1.75)
+
+
+def test_move_l_overrunning_its_deadline_ends_timeout_with_the_arm_stopped(rig_short_deadline, core):
+    standin, arm = rig_short_deadline
+    start = standin.get_tcp_pose()
+    target = list(start)
+    target[0] += 0.3
+    # nominal 0.3 m / 0.05 m/s = 6 s of motion time (0.6 s wall at time scale 10); deadline 5 % of it: ~0.3 s
+    t0 = time.monotonic()
+    r = run(core, "MOVE_L %s speed=0.05" % " ".join("%.6f" % v for v in target))
+    took = time.monotonic() - t0
+    assert r.code.value == "TIMEOUT" and "did not finish within" in r.message, r
+    assert took < 0.3 + 0.5, "answered after %.2f s" % took
+    assert wait_until(lambda: nothing_running(standin), timeout=2.0)
+    reached = standin.get_tcp_pose()
+    left = float(np.linalg.norm(np.subtract(reached[:3], target[:3])))
+    assert 0.02 < left < 0.29, "stopped %.3f m before the target: the move was cut short, not completed" % left
+    time.sleep(0.3)
+    assert standin.get_tcp_pose() == reached                  # and it stays where it stopped
 
 
 def test_controller_restart_is_followed_by_an_automatic_reconnect(rig, core):

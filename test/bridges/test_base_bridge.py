@@ -7,22 +7,39 @@ import pytest
 
 from locem_bridge.bridges.cia402_base import Cia402Base
 from locem_bridge.bridges.commands_base import BaseCommands
+from locem_bridge.bridges.interfaces import HEALTH_ERROR, HEALTH_OK, health_level
 from locem_bridge.locem.registry import Interface
 
-from bridge_rigs import BaseRig, wait_until
+from bridge_rigs import BaseRig, HeartbeatWatch, last_motion, sim_time_of, wait_until
 
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture
-def rig(robot, core):
+def _make(robot, core, deadline=None):
     rig = BaseRig(robot, time_scale=1.0)
     cfg = dict(rig.cfg)
     cfg["named_poses"] = {"door": [2.0, 1.2, 0.0]}
+    if deadline is not None:
+        cfg["deadline"] = deadline
     base = Cia402Base(cfg, rig.eds, initial_pose=tuple(rig.world.base_pose()))
     base.start()
     core.install(BaseCommands(base))
     assert base.wait_ready(10.0), base.health()
+    return rig, base
+
+
+@pytest.fixture
+def rig(robot, core):
+    rig, base = _make(robot, core)
+    yield rig, base
+    base.close()
+    rig.close()
+
+
+@pytest.fixture
+def rig_short_deadline(robot, core):
+    """GOTO deadlines at 20 % of the nominal travel time, no margin (robot.base.deadline)."""
+    rig, base = _make(robot, core, deadline={"scale": 0.2, "margin": 0.0})
     yield rig, base
     base.close()
     rig.close()
@@ -115,17 +132,35 @@ def test_cmd_vel_twist_moves_the_base_and_stops_when_it_goes_stale(rig, core):
 
 def test_drive_heartbeat_loss_stops_the_base_and_fails_the_goto(rig, core):
     r_, base = rig
-    execution = core.dispatcher.submit("GOTO 2.4 3.0 1.5708 speed=0.8", Interface.SERVICE)
-    assert wait_until(lambda: abs(r_.drives.wheel_speeds()[0]) > 3.0, timeout=5.0)
-    r_.drives.drive(3).inject_heartbeat_loss()
-    t_loss = r_.clock.now()
-    assert wait_until(lambda: base.health()["fault"], timeout=1.0)
-    t_detect = r_.clock.now()
-    took = _wheels_stopped_within(r_, t_detect, 0.1)
-    assert took is not None and took < 0.1, "base stood still %.3f s after the loss was detected" % took
-    assert t_detect - t_loss < 0.1 + base.hb_timeout
+    # robot YAML: heartbeat_ms 100 x consumer_timeout_factor 2 = a drive is silent after 200 ms
+    assert base.hb_timeout == pytest.approx(0.2)
+    watch = HeartbeatWatch(r_.cfg["drives"]["can"])
+    try:
+        execution = core.dispatcher.submit("GOTO 2.4 3.0 1.5708 speed=0.8", Interface.SERVICE)
+        assert wait_until(lambda: abs(r_.drives.wheel_speeds()[0]) > 3.0, timeout=5.0)
+        node = r_.drives.drive(3).node_id
+        r_.drives.drive(3).inject_heartbeat_loss()
+        t_loss = r_.clock.now()
+        assert wait_until(lambda: base.health()["fault"], timeout=1.0)
+        t_detect = r_.clock.now()
+        took = _wheels_stopped_within(r_, t_detect, 0.1)
+        assert took is not None and took < 0.1, "base stood still %.3f s after the loss was detected" % took
+        assert t_detect - t_loss < 0.1 + base.hb_timeout
+        # from the last heartbeat the drive sent (seen on the bus) to the base standing still (ground truth of
+        # every wheel): within the configured consumer timeout + 100 ms
+        last_hb = sim_time_of(r_.clock, watch.last[node])
+        still = last_motion(r_.drives, last_hb, r_.clock.now())
+        print("last heartbeat -> base still: %.0f ms (consumer timeout %.0f ms)"
+              % ((still - last_hb) * 1000, base.hb_timeout * 1000))
+        assert still - last_hb <= base.hb_timeout + 0.1, (
+            "base stood still %.0f ms after the last heartbeat (consumer timeout %.0f ms)"
+            % ((still - last_hb) * 1000, base.hb_timeout * 1000))
+    finally:
+        watch.close()
     r = execution.wait(2.0)
     assert r.code.value == "HARDWARE_ERROR" and "heartbeat" in r.message
+    health = core.dispatcher.health()["base"]             # the source of the node's /diagnostics
+    assert health_level(health) == HEALTH_ERROR and "heartbeat lost" in health["last_error"], health
     assert run(core, "GOTO 2.4 1.6 1.5708").code.value in ("HARDWARE_ERROR", "NOT_READY")
     assert "heartbeat" in run(core, "STATUS").result["health"]["base"]["fault"]
     time.sleep(0.3)
@@ -133,7 +168,43 @@ def test_drive_heartbeat_loss_stops_the_base_and_fails_the_goto(rig, core):
     # the drive comes back: the bridge enables it again, the base obeys again
     r_.drives.drive(3).restore()
     assert wait_until(lambda: base.health()["link"] == "up" and not base.health()["fault"], timeout=10.0)
+    assert health_level(core.dispatcher.health()["base"]) == HEALTH_OK
     assert run(core, "MOVE_BASE_REL 0.05 0 0").success
+
+
+def test_stop_base_ends_the_goto_like_stop_does(rig, core):
+    r_, base = rig
+    execution = core.dispatcher.submit("GOTO 2.4 3.0 1.5708 speed=0.8", Interface.ACTION)
+    assert wait_until(lambda: abs(r_.drives.wheel_speeds()[0]) > 3.0, timeout=5.0)
+    t_stop = r_.clock.now()
+    r = run(core, "STOP_BASE")
+    assert r.success and r.result["stopped"] is True, r
+    took = _wheels_stopped_within(r_, t_stop, 0.2)
+    assert took is not None and took < 0.2, took
+    ended = execution.wait(2.0)
+    assert ended.code.value == "ABORTED" and "STOP_BASE" in ended.message, ended
+    time.sleep(0.3)
+    assert r_.still()
+    # nothing latched: the base obeys the next command
+    assert run(core, "MOVE_BASE_REL 0.05 0 0").success
+
+
+def test_goto_overrunning_its_deadline_ends_timeout_with_the_base_stopped(rig_short_deadline, core):
+    r_, base = rig_short_deadline
+    x0, y0, _ = r_.world.base_pose()
+    goal = (2.4, 3.0, 1.5708)
+    t0 = time.monotonic()
+    r = run(core, "GOTO %g %g %g speed=0.5" % goal)
+    took = time.monotonic() - t0
+    assert r.code.value == "TIMEOUT" and "did not reach" in r.message, r
+    # the deadline is 20 % of the nominal travel time: the base is stopped on its way
+    dist = math.hypot(goal[0] - x0, goal[1] - y0)
+    assert took < 0.2 * (dist / 0.5 + 2 * 0.5 / base.lin_accel + base.max_ang / base.ang_accel) + 1.0
+    assert wait_until(r_.still, timeout=1.0), r_.drives.wheel_speeds()
+    x, y, _ = r_.world.base_pose()
+    assert math.hypot(goal[0] - x, goal[1] - y) > 0.2 * dist, "the GOTO was not cut short"
+    time.sleep(0.3)
+    assert r_.still()
 
 
 def test_drive_fault_is_latched_until_reset_base(rig, core):

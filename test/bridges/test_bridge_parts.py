@@ -64,6 +64,24 @@ def test_config_errors_name_the_key_and_the_allowed_values(tmp_path):
     assert deep_merge({"a": {"b": 1, "c": 2}}, {"a": {"b": 3}}) == {"a": {"b": 3, "c": 2}}
 
 
+def test_motion_deadline_settings_are_checked_and_default_to_the_documented_values():
+    from locem_bridge.bridges.cia402_base import Cia402Base
+    from locem_bridge.bridges.config import resolve_path
+    from locem_bridge.bridges.ur_arm import MOTION_MARGIN_S, UrRtdeArm
+    robot = load_robot_config(ROBOT_YAML)
+    arm = UrRtdeArm(robot["arm"])
+    assert (arm.deadline_scale, arm.deadline_margin) == (1.0, MOTION_MARGIN_S)
+    eds = resolve_path(robot, robot["base"]["eds"])
+    base = Cia402Base(robot["base"], eds)
+    assert (base.deadline_scale, base.deadline_margin) == (1.0, 5.0)
+    # the robot YAML: 100 ms producer heartbeat x consumer factor 2 -> a drive is silent after 200 ms
+    assert base.hb_timeout == pytest.approx(0.2)
+    with pytest.raises(BridgeConfigError, match=r"robot.arm.deadline.scale = 0.0 is out of range; allowed 0.01 .. 100"):
+        UrRtdeArm(deep_merge(robot["arm"], {"deadline": {"scale": 0.0}}))
+    with pytest.raises(BridgeConfigError, match=r"robot.base.deadline.margin = 'long' must be a finite number"):
+        Cia402Base(deep_merge(robot["base"], {"deadline": {"margin": "long"}}), eds)
+
+
 def test_backend_table_names_what_exists():
     assert backends.backend_class("compressor", "modbus_tcp").__name__ == "ModbusCompressor"
     with pytest.raises(BridgeConfigError, match="no arm backend named 'kuka'; known: ur_rtde"):

@@ -4,6 +4,7 @@ import time
 import pytest
 
 from locem_bridge.bridges.commands_compressor import CompressorCommands
+from locem_bridge.bridges.interfaces import HEALTH_ERROR, HEALTH_OK, health_level
 from locem_bridge.bridges.modbus_compressor import ModbusCompressor
 
 from bridge_rigs import wait_until
@@ -58,10 +59,12 @@ def test_out_of_range_setpoint_never_reaches_the_device(bridge, core, compressor
 
 
 @pytest.mark.parametrize("mode", ["close", "silent"])
-def test_link_loss_fails_commands_and_the_valve_is_closed_when_the_link_returns(bridge, core, compressor_rig, mode):
+def test_link_loss_fails_commands_and_the_device_is_made_safe_when_the_link_returns(bridge, core, compressor_rig,
+                                                                                   mode):
     assert run(core, "COMPRESSOR_ON").success
     assert run(core, "SET_PRESSURE 3.0").success
     assert run(core, "SPRAY_ON").success
+    assert health_level(core.dispatcher.health()["compressor"]) == HEALTH_OK
     compressor_rig.server.drop_link(duration=None, mode=mode)
     t0 = time.monotonic()
     assert wait_until(lambda: bridge.health()["link"] == "down", timeout=2.0)
@@ -71,14 +74,41 @@ def test_link_loss_fails_commands_and_the_valve_is_closed_when_the_link_returns(
     assert r.code.value == "HARDWARE_ERROR" and "link" in r.message
     assert "compressor" in run(core, "STATUS").result["health"]
     assert run(core, "STATUS").result["health"]["compressor"]["link"] == "down"
-    # the device still sprays (nobody could reach it) ...
-    assert compressor_rig.model.snapshot()["valve_open"] is True
+    # what the node publishes on /diagnostics (LocemDevices reads core.dispatcher.health): ERROR, naming the loss
+    health = core.dispatcher.health()["compressor"]
+    assert health_level(health) == HEALTH_ERROR, health
+    assert "does not answer" in health["last_error"] or "no answer" in health["last_error"], health
+    # the device still sprays, motor running (nobody could reach it) ...
+    truth = compressor_rig.model.snapshot()
+    assert truth["valve_open"] is True and truth["motor_on"] is True
     compressor_rig.server.restore_link()
-    # ... until the link returns: the bridge closes the valve by itself
-    assert wait_until(lambda: compressor_rig.model.snapshot()["valve_open"] is False, timeout=3.0)
+    # ... until the link returns: the bridge brings it to its safe state by itself, no command sent
+    assert wait_until(lambda: not compressor_rig.model.snapshot()["valve_open"]
+                      and not compressor_rig.model.snapshot()["motor_on"], timeout=3.0), compressor_rig.model.snapshot()
     assert wait_until(lambda: bridge.health()["link"] == "up", timeout=3.0)
-    assert run(core, "COMPRESSOR_OFF").success
+    assert health_level(core.dispatcher.health()["compressor"]) == HEALTH_OK
+    assert bridge.safe_state_writes >= 1
+    # it stays safe (nothing switches it on again by itself) and obeys again
+    time.sleep(0.5)
     assert compressor_rig.model.snapshot()["motor_on"] is False
+    assert run(core, "COMPRESSOR_ON").success
+    assert compressor_rig.model.snapshot()["motor_on"] is True
+    assert run(core, "COMPRESSOR_OFF").success
+
+
+def test_spray_off_closes_the_valve_on_the_device_and_leaves_the_motor_running(bridge, core, compressor_rig):
+    assert run(core, "COMPRESSOR_ON").success
+    assert run(core, "SET_PRESSURE 3.0").success
+    assert run(core, "SPRAY_ON").success
+    assert compressor_rig.model.snapshot()["valve_open"] is True
+    writes = compressor_rig.server.requests
+    r = run(core, "SPRAY_OFF")
+    assert r.success, r.message
+    assert r.result["valve_open"] is False                      # as read back from the device
+    truth = compressor_rig.model.snapshot()
+    assert truth["valve_open"] is False and truth["motor_on"] is True
+    assert compressor_rig.server.requests > writes
+    assert run(core, "GET_PRESSURE").result["valve_open"] is False
 
 
 def test_stop_closes_the_valve_and_stops_the_motor(bridge, core, compressor_rig):

@@ -4,36 +4,15 @@ import time
 
 import pytest
 
-from locem_bridge.bridges.robot import build_robot
 from locem_bridge.locem.registry import Interface
 
-from bridge_rigs import WorksiteRig, wait_until
+from bridge_rigs import rtde_payload, wait_until
 
 pytest.importorskip("rtde_control")
 pytestmark = pytest.mark.slow
 
 JOINT = "wall_1_joint_1"      # the horizontal joint at z = 1.25 m, x 1.8 .. 3.0, y = 3.6
 NORMAL = "0 -1 0"
-
-
-@pytest.fixture
-def site(robot):
-    rig = WorksiteRig(robot)
-    built = build_robot(rig.robot, site=rig.site_path, initial_pose=tuple(rig.world.base_pose()))
-    built.start()
-    yield rig, built
-    built.close()
-    rig.close()
-
-
-@pytest.fixture
-def wall(site, core):
-    rig, built = site
-    for command_set in built.command_sets:
-        core.install(command_set)
-    for kind in ("arm", "compressor", "base"):
-        assert built.get(kind).wait_ready(20.0), (kind, built.get(kind).health())
-    return rig, built
 
 
 def run(core, text):
@@ -56,6 +35,9 @@ def test_apply_tape_along_the_joint_covers_it(wall, core):
     r = run(core, "MOUNT_TOOL taping_tool")
     assert r.success, r.message
     assert rig.standin.get_tcp_offset()[2] == pytest.approx(0.22)
+    # the tool's payload (robot.tools.taping_tool: 3.2 kg, cog 9 cm along the flange z) is on the controller
+    payload = rtde_payload(rig.address)
+    assert payload["mass"] == pytest.approx(3.2) and payload["cog"] == pytest.approx([0.0, 0.0, 0.09]), payload
     r = run(core, "APPLY_TAPE_START 1.8 3.6 1.25 3.0 3.6 1.25 %s" % NORMAL)
     assert r.success, r.message
     time.sleep(0.1)
@@ -82,7 +64,10 @@ def test_spray_area_covers_the_area_and_leaves_the_valve_closed(wall, core):
     time.sleep(0.2)
     coverage = rig.area_coverage("wall_1", (0.2, 1.0), (0.9, 1.5))
     assert coverage >= 0.98, coverage
-    assert rig.nothing_running()
+    # the valve is closed; the motor keeps running for the next section until COMPRESSOR_OFF (or STOP)
+    assert rig.running() == ["compressor motor on"]
+    assert run(core, "COMPRESSOR_OFF").success
+    assert rig.nothing_running(), rig.running()
 
 
 def test_compressor_link_lost_mid_spray_area_fails_within_1s_and_closes_the_valve_on_return(wall, core):
@@ -101,8 +86,24 @@ def test_compressor_link_lost_mid_spray_area_fails_within_1s_and_closes_the_valv
     assert took < 1.0, "answered %.2f s after the link loss" % took
     assert wait_until(lambda: not rig.standin.get_state()["moving"], timeout=2.0)
     rig.server.restore_link()
+    # the link is back: valve closed and motor off by the backend itself (no COMPRESSOR_OFF / STOP sent)
     assert wait_until(lambda: not rig.model.snapshot()["valve_open"], timeout=3.0)
-    assert wait_until(rig.nothing_running, timeout=3.0)
+    assert wait_until(rig.nothing_running, timeout=3.0), rig.running()
+    # HICEM's RECOVER (WALL_READY, then STATUS until every device is up) and the area again: SPRAY_AREA
+    # switches the motor on by itself and sprays (a part of the area the failed pass never reached)
+    assert run(core, "WALL_READY").success
+    assert wait_until(lambda: all(h["link"] == "up" and h["device"] == "ok"
+                                  for k, h in run(core, "STATUS").result["health"].items()
+                                  if k in ("arm", "compressor", "base")), timeout=5.0)
+    part = ((0.2, 0.6), (1.3, 1.5))                         # wall s (x - 1.8) and height ranges
+    assert rig.area_coverage("wall_1", *part) < 0.5
+    assert rig.model.snapshot()["motor_on"] is False
+    r = run(core, "SPRAY_AREA 2.0 3.6 1.3 1 0 0 0.4 0.2 %s spacing=0.1 speed=0.1 pressure=3.5" % NORMAL)
+    assert r.success, r.message
+    time.sleep(0.2)
+    coverage = rig.area_coverage("wall_1", *part)
+    assert coverage >= 0.98, coverage
+    assert rig.running() == ["compressor motor on"]
 
 
 def test_home_switches_outputs_off_and_parks_the_arm(wall, core):

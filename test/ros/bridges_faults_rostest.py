@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
 """rostest: device faults through the real LOCEM node; every test also asserts that nothing is left running on
-any device (no arm motion, digital outputs off, spray valve closed, wheels still)."""
+any device (no arm motion or force mode, digital outputs off, spray valve closed, compressor motor off, wheels
+still) without sending anything that would switch a device off first, and that ``/diagnostics`` reports the
+faulty backend at ERROR level, naming the fault, while the fault lasts."""
 import threading
 import time
 import unittest
 
 import rospy
 import rostest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
 from bridges_rig import Locem, start_worksite
 from rostest_support import wait_until
@@ -40,6 +43,8 @@ class BridgesFaultsTest(unittest.TestCase):
         cls.rig = start_worksite()
         cls.locem = Locem()
         cls.locem.wait_ready()
+        cls.diagnostics = []
+        rospy.Subscriber("/diagnostics", DiagnosticArray, lambda m: cls.diagnostics.append((time.monotonic(), m)))
 
     @classmethod
     def tearDownClass(cls):
@@ -47,10 +52,21 @@ class BridgesFaultsTest(unittest.TestCase):
         cls.rig.close()
 
     def assertNothingRunning(self):
-        self.assertTrue(wait_until(self.rig.nothing_running, timeout=3.0),
-                        "still running: arm %s, DO %s, compressor %s, wheels %s" % (
-                            self.rig.standin.get_state()["moving"], self.rig.standin.get_standard_digital_outputs(),
-                            self.rig.model.snapshot(), self.rig.drives.wheel_speeds()))
+        self.assertTrue(wait_until(self.rig.nothing_running, timeout=3.0), "still running: %s" % self.rig.running())
+
+    def assertDiagnosticsError(self, backend, words, since, timeout=4.0):
+        """A /diagnostics array published after ``since`` (monotonic) shows ``locem: <backend>`` at ERROR level
+        with every one of ``words`` in its message (published at 1 Hz)."""
+        def seen():
+            for stamp, array in list(self.diagnostics):
+                for st in array.status:
+                    if (stamp >= since and st.name == "locem: %s" % backend and st.level == DiagnosticStatus.ERROR
+                            and all(w in st.message for w in words)):
+                        return st
+            return None
+        found = wait_until(seen, timeout=timeout, period=0.05)
+        last = [(st.name, st.level, st.message) for st in self.diagnostics[-1][1].status] if self.diagnostics else []
+        self.assertTrue(found, "no ERROR for %s naming %s on /diagnostics; last: %s" % (backend, words, last))
 
     def test_1_compressor_link_lost_mid_spray_area(self):
         self.assertTrue(self.locem("GOTO 2.4 2.5 1.5708").success)
@@ -69,20 +85,25 @@ class BridgesFaultsTest(unittest.TestCase):
         self.assertIn("compressor", reply.message)
         self.assertLess(job.ended - t0, 1.0)
         self.assertTrue(self.rig.model.snapshot()["valve_open"])     # nobody could reach the valve yet
+        self.assertTrue(self.rig.model.snapshot()["motor_on"])
+        self.assertDiagnosticsError("compressor", ["link down", "does not answer"], since=t0)
         self.rig.server.restore_link()
+        # the link is back: the backend brings the compressor to its safe state by itself (valve closed, motor
+        # off); no COMPRESSOR_OFF is sent here
         self.assertTrue(wait_until(lambda: not self.rig.model.snapshot()["valve_open"], timeout=3.0))
-        self.assertTrue(self.locem("COMPRESSOR_OFF").success)
         self.assertNothingRunning()
 
     def test_2_drive_heartbeat_lost_mid_goto(self):
         job = Background(self.locem, "GOTO 2.4 1.5 1.5708 speed=0.6")
         self.assertTrue(wait_until(lambda: abs(self.rig.drives.wheel_speeds()[0]) > 2.0, timeout=10.0))
         self.rig.drives.drive(2).inject_heartbeat_loss()
+        t0 = time.monotonic()
         reply = job.wait(5.0)
         self.assertIsNotNone(reply)
         self.assertEqual(reply.code, "HARDWARE_ERROR", reply.message)
         self.assertIn("heartbeat", reply.message)
         self.assertNothingRunning()
+        self.assertDiagnosticsError("base", ["fault", "heartbeat lost"], since=t0)
         self.assertIn("heartbeat", self.locem("STATUS").data["health"]["base"]["fault"])
         refused = self.locem("MOVE_BASE_REL 0.1 0 0")
         self.assertIn(refused.code, ("HARDWARE_ERROR", "NOT_READY"))
@@ -100,10 +121,12 @@ class BridgesFaultsTest(unittest.TestCase):
         job = Background(self.locem, "MOVE_L %s speed=0.05" % " ".join("%.6f" % v for v in target))
         self.assertTrue(wait_until(lambda: self.rig.standin.get_state()["moving"], timeout=10.0))
         self.rig.standin.inject_protective_stop("rostest: collision")
+        t0 = time.monotonic()
         reply = job.wait(5.0)
         self.assertEqual(reply.code, "HARDWARE_ERROR", reply.message)
         self.assertIn("protective stop", reply.message)
         self.assertNothingRunning()
+        self.assertDiagnosticsError("arm", ["safety stop", "protective stop"], since=t0)
         refused = self.locem("MOVE_HOME")
         self.assertEqual(refused.code, "HARDWARE_ERROR")
         self.assertIn("RESET_ARM", refused.message)

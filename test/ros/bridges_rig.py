@@ -50,3 +50,49 @@ class Locem:
                 return health
             time.sleep(0.2)
         raise AssertionError("devices not up within %.0f s: %s" % (timeout, health))
+
+
+class ArmMotionSampler:
+    """Ground truth of the arm while a stop is measured. The UR stand-in records ``last_moving_time``, its own sim
+    time (``motion_time``) at the end of the last control cycle in which the arm moved; a light thread reads its
+    state every ``period`` s of wall time, each sample stamped with the wall clock (``time.time()``, the clock of ROS
+    stamps here) at the middle of its request, so a wall instant maps to the controller's sim time."""
+
+    def __init__(self, standin, period=0.01):
+        import threading
+        self.standin = standin
+        self.period = period
+        self.samples = []                   # (wall, motion_time, last_moving_time)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        end = time.monotonic() + 60.0
+        while not self._stop.is_set() and time.monotonic() < end:
+            t0 = time.time()
+            st = self.standin.get_state()
+            t1 = time.time()
+            self.samples.append(((t0 + t1) / 2.0, st["motion_time"], st["last_moving_time"]))
+            self._stop.wait(self.period)
+
+    def close(self):
+        self._stop.set()
+        self._thread.join(2.0)
+
+    def motion_time_at(self, wall):
+        """The controller's sim time at the wall instant ``wall``, interpolated between the samples around it."""
+        before = [s for s in self.samples if s[0] <= wall]
+        after = [s for s in self.samples if s[0] > wall]
+        assert before and after, "no samples around %.3f" % wall
+        (w0, m0, _), (w1, m1, _) = before[-1], after[0]
+        return m0 + (m1 - m0) * (wall - w0) / (w1 - w0)
+
+    def stop_time(self, accepted_wall):
+        """(sim s from ``accepted_wall`` to the end of the last control cycle with motion, the uncertainty of the
+        wall -> sim mapping in sim s: the sim time between the two samples around ``accepted_wall``)."""
+        t_acc = self.motion_time_at(accepted_wall)
+        before = [s for s in self.samples if s[0] <= accepted_wall][-1]
+        after = [s for s in self.samples if s[0] > accepted_wall][0]
+        last = self.samples[-1][2]
+        return max(0.0, last - t_acc), after[1] - before[1]

@@ -15,7 +15,10 @@ from locem_bridge.msg import CommandAction, CommandGoal, Status
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
 
-from bridges_rig import Locem, start_worksite
+from actionlib_msgs.msg import GoalStatus, GoalStatusArray
+
+from bridges_rig import ArmMotionSampler, Locem, start_worksite
+from bridge_rigs import last_motion, sim_time_of
 from rostest_support import result_of, rosservice_call, wait_until
 
 PKG = "locem_bridge"
@@ -34,12 +37,15 @@ class BridgesWorksiteTest(unittest.TestCase):
         cls.rig = start_worksite()
         cls.locem = Locem()
         cls.locem.wait_ready()
-        cls.messages = {"joint_states": [], "odom": [], "diagnostics": [], "health": []}
+        cls.messages = {"joint_states": [], "odom": [], "diagnostics": [], "health": [], "events": [],
+                        "goal_status": []}
         rospy.Subscriber("/joint_states", JointState, lambda m: cls.messages["joint_states"].append(m))
         rospy.Subscriber("/odom", Odometry, lambda m: cls.messages["odom"].append(m))
         rospy.Subscriber("/diagnostics", DiagnosticArray, lambda m: cls.messages["diagnostics"].append(m))
         rospy.Subscriber("/locem/status", Status,
-                         lambda m: cls.messages["health"].append(m) if m.name == "HEALTH" else None)
+                         lambda m: cls.messages["health" if m.name == "HEALTH" else "events"].append(m))
+        rospy.Subscriber("/locem/command_action/status", GoalStatusArray,
+                         lambda m: cls.messages["goal_status"].append(m))
         import tf2_ros
         cls.tf_buffer = tf2_ros.Buffer()
         cls.tf_listener = tf2_ros.TransformListener(cls.tf_buffer)
@@ -117,36 +123,78 @@ class BridgesWorksiteTest(unittest.TestCase):
         self.assertTrue(reply.success, reply.message)
         time.sleep(0.2)
         self.assertGreaterEqual(self.rig.area_coverage("wall_1", (0.2, 1.0), (0.9, 1.5)), 0.98)
-        self.assertTrue(self.rig.nothing_running())
+        self.assertEqual(self.rig.running(), ["compressor motor on"])     # kept on for a next section
         self.assertTrue(self.locem("COMPRESSOR_OFF").success)
+        self.assertTrue(self.rig.nothing_running(), self.rig.running())
 
-    def test_06_action_cancel_stops_the_arm(self):
+    # -- stops: measured from the moment the node accepted STOP / the cancel (its own stamp) to the last ground-truth
+    # sample with motion, in sim time (time scale 4). Base: the drive stand-ins' recorded motion segments, evaluated
+    # on a 1 ms sim grid (exact model, the standstill lies within 1 ms after the last moving sample). Arm: the UR
+    # stand-in's own record of the last control cycle with motion, its sim time mapped to the wall clock by samples
+    # every 10 ms (ArmMotionSampler; the mapping's spread is reported).
+    def stop_accepted(self, since):
+        """Wall stamp at which the node accepted a STOP sent after ``since`` (its /locem/status event)."""
+        def stamp():
+            found = [m.header.stamp.to_sec() for m in list(self.messages["events"])
+                     if m.name == "STOP" and m.header.stamp.to_sec() >= since - 0.05]
+            return min(found) if found else None
+        accepted = wait_until(stamp, timeout=3.0)
+        self.assertIsNotNone(accepted, "no STOP event on /locem/status")
+        return accepted
+
+    def cancel_accepted(self, since):
+        """Wall stamp at which the action server accepted the cancel (first status PREEMPTING / RECALLING)."""
+        def stamp():
+            found = [m.header.stamp.to_sec() for m in list(self.messages["goal_status"])
+                     if m.header.stamp.to_sec() >= since - 0.05
+                     and any(g.status in (GoalStatus.PREEMPTING, GoalStatus.RECALLING) for g in m.status_list)]
+            return min(found) if found else None
+        accepted = wait_until(stamp, timeout=3.0)
+        self.assertIsNotNone(accepted, "no PREEMPTING status from the action server")
+        return accepted
+
+    def assert_arm_stopped_within_200ms(self, sampler, accepted, what):
+        took, spread = sampler.stop_time(accepted)
+        rospy.loginfo("%s: arm moving %.3f s sim after acceptance (wall -> sim mapping within %.4f s sim)",
+                      what, took, spread)
+        self.assertLessEqual(took, 0.2, "%s: arm moving %.3f s sim after it was accepted (mapping within %.4f s)"
+                             % (what, took, spread))
+
+    def test_06_action_cancel_stops_the_arm_within_200ms_sim_time(self):
         self.assertTrue(self.locem("HOME").success)
         goal = CommandGoal(command="MOVE_J 1.5 -1.5708 1.5708 -1.5708 -1.5708 0 speed=0.3")
         self.action.send_goal(goal)
         self.assertTrue(wait_until(lambda: self.rig.standin.get_state()["moving"], timeout=10.0))
-        t0 = self.rig.clock.now()
-        self.action.cancel_goal()
-        self.assertTrue(wait_until(lambda: not self.rig.standin.get_state()["moving"], timeout=3.0))
-        self.assertLess(self.rig.clock.now() - t0, 0.2 * 4 + 0.5)   # generous bound at time scale 4 (wall RPCs)
+        sampler = ArmMotionSampler(self.rig.standin)
+        try:
+            time.sleep(0.1)
+            sent = time.time()
+            self.action.cancel_goal()
+            self.assertTrue(wait_until(lambda: not self.rig.standin.get_state()["moving"], timeout=3.0))
+            time.sleep(0.1)
+        finally:
+            sampler.close()
+        self.assert_arm_stopped_within_200ms(sampler, self.cancel_accepted(sent), "action cancel")
         self.assertTrue(self.action.wait_for_result(rospy.Duration(5)))
         self.assertEqual(self.action.get_result().code, "ABORTED")
-        self.assertTrue(wait_until(self.rig.nothing_running, timeout=2.0))
+        self.assertTrue(wait_until(self.rig.nothing_running, timeout=2.0), self.rig.running())
 
     def test_07_stop_during_goto_stops_the_base_within_200ms_sim_time(self):
         goal = CommandGoal(command="GOTO 2.4 1.0 1.5708 speed=0.8")
         self.action.send_goal(goal)
         self.assertTrue(wait_until(lambda: abs(self.rig.drives.wheel_speeds()[0]) > 3.0, timeout=10.0))
-        t0 = self.rig.clock.now()
+        sent = time.time()
         reply = self.locem("STOP")
         self.assertTrue(reply.success)
         self.assertTrue(wait_until(lambda: all(abs(v) < 1e-9 for v in self.rig.drives.wheel_speeds()),
                                    timeout=2.0, period=0.002))
-        took = self.rig.clock.now() - t0
-        self.assertLess(took, 0.2 + 4 * 0.03, "base stood still %.3f s sim after STOP" % took)
+        accepted = sim_time_of(self.rig.clock, self.stop_accepted(sent))
+        took = last_motion(self.rig.drives, accepted, self.rig.clock.now(), step=0.001) - accepted
+        rospy.loginfo("STOP: base wheels still %.3f s sim after acceptance (1 ms sim grid)", took)
+        self.assertLessEqual(took, 0.2, "base wheels turning %.3f s sim after STOP was accepted" % took)
         self.assertTrue(self.action.wait_for_result(rospy.Duration(5)))
         self.assertEqual(self.action.get_result().code, "ABORTED")
-        self.assertTrue(wait_until(self.rig.nothing_running, timeout=2.0))
+        self.assertTrue(wait_until(self.rig.nothing_running, timeout=2.0), self.rig.running())
 
     def test_08_cmd_vel_moves_the_base(self):
         pub = rospy.Publisher("/cmd_vel", Twist, queue_size=10)
@@ -161,6 +209,26 @@ class BridgesWorksiteTest(unittest.TestCase):
         x1, y1, _ = self.rig.world.base_pose()
         moved = (x1 - x0) * math.cos(th0) + (y1 - y0) * math.sin(th0)
         self.assertGreater(moved, 0.05)
+
+    def test_09_stop_during_move_j_stops_the_arm_within_200ms_sim_time(self):
+        self.assertTrue(self.locem("HOME").success)
+        goal = CommandGoal(command="MOVE_J 1.5 -1.5708 1.5708 -1.5708 -1.5708 0 speed=0.3")
+        self.action.send_goal(goal)
+        self.assertTrue(wait_until(lambda: self.rig.standin.get_state()["moving"], timeout=10.0))
+        sampler = ArmMotionSampler(self.rig.standin)
+        try:
+            time.sleep(0.1)
+            sent = time.time()
+            self.assertTrue(self.locem("STOP").success)
+            self.assertTrue(wait_until(lambda: not self.rig.standin.get_state()["moving"], timeout=3.0))
+            time.sleep(0.1)
+        finally:
+            sampler.close()
+        self.assert_arm_stopped_within_200ms(sampler, self.stop_accepted(sent), "STOP")
+        self.assertTrue(self.action.wait_for_result(rospy.Duration(5)))
+        self.assertEqual(self.action.get_result().code, "ABORTED")
+        self.assertTrue(wait_until(self.rig.nothing_running, timeout=2.0), self.rig.running())
+        self.assertTrue(self.locem("HOME").success)
 
 
 if __name__ == "__main__":

@@ -17,10 +17,12 @@ def rosservice_call(service, yaml_request, timeout=30.0):
 
 
 def wait_until(predicate, timeout=5.0, period=0.02):
+    """The first truthy value of ``predicate()`` (polled every ``period`` s), or its last value after ``timeout``."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
-        if predicate():
-            return True
+        value = predicate()
+        if value:
+            return value
         time.sleep(period)
     return predicate()
 

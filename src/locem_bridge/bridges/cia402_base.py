@@ -13,6 +13,19 @@ is commanded to zero in the same cycle (the drives decelerate at ``stop_decelera
 with :class:`~.errors.DeviceFault` (``HARDWARE_ERROR``). When every drive is back (boot-up, heartbeat) the
 supervisor enables them again; nothing moves until the next command.
 
+GOTO deadline (:class:`~.errors.MotionTimeout`, ``TIMEOUT``; the base is commanded to zero before the command
+answers)::
+
+    deadline = scale x (max(distance / speed, turn / (0.8 max_angular_velocity)) + 2 speed / linear_acceleration
+                        + max_angular_velocity / angular_acceleration) + margin
+
+``scale`` and ``margin`` (s) come from ``robot.base.deadline`` (defaults 1.0 and 5 s).
+
+Heartbeat consumer: a drive is silent when no heartbeat arrived for ``heartbeat_ms`` x ``consumer_timeout_factor``
+(the robot YAML: 100 ms x 2 = 200 ms); the cycle that notices it commands every wheel to zero, so the base stands
+still at most that timeout + one control period (20 ms at 50 Hz) + the drives' braking at ``stop_deceleration``
+after the last heartbeat.
+
 Poses: ``[x, y, theta]`` of base_footprint in ``map``; odometry starts at :meth:`set_pose` (initial pose).
 """
 
@@ -69,6 +82,8 @@ class Cia402Base(Base):
         self.rate = need(cfg, "control_rate", float, default=50.0, lo=5.0, hi=1000.0, where=w)
         self.fix_window = int(need(cfg, "localisation_window", float, default=10.0, lo=1.0, hi=1000.0, where=w))
         self.named_poses = {k: [float(x) for x in v] for k, v in dict(cfg.get("named_poses", {}) or {}).items()}
+        self.deadline_scale = need(cfg, "deadline.scale", float, default=1.0, lo=0.01, hi=100.0, where=w)
+        self.deadline_margin = need(cfg, "deadline.margin", float, default=5.0, lo=0.0, hi=600.0, where=w)
         self.eds_path = eds_path
         self._bus_given = bus
         self._bus: Any = None
@@ -397,8 +412,8 @@ class Cia402Base(Base):
         dist = math.hypot(x - start[0], y - start[1])
         turn = abs(wrap_angle(theta - start[2]))
         speed = min(speed, self.max_lin)
-        budget = (max(dist / speed, turn / (0.8 * self.max_ang)) + 2.0 * speed / self.lin_accel
-                  + self.max_ang / self.ang_accel + 5.0)
+        budget = self.deadline_scale * (max(dist / speed, turn / (0.8 * self.max_ang)) + 2.0 * speed / self.lin_accel
+                                        + self.max_ang / self.ang_accel) + self.deadline_margin
         goal = {"x": x, "y": y, "theta": wrap_angle(theta), "tolerance": tolerance,
                 "angle_tolerance": angle_tolerance, "speed": speed, "reached": threading.Event()}
         t0 = time.monotonic()

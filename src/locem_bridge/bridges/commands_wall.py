@@ -12,7 +12,10 @@ passes ``robot.arm.home_via`` first.
 Process outputs are switched from ``robot.tools.<tool>.switch``: a UR standard digital output (taping tool,
 sander) or the compressor's spray valve. Whatever ends a command (success, error, cancel, STOP, deadline), the
 process output is switched off before the command answers; a compressor link lost mid SPRAY_AREA ends the
-command with ``HARDWARE_ERROR`` within one second (the valve is closed when the link returns).
+command with ``HARDWARE_ERROR`` within one second (when the link returns the compressor backend brings the device
+to its safe state: valve closed, motor off). SPRAY_AREA therefore switches the motor on itself every time
+(valve closed, motor on, set-point, wait for pressure), so a SPRAY_AREA after such a failure (HICEM's RECOVER,
+then the area again) needs no COMPRESSOR_ON first.
 """
 
 import math

@@ -12,8 +12,15 @@ input registers    0..3     measured pressure (cbar), motor current (cA), fault 
 Lifecycle: ``ModbusCompressor(cfg)`` -> :meth:`start` (poll thread at ``poll_rate`` Hz, 10..20) -> :meth:`close`.
 Every request has a timeout of at most 500 ms and is retried once on a fresh connection (pymodbus reconnects on
 the next request, with its own growing delay). A failed poll marks the link ``down``; commands then fail with
-:class:`~.errors.LinkDown` (``HARDWARE_ERROR``). The first successful poll after a loss commands the spray valve
-closed before anything else: a valve left open when the link died never reopens by itself.
+:class:`~.errors.LinkDown` (``HARDWARE_ERROR``).
+
+Safe state when the link returns: the first successful poll after a loss (a failed poll, a poll answered later
+than ``stale_after``, or a :meth:`stop` that could not reach the device) commands the spray valve closed, then the
+motor off, before anything else and before the link is reported ``up`` again. Whatever was running when the link
+died (e.g. a SPRAY_AREA that then failed with ``HARDWARE_ERROR``) is thus left with no spray and no motor; nothing
+restarts by itself. A command that needs pressure again switches the motor on itself (SPRAY_AREA does;
+SET_PRESSURE asks for COMPRESSOR_ON first). The very first poll after :meth:`start` closes the valve only: a
+LOCEM node starting up leaves a running motor alone.
 """
 
 import inspect
@@ -62,6 +69,7 @@ class ModbusCompressor(Compressor):
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
         self.polls = 0
+        self.safe_state_writes = 0              # times the safe state was commanded after a link loss
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def start(self) -> None:
@@ -141,11 +149,15 @@ class ModbusCompressor(Compressor):
                 state = self._read_state()
                 silent = self._last_ok > 0.0 and time.monotonic() - self._last_ok > self.stale_after
                 if self._was_down or silent or self._last_ok == 0.0:
-                    # link (re)gained: the valve is commanded closed before anything else happens
+                    # link (re)gained: the valve is commanded closed before anything else happens; after a loss
+                    # the motor is switched off too (safe state, see the module docstring)
                     self._request(lambda c, kw: c.write_coil(COIL_VALVE, False, **kw))
                     state["valve_open"] = False
                     if self._was_down or silent:
-                        log.warning("compressor link back: spray valve commanded closed")
+                        self._request(lambda c, kw: c.write_coil(COIL_MOTOR, False, **kw))
+                        state["motor_running"] = False
+                        log.warning("compressor link back: spray valve closed, motor off (safe state)")
+                        self.safe_state_writes += 1
                     self._was_down = False
                 with self._lock:
                     self._state = state

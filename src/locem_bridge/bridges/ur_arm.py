@@ -6,8 +6,14 @@ lost: a reconnect redoes the whole handshake including the script upload) -> :me
 
 Motions: every move is started asynchronously and watched: it ends when the controller reports the async
 operation finished and the arm stands still at the target; it is stopped (``stopJ`` / ``stopL``) on cancel,
-STOP, STOP_ARM and when it overruns its deadline ``path / speed + stops * 2 speed / accel + margin``
-(:class:`~.errors.MotionTimeout`). Before each command the link and the safety state are checked.
+STOP, STOP_ARM and when it overruns its deadline (:class:`~.errors.MotionTimeout`, ``TIMEOUT``; the arm is stopped
+before the command answers)::
+
+    deadline = scale x (path / speed + stops x 2 speed / accel) + margin      [+ the script upload of a path]
+
+``scale`` and ``margin`` (s) come from ``robot.arm.deadline`` (defaults 1.0 and ``MOTION_MARGIN_S`` = 2 s): a
+slower controller (speed slider, reduced mode) needs a larger scale; a scale below 1 makes every motion overrun
+(used by the tests). Before each command the link and the safety state are checked.
 
 Paths (:meth:`UrRtdeArm.move_path`): one ``moveL(path)`` of ur_rtde, i.e. the control script is re-uploaded with
 the waypoints (speed, acceleration, blend radius each) injected and run as one blended motion; the async progress
@@ -73,6 +79,9 @@ class UrRtdeArm(Arm):
         self.named_poses = {k: [float(x) for x in v] for k, v in need(cfg, "named_poses", dict, where="robot.arm").items()}
         self.poll_rate = poll_rate
         self.connect_timeout = connect_timeout
+        self.deadline_scale = need(cfg, "deadline.scale", float, default=1.0, lo=0.01, hi=100.0, where="robot.arm")
+        self.deadline_margin = need(cfg, "deadline.margin", float, default=MOTION_MARGIN_S, lo=0.0, hi=600.0,
+                                    where="robot.arm")
         self._health = Health("connecting")
         self._io_lock = threading.Lock()
         self._proc: Optional[subprocess.Popen] = None
@@ -199,6 +208,7 @@ class UrRtdeArm(Arm):
         if mode not in SAFETY_OK and self._safety is None:
             self._safety = "%s (safety mode %d)" % (SAFETY_NAMES.get(mode, "UNKNOWN").lower().replace("_", " "), mode)
             log.error("UR controller %s: %s latched; RESET_ARM after the cause is removed", self.host, self._safety)
+            self._health.set(error="%s latched; RESET_ARM after the cause is removed" % self._safety)
         self._link_up.set()
         device = "safety stop: %s" % self._safety if self._safety else (
             "ok" if st["robot_mode"] == ROBOT_RUNNING and st["program_running"] else
@@ -301,7 +311,7 @@ class UrRtdeArm(Arm):
                 target_q: Optional[List[float]] = None, target_pose: Optional[List[float]] = None,
                 stops: int = 1, kind: Optional[str] = None, extra_s: float = 0.0,
                 call_timeout: float = REQUEST_TIMEOUT, waypoints: int = 0) -> Dict[str, Any]:
-        budget = travel / speed + stops * 2.0 * speed / accel + MOTION_MARGIN_S + extra_s
+        budget = self.deadline_scale * (travel / speed + stops * 2.0 * speed / accel) + self.deadline_margin + extra_s
         self._stop_requested = None
         self._motion_kind = kind or op
         waiter.on_cancel(lambda: self.stop_motion("cancelled"))
@@ -331,7 +341,7 @@ class UrRtdeArm(Arm):
                     waiter.report(min(0.99, st["progress"] / float(waypoints)),
                                   "waypoint %d of %d" % (st["progress"] + 1, waypoints))
                 elif travel > 0:
-                    waiter.report(min(0.99, elapsed / max(budget - MOTION_MARGIN_S, 1e-3)), "%s running" % op)
+                    waiter.report(min(0.99, elapsed / max(budget - self.deadline_margin, 1e-3)), "%s running" % op)
                 if elapsed > budget:
                     self.stop_motion("deadline")
                     raise MotionTimeout("%s did not finish within %.2f s (path %.3f, speed %.3f, accel %.3f, "

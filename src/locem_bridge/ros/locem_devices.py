@@ -31,6 +31,7 @@ from geometry_msgs.msg import TransformStamped, Twist
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
 
+from locem_bridge.bridges.interfaces import HEALTH_OK, HEALTH_WARN, health_level
 from locem_bridge.msg import Status
 
 
@@ -40,12 +41,9 @@ def _quat_z(yaw: float) -> Any:
 
 
 def _level(health: Dict[str, Any]) -> int:
-    if health.get("link") != "up":
-        return DiagnosticStatus.ERROR
-    device = str(health.get("device", "ok"))
-    if device.startswith("fault") or device.startswith("safety") or health.get("fault"):
-        return DiagnosticStatus.ERROR
-    return DiagnosticStatus.OK if device in ("ok", "unknown") else DiagnosticStatus.WARN
+    """DiagnosticStatus level of one backend's health record (graded by the ROS-free core)."""
+    return {HEALTH_OK: DiagnosticStatus.OK, HEALTH_WARN: DiagnosticStatus.WARN}.get(
+        health_level(health), DiagnosticStatus.ERROR)
 
 
 class LocemDevices:
