@@ -16,6 +16,9 @@ _SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirn
                     "src")
 if _SRC not in sys.path:
     sys.path.insert(0, _SRC)
+_HERE = os.path.dirname(os.path.abspath(__file__))     # ur_client_support, shared by the client tests
+if _HERE not in sys.path:
+    sys.path.insert(0, _HERE)
 
 TEST_TIME_LIMIT_S = 120
 _counter = itertools.count(1)

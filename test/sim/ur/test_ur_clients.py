@@ -5,33 +5,14 @@ import time
 import numpy as np
 import pytest
 
+from ur_client_support import Q_HOME, disconnect_all, eventually
+
 rtde_control = pytest.importorskip("rtde_control")
 rtde_receive = pytest.importorskip("rtde_receive")
 rtde_io = pytest.importorskip("rtde_io")
 dashboard_client = pytest.importorskip("dashboard_client")
 
 pytestmark = pytest.mark.slow
-
-Q_HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
-
-
-def _disconnect(*clients):
-    for c in clients:
-        try:
-            c.disconnect()
-        except Exception:
-            pass
-
-
-def eventually(fn, timeout=3.0):
-    """Poll ``fn`` until it returns a true value (the receive stream is another connection: it may lag a few
-    cycles behind the control connection, more so on a loaded machine)."""
-    end = time.time() + timeout
-    while True:
-        value = fn()
-        if value or time.time() > end:
-            return value
-        time.sleep(0.005)
 
 
 def _point_line_distance(p, a, b):
@@ -68,7 +49,7 @@ def test_clients_connect_with_default_flags_and_stream_at_500hz(ur_standin):
         assert np.allclose(steps, np.round(steps), atol=1e-3)
         assert ur_standin.refused() == []
     finally:
-        _disconnect(c, r, io)
+        disconnect_all(c, r, io)
 
 
 def test_movej_reaches_target_with_synchronised_trapezoid(ur_standin):
@@ -100,7 +81,7 @@ def test_movej_reaches_target_with_synchronised_trapezoid(ur_standin):
         assert c.moveJ(Q_HOME, v, a)
         assert eventually(lambda: np.max(np.abs(np.subtract(r.getActualQ(), Q_HOME))) < 1e-3)
     finally:
-        _disconnect(c, r)
+        disconnect_all(c, r)
 
 
 def test_movel_reaches_pose_on_a_straight_line(ur_standin):
@@ -132,7 +113,7 @@ def test_movel_reaches_pose_on_a_straight_line(ur_standin):
         assert c.moveL(start, 0.25, 1.2)
         assert eventually(lambda: np.linalg.norm(np.subtract(r.getActualTCPPose()[:3], start[:3])) < 1e-3)
     finally:
-        _disconnect(c, r)
+        disconnect_all(c, r)
 
 
 def test_speedl_then_stopl(ur_standin):
@@ -158,7 +139,7 @@ def test_speedl_then_stopl(ur_standin):
         assert p2[2] - start[2] > 0.05                    # it did rise (0.3 s wall = 3 s motion at 0.05 m/s)
         assert abs(p2[0] - start[0]) < 1e-3 and abs(p2[1] - start[1]) < 1e-3
     finally:
-        _disconnect(c, r)
+        disconnect_all(c, r)
 
 
 def test_speedj_and_speedstop(ur_standin):
@@ -176,7 +157,7 @@ def test_speedj_and_speedstop(ur_standin):
         assert eventually(lambda: np.allclose(r.getActualQd(), 0.0, atol=1e-9))
         assert r.getActualQ()[0] > Q_HOME[0] + 0.05
     finally:
-        _disconnect(c, r)
+        disconnect_all(c, r)
 
 
 def test_protective_stop_fails_move_until_dashboard_unlock(ur_standin):
@@ -204,7 +185,7 @@ def test_protective_stop_fails_move_until_dashboard_unlock(ur_standin):
         assert c.moveJ(Q_HOME, 1.0, 1.0) is True
         assert eventually(lambda: np.max(np.abs(np.subtract(r.getActualQ(), Q_HOME))) < 1e-3)
     finally:
-        _disconnect(c, r, db)
+        disconnect_all(c, r, db)
 
 
 def test_unlock_too_early_is_refused_like_polyscope(ur_address):
@@ -247,7 +228,7 @@ def test_emergency_stop_needs_power_on_and_brake_release(ur_standin):
             time.sleep(0.01)
         assert c.moveJ([0.3] + Q_HOME[1:], 1.0, 1.0) is True
     finally:
-        _disconnect(c, r, db)
+        disconnect_all(c, r, db)
 
 
 def test_restart_standin_then_reconnect(ur_standin):
@@ -271,7 +252,7 @@ def test_restart_standin_then_reconnect(ur_standin):
         assert c.moveJ(Q_HOME, 1.0, 1.0)
         assert eventually(lambda: np.max(np.abs(np.subtract(r.getActualQ(), Q_HOME))) < 1e-3)
     finally:
-        _disconnect(c, r)
+        disconnect_all(c, r)
 
 
 def test_io_outputs_visible_in_standin_and_stream(ur_standin):
@@ -296,7 +277,7 @@ def test_io_outputs_visible_in_standin_and_stream(ur_standin):
         ur_standin.set_standard_digital_input(4, True)
         assert eventually(lambda: r.getDigitalInState(4))
     finally:
-        _disconnect(io, r)
+        disconnect_all(io, r)
 
 
 def test_speed_slider_scales_motion(ur_standin):
@@ -323,7 +304,7 @@ def test_speed_slider_scales_motion(ur_standin):
         assert peak == pytest.approx(0.25 * 0.8, rel=1e-6)      # 25 % of the programmed joint speed
         assert slow > 2.0 * full
     finally:
-        _disconnect(io, c, r)
+        disconnect_all(io, c, r)
 
 
 def test_kinematics_round_trip_and_tcp_offset(ur_standin):
@@ -376,7 +357,7 @@ def test_kinematics_round_trip_and_tcp_offset(ur_standin):
             time.sleep(0.01)
         assert c.isSteady()
     finally:
-        _disconnect(c, r)
+        disconnect_all(c, r)
 
 
 def _rotvec_to_matrix(rv):
@@ -414,7 +395,7 @@ def test_async_movej_then_stopj_and_servoj(ur_standin):
         c.servoStop(10.0)
         assert eventually(lambda: np.allclose(r.getActualQd(), 0.0))
     finally:
-        _disconnect(c, r)
+        disconnect_all(c, r)
 
 
 def test_trigger_protective_stop_from_client(ur_standin):
@@ -434,7 +415,7 @@ def test_trigger_protective_stop_from_client(ur_standin):
         assert eventually(c.isProgramRunning)             # the RTDE stream carries the new state
         assert c.moveJ([0.2] + Q_HOME[1:], 1.0, 1.0) is True
     finally:
-        _disconnect(c, r, db)
+        disconnect_all(c, r, db)
 
 
 def test_new_control_interface_replaces_a_running_control_script(ur_standin):

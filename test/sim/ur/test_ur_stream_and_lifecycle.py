@@ -11,35 +11,19 @@ import time
 import numpy as np
 import pytest
 
+from ur_client_support import Q_HOME, disconnect_all, eventually
+
 rtde_control = pytest.importorskip("rtde_control")
 rtde_receive = pytest.importorskip("rtde_receive")
 dashboard_client = pytest.importorskip("dashboard_client")
 
 pytestmark = pytest.mark.slow
 
-Q_HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))),
                    "src")
 RTDE_PORT = 30004
 # RTDE package types
 REQUEST_PROTOCOL_VERSION, SETUP_OUTPUTS, START, PAUSE, DATA = 86, 79, 83, 80, 85
-
-
-def _disconnect(*clients):
-    for c in clients:
-        try:
-            c.disconnect()
-        except Exception:
-            pass
-
-
-def eventually(fn, timeout=3.0):
-    end = time.time() + timeout
-    while True:
-        value = fn()
-        if value or time.time() > end:
-            return value
-        time.sleep(0.005)
 
 
 class RtdeReader:
@@ -130,7 +114,7 @@ def test_rtde_stream_delivers_about_500_packages_per_wall_second(ur_standin):
         assert 100.0 <= slow_rate <= 140.0, "%.1f packages/s at 125 Hz" % slow_rate
     finally:
         reader.close()
-        _disconnect(r)
+        disconnect_all(r)
 
 
 def _spawn_standin(addr: str, log_path: str) -> subprocess.Popen:
@@ -219,7 +203,7 @@ def test_stop_script_ends_the_control_program_and_moves_need_a_new_upload(ur_add
     finally:
         for client in (c, r, db):
             if client is not None:
-                _disconnect(client)
+                disconnect_all(client)
         _kill(proc)
 
 
@@ -262,6 +246,6 @@ def test_sigkilled_standin_process_restarted_then_clients_reconnect(ur_address, 
     finally:
         for client in (c, r):
             if client is not None:
-                _disconnect(client)
+                disconnect_all(client)
         for p in procs:
             _kill(p)
