@@ -18,13 +18,12 @@ import re
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
+from ..finish import AREA_FINISHES
 from .datastore import DataManager
 from .errors import DataStoreError, HicemError, ScanFormatError
 
 FEATURES = "features"
 _ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
-#: values of an area's optional ``finish`` (docs/contracts.md), from bare board to finished
-FINISHES = ("bare", "sprayed", "sanded")
 
 
 def _num(v: Any, where: str) -> float:
@@ -109,8 +108,9 @@ def validate_scan(scan: Any, known_walls: Sequence[str] = ()) -> Dict[str, List[
                 "height": _pos(a.get("height"), where + ".height")}
         finish = a.get("finish")
         if finish is not None:
-            if not isinstance(finish, str) or finish not in FINISHES:
-                raise ScanFormatError("%s.finish must be one of %s, got %r" % (where, ", ".join(FINISHES), finish))
+            if not isinstance(finish, str) or finish not in AREA_FINISHES:
+                raise ScanFormatError("%s.finish must be one of %s, got %r"
+                                      % (where, ", ".join(AREA_FINISHES), finish))
             area["finish"] = finish
         out["areas"].append(area)
     return out

@@ -19,6 +19,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Union
 from rdflib import Literal, Namespace, URIRef
 from rdflib.namespace import RDF, XSD
 
+from ..finish import AREA_FINISHES, BARE, WORK_DONE
 from .errors import WorldUpdateError
 from .store import G_WORLD, ChangeSet, TripleStore
 from .terms import FEATURE_ID_RE
@@ -26,9 +27,6 @@ from .vocab import GEO, PPR
 
 _JOINT_CLASS = {"vertical": PPR.VerticalJointLine, "horizontal": PPR.HorizontalJointLine}
 _GEOMETRY_PROPS = (PPR.geometry, PPR.height, PPR.width, PPR.thickness, PPR.kind, PPR.onWall, PPR.lastScannedAt)
-#: ``finish`` of an area -> (spraying done, sanding done)
-FINISHES = {"bare": (False, False), "sprayed": (True, False), "sanded": (True, True)}
-_FINISH_ORDER = ("bare", "sprayed", "sanded")
 #: statuses that count as done: a scan never replaces them
 _DONE = frozenset((PPR.processed, PPR.processedManually))
 
@@ -69,9 +67,9 @@ def _wkt_polygon(points: Sequence[Sequence[float]]) -> Literal:
 
 def _finish(v: Any, path: str) -> str:
     if v is None:
-        return "bare"
-    if not isinstance(v, str) or v not in FINISHES:
-        raise WorldUpdateError("%s must be one of %s, got %r" % (path, ", ".join(_FINISH_ORDER), v))
+        return BARE
+    if not isinstance(v, str) or v not in WORK_DONE:
+        raise WorldUpdateError("%s must be one of %s, got %r" % (path, ", ".join(AREA_FINISHES), v))
     return v
 
 
@@ -191,7 +189,7 @@ def scan_changes(scan: Union[str, bytes, Mapping[str, Any]], store: TripleStore,
         width, height = _num(a.get("width"), path + ".width"), _num(a.get("height"), path + ".height")
         if width <= 0 or height <= 0:
             raise WorldUpdateError("%s: width and height must be > 0 m, got %r x %r" % (path, width, height))
-        spray_done, sand_done = FINISHES[_finish(a.get("finish"), path + ".finish")]
+        spray_done, sand_done = WORK_DONE[_finish(a.get("finish"), path + ".finish")]
         c1 = [origin[k] + width * u[k] for k in range(3)]
         corners = [origin, c1, [c1[0], c1[1], c1[2] + height], [origin[0], origin[1], origin[2] + height]]
         node = iri(fid)
@@ -206,7 +204,7 @@ def scan_changes(scan: Union[str, bytes, Mapping[str, Any]], store: TripleStore,
             for prop, done in ((PPR.sprayingStatus, spray_done), (PPR.sandingStatus, sand_done)):
                 if not done:
                     continue
-                stored = [q for q in store.quads(node, prop, None, (G_WORLD,))]
+                stored = list(store.quads(node, prop, None, (G_WORLD,)))
                 if any(q[2] in _DONE for q in stored):
                     continue
                 cs.remove += [(s2, p2, o2, G_WORLD) for s2, p2, o2, _ in stored]

@@ -22,6 +22,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from ..finish import BARE, SANDED, SPRAYED
 from .site import Area, Site, Wall, _r
 
 #: fraction of an area's cells that must be sprayed (sanded) for the scan to report it sprayed (sanded)
@@ -48,8 +49,8 @@ def area_finish(outcome: Any, area: Area) -> str:
     """``bare`` / ``sprayed`` / ``sanded`` for ``area`` (see the module docstring)."""
     spray, sand = area_coverage(outcome, area)
     if spray < FINISHED_FRACTION:
-        return "bare"
-    return "sanded" if sand >= FINISHED_FRACTION else "sprayed"
+        return BARE
+    return SANDED if sand >= FINISHED_FRACTION else SPRAYED
 
 
 def _angle_wrap(a: float) -> float:
