@@ -34,6 +34,22 @@ def test_second_command_on_a_busy_resource_is_refused_other_resources_run(core, 
     assert first.wait(1.0).code is Code.ABORTED
 
 
+def test_a_command_sent_as_soon_as_the_previous_one_answered_is_not_busy(core, wait_until):
+    # a client that sends the next arm command the moment the previous one's answer arrives (the reply of a
+    # service call, the final /locem/status event) must find the arm free: the resource is released before the
+    # answer is visible, not after
+    replies = []
+
+    def on_event(event):
+        if event.name == "ARM_MOVE" and event.state.terminal and event.command == "ARM_MOVE 0":
+            replies.append(core.dispatcher.execute("ARM_MOVE 0.01"))
+
+    core.dispatcher.add_listener(on_event)
+    assert core.dispatcher.execute("ARM_MOVE 0").success
+    assert wait_until(lambda: replies, timeout=2.0), "the final event of ARM_MOVE 0 never came"
+    assert replies[0].success, replies[0].message
+
+
 def test_stop_preempts_everything_and_runs_device_stops(core, device):
     arm = core.dispatcher.submit("ARM_MOVE 30", Interface.ACTION)
     base = core.dispatcher.submit("BASE_MOVE 0.4", Interface.SUBSCRIBER)

@@ -223,8 +223,10 @@ class Dispatcher:
                                                       % (execution.bound.name, type(error).__name__, error)))
         finally:
             execution._handler_returned.set()
-        execution._finish(response)
+        # resources first, answer second: whoever sees the answer (a service reply, the final status event, a
+        # procedure queue) may send the next command on the same resource at once and must not get BUSY
         self._release(execution)
+        execution._finish(response)
 
     def _release(self, execution: Execution) -> None:
         with self._lock:
