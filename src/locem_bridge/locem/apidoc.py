@@ -14,6 +14,7 @@ from typing import Iterable, List, Optional
 
 from .catalogue import all_specs
 from .codes import Code
+from .dispatcher import DEFAULT_MAX_RUNNING
 from .grammar import MAX_COMMAND_LENGTH
 from .registry import CommandSpec
 
@@ -34,7 +35,12 @@ def render(specs: Iterable[CommandSpec]) -> str:
         "`NAME arg1 arg2 ... key=value ...` -- the name is case-insensitive; positional arguments come first,",
         "keyword arguments last, each at most once. Tokens are separated by spaces; a token in double quotes may",
         "contain spaces. At most %d printable characters; control characters are refused." % MAX_COMMAND_LENGTH,
-        "Numbers are SI units (m, rad, s, bar) per REP 103; NaN and infinities are refused.",
+        "Numbers are SI units (m, rad, s, bar) per REP 103, written in ASCII (digits of other scripts are refused);",
+        "NaN and infinities are refused. Every argument is ASCII text.",
+        "",
+        "One running command per resource; at most %d commands run at once (the node's `~max_running`), one more"
+        % DEFAULT_MAX_RUNNING,
+        "is answered `BUSY` naming the limit; `STOP`, `HELP` and `STATUS` are never refused by it.",
         "",
         "Every interface answers with `success`, `code`, `message` and `result` (a JSON object, `{}` when empty).",
         "",

@@ -11,7 +11,7 @@ Bridges add their commands with ``core.install(command_set)`` before serving.
 
 from typing import Any, Dict, Iterable, Optional, Protocol
 
-from .dispatcher import Dispatcher
+from .dispatcher import DEFAULT_MAX_RUNNING, Dispatcher
 from .procedures import ProcedureManager
 from .registry import CommandRegistry, CommandSpec
 from .system_commands import SystemCommands
@@ -35,9 +35,9 @@ class LocemCore:
     """Owns the dispatcher and the procedure queue; ``close()`` stops everything."""
 
     def __init__(self, grace: float = 1.0, stop_timeout: float = 2.0,
-                 registry: Optional[CommandRegistry] = None) -> None:
+                 registry: Optional[CommandRegistry] = None, max_running: int = DEFAULT_MAX_RUNNING) -> None:
         self.registry = registry or CommandRegistry()
-        self.dispatcher = Dispatcher(self.registry, grace=grace, stop_timeout=stop_timeout)
+        self.dispatcher = Dispatcher(self.registry, grace=grace, stop_timeout=stop_timeout, max_running=max_running)
         self.system = SystemCommands(self.dispatcher)
         self.procedures = ProcedureManager(self.dispatcher)
 

@@ -9,6 +9,9 @@ Policy, stated once:
 * **One running command per resource.** Each command declares the resources it occupies (``base``, ``arm``,
   ``compressor``, ``tool``, ...). A command needing an occupied resource is answered ``BUSY`` at once; there is
   no hidden queue (the procedure interface is the queue).
+* **A bounded number of running commands.** At most ``max_running`` (:data:`DEFAULT_MAX_RUNNING`) commands
+  that run in their own thread may run at once, whatever their resources; one more is answered ``BUSY`` naming
+  the limit. ``STOP`` and the inline queries (``HELP``, ``STATUS``) do not count and are never refused by it.
 * **STOP pre-empts everything.** Preemptive commands are never ``BUSY``; ``STOP`` cancels every running
   command, runs every registered device stop hook, and waits (bounded) until the handlers have returned.
 * **Every command has a deadline** (its declared or computed timeout, pauses excluded). At the deadline the
@@ -17,7 +20,8 @@ Policy, stated once:
   listed as stuck by ``STATUS``.
 
 Handlers run in their own thread, except ``inline`` ones (quick queries such as ``HELP`` and ``STATUS``),
-which run in the caller's thread.
+which run in the caller's thread. A waiting handler sleeps on its execution's event (see
+:meth:`CommandContext.sleep`), so it costs nothing until a cancel, ``STOP``, pause or its time wakes it.
 """
 
 import heapq
@@ -38,12 +42,19 @@ _log = logging.getLogger(__name__)
 
 HealthSource = Callable[[], Dict[str, Any]]
 
+DEFAULT_MAX_RUNNING = 64
+"""Commands that may run at once in their own thread (the ROS node's ``~max_running`` parameter)."""
+
 
 class Dispatcher:
     """Thread-safe front door of the LOCEM core. Construct with a registry whose handlers are bound."""
 
-    def __init__(self, registry: CommandRegistry, grace: float = 1.0, stop_timeout: float = 2.0) -> None:
+    def __init__(self, registry: CommandRegistry, grace: float = 1.0, stop_timeout: float = 2.0,
+                 max_running: int = DEFAULT_MAX_RUNNING) -> None:
+        if int(max_running) < 1:
+            raise ValueError("max_running must be at least 1, got %r" % (max_running,))
         self.registry = registry
+        self.max_running = int(max_running)
         self.grace = grace
         self.stop_timeout = stop_timeout
         self.started = time.monotonic()
@@ -52,6 +63,7 @@ class Dispatcher:
         self._released = threading.Condition(self._lock)
         self._owners: Dict[str, Execution] = {}
         self._running: Dict[int, Execution] = {}
+        self._threaded = 0  # running executions that hold a thread (not inline): bounded by max_running
         self._listeners: List[Listener] = []
         self._stop_hooks: List[Tuple[str, Callable[[], None]]] = []
         self._health: Dict[str, HealthSource] = {}
@@ -99,9 +111,15 @@ class Dispatcher:
             self._emit(execution._event())
         if bound.spec.inline:
             self._run(execution, handler)
-        else:
+            return execution
+        try:
             threading.Thread(target=self._run, args=(execution, handler),
                              name="locem-%s-%d" % (bound.name.lower(), execution.id), daemon=True).start()
+        except RuntimeError as error:  # "can't start new thread": answer it like any other end, never lose it
+            execution._handler_returned.set()
+            self._release(execution)
+            execution._finish(Response.from_error(Busy("%s could not start: %s; wait for running commands to "
+                                                       "end or send STOP" % (bound.name, error))))
         return execution
 
     def execute(self, text: object, interface: Interface = Interface.SERVICE) -> Response:
@@ -145,16 +163,24 @@ class Dispatcher:
         with self._lock:
             return self._owners.get(resource)
 
-    def wait_for_resources(self, resources: Any, timeout: float) -> bool:
-        """Block until none of ``resources`` is occupied (True) or ``timeout`` passes (False)."""
+    def wait_for_resources(self, resources: Any, timeout: float, capacity: bool = False) -> bool:
+        """Block until none of ``resources`` is occupied (True) or ``timeout`` passes (False).
+
+        With ``capacity`` also until one more command may run under ``max_running``.
+        """
         deadline = time.monotonic() + timeout
         with self._lock:
-            while any(r in self._owners for r in resources):
+            while any(r in self._owners for r in resources) or (capacity and self._threaded >= self.max_running):
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False
                 self._released.wait(left)
             return True
+
+    def wake_waiters(self) -> None:
+        """Wake every :meth:`wait_for_resources` caller so it re-reads its own state (e.g. a canceled procedure)."""
+        with self._lock:
+            self._released.notify_all()
 
     def health(self) -> Dict[str, Any]:
         report = {}
@@ -191,7 +217,13 @@ class Dispatcher:
                         raise Busy("%s needs the %s, which is running '%s' (id %d)%s; wait for it, cancel it, "
                                    "or send STOP" % (bound.name, resource, owner.text, owner.id,
                                                      " and is stuck after a timeout" if owner.stuck else ""))
+                if not bound.spec.inline and self._threaded >= self.max_running:
+                    raise Busy("%s refused: LOCEM is already running %d commands, its limit (max_running = %d, "
+                               "the node's ~max_running parameter); wait for one to end, cancel one, or send STOP"
+                               % (bound.name, self._threaded, self.max_running))
             execution = Execution(next(self._ids), bound, interface, self.grace)
+            if not bound.spec.inline:
+                self._threaded += 1
             for resource in claims:
                 self._owners[resource] = execution
             self._running[execution.id] = execution
@@ -233,7 +265,8 @@ class Dispatcher:
             for resource, owner in list(self._owners.items()):
                 if owner is execution:
                     del self._owners[resource]
-            self._running.pop(execution.id, None)
+            if self._running.pop(execution.id, None) is not None and not execution.bound.spec.inline:
+                self._threaded -= 1
             self._released.notify_all()
 
     def _watch_deadlines(self) -> None:

@@ -83,6 +83,11 @@ class CommandContext:
         return dict(self._execution.bound.values)
 
     @property
+    def follows_progress(self) -> bool:
+        """True when someone listens to this command's progress (an action client); else :meth:`report` is moot."""
+        return bool(self._execution._feedback_listeners)
+
+    @property
     def cancelled(self) -> bool:
         return self._execution._cancel_error is not None
 
@@ -99,7 +104,7 @@ class CommandContext:
                 raise error
             if not execution._paused:
                 return
-            execution._wake.wait(0.1)
+            execution._wake.wait()  # set by resume and by every stop request; the loop re-reads the state
             execution._wake.clear()
 
     def sleep(self, seconds: float) -> None:

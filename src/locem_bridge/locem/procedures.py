@@ -8,7 +8,8 @@ States of a procedure, published on change only::
 
 * ``add`` validates the command at once (an invalid one is refused and never queued) and appends it.
 * Procedures run one at a time, in the order they were added. A procedure whose resources are held by a
-  command from another interface waits, still ``queued``, until they are free.
+  command from another interface, or that would exceed the dispatcher's ``max_running``, waits, still
+  ``queued``, until they are free.
 * ``pause`` / ``resume`` apply to the running procedure, when its command is pausable.
 * ``cancel`` removes a queued procedure or cancels the running one; either way it ends ``finished`` with
   code ``ABORTED``.
@@ -87,7 +88,7 @@ StateListener = Callable[[ProcedureSnapshot], None]
 class ProcedureManager:
     """Owns the queue and one worker thread. ``close()`` ends the worker."""
 
-    def __init__(self, dispatcher: Dispatcher, poll: float = 0.05) -> None:
+    def __init__(self, dispatcher: Dispatcher, poll: float = 1.0) -> None:
         self._dispatcher = dispatcher
         self._poll = poll
         self._lock = threading.Condition()
@@ -135,7 +136,13 @@ class ProcedureManager:
                 self._queue.remove(procedure)
                 self._finish(procedure, Response.from_error(Aborted("procedure %d canceled before it started"
                                                                     % procedure_id)))
-                return procedure.snapshot()
+                snapshot = procedure.snapshot()
+            else:
+                snapshot = None
+        if snapshot is not None:
+            self._dispatcher.wake_waiters()  # the worker may be waiting for this one's resources
+            return snapshot
+        with self._lock:
             execution = procedure.execution
         if execution is not None:
             execution.cancel("procedure %d canceled" % procedure_id)
@@ -166,6 +173,7 @@ class ProcedureManager:
             running = self._current.execution if self._current else None
         if running is not None:
             running.cancel(reason)
+        self._dispatcher.wake_waiters()
 
     def list(self) -> List[ProcedureSnapshot]:
         with self._lock:
@@ -203,7 +211,9 @@ class ProcedureManager:
                 if self._closed:
                     return
                 procedure = self._queue[0]
-            if not self._dispatcher.wait_for_resources(procedure.bound.claims, self._poll):
+            # sleeps until a command ends (the dispatcher's condition) or a cancel here nudges it; poll is a backstop
+            if not self._dispatcher.wait_for_resources(procedure.bound.claims, self._poll,
+                                                       capacity=not procedure.bound.spec.inline):
                 continue  # still queued; a cancel may remove it meanwhile
             with self._lock:
                 if not self._queue or self._queue[0] is not procedure:

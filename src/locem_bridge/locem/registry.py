@@ -41,11 +41,13 @@ class Interface(str, Enum):
 ALL_INTERFACES: FrozenSet[Interface] = frozenset(Interface)
 
 _REQUIRED = object()
-_NUMBER = re.compile(r"[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?\Z")
-_INTEGER = re.compile(r"[+-]?\d+\Z")
+# ASCII digits only: Python's \\d, float() and int() also take other scripts' digits ('\u0661' is 1)
+_NUMBER = re.compile(r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?\Z")
+_INTEGER = re.compile(r"[+-]?[0-9]+\Z")
 _TRUE = {"true", "1", "on", "yes"}
 _FALSE = {"false", "0", "off", "no"}
 _STRING = re.compile(r"[A-Za-z0-9_.:/#\-]+\Z")
+_COMMAND_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}\Z")
 
 
 class ArgType(str, Enum):
@@ -55,6 +57,8 @@ class ArgType(str, Enum):
     ENUM = "enum"
     NAME = "name"
     """An identifier-like string: letters, digits and ``_ . : / # -`` (tags, tool names, IRIs)."""
+    COMMAND = "command"
+    """The name of a command declared in the registry (checked when the command is bound, on every interface)."""
 
 
 @dataclass(frozen=True)
@@ -93,6 +97,10 @@ class Arg:
     def word(cls, name: str, doc: str, **kw: Any) -> "Arg":
         return cls(name, ArgType.NAME, doc, **kw)
 
+    @classmethod
+    def command(cls, name: str, doc: str, **kw: Any) -> "Arg":
+        return cls(name, ArgType.COMMAND, doc, **kw)
+
     # -- description ----------------------------------------------------------------------------------------
     @property
     def required(self) -> bool:
@@ -114,6 +122,8 @@ class Arg:
             return "true or false"
         if self.type is ArgType.ENUM:
             return "one of " + ", ".join(self.choices)
+        if self.type is ArgType.COMMAND:
+            return "the name of a command of this LOCEM (HELP lists them)"
         return "a name (letters, digits and _ . : / # -)"
 
     def describe(self) -> Dict[str, Any]:
@@ -132,7 +142,14 @@ class Arg:
 
     # -- conversion -----------------------------------------------------------------------------------------
     def convert(self, command: str, token: str) -> Any:
-        """Turn one token into a typed value or raise :class:`InvalidArgument` naming this argument."""
+        """Turn one token into a typed value or raise :class:`InvalidArgument` naming this argument.
+
+        Every check is ASCII-only: digits of other scripts, look-alike letters that lower-case to ASCII (the
+        Kelvin sign) and the like are refused, never converted.
+        """
+        if not token.isascii():
+            raise self._error(command, "expects %s in ASCII characters, got '%s' (non-ASCII character U+%04X)"
+                              % (self.allowed(), _clip(token), ord(next(c for c in token if ord(c) > 0x7F))))
         if self.type in (ArgType.FLOAT, ArgType.INT):
             pattern = _NUMBER if self.type is ArgType.FLOAT else _INTEGER
             if not pattern.match(token):
@@ -162,6 +179,10 @@ class Arg:
             hint = difflib.get_close_matches(token.lower(), [c.lower() for c in self.choices], n=1)
             extra = " (did you mean '%s'?)" % hint[0] if hint else ""
             raise self._error(command, "expects %s, got '%s'%s" % (self.allowed(), _clip(token), extra))
+        if self.type is ArgType.COMMAND:
+            if not _COMMAND_NAME.match(token):
+                raise self._error(command, "expects %s, got '%s'" % (self.allowed(), _clip(token)))
+            return token.upper()  # whether it is declared is checked by the registry, which knows the names
         if not _STRING.match(token) or len(token) > self.max_length:
             raise self._error(command, "expects %s of at most %d characters, got '%s'"
                               % (self.allowed(), self.max_length, _clip(token)))
@@ -337,6 +358,12 @@ class CommandRegistry:
             values[key] = arg.convert(spec.name, token)
         for arg in spec.args:
             if arg.name in values:
+                if arg.type is ArgType.COMMAND and values[arg.name] and values[arg.name] not in self._specs:
+                    raise InvalidArgument(
+                        "%s: argument '%s': no command named '%s'%s; the commands are those declared in this "
+                        "LOCEM's command registry (system commands and the configured robot's bridges): send HELP "
+                        "to list them" % (spec.name, arg.name, _clip(values[arg.name]),
+                                          self.suggest(values[arg.name])), argument=arg.name)
                 continue
             if arg.required:
                 raise InvalidArgument("%s: missing argument '%s' (%s: %s); usage: %s"

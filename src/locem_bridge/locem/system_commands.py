@@ -8,7 +8,6 @@ policy (``BUSY``, ``STOP``) can be shown on a machine without devices.
 from typing import Any, Dict, List
 
 from .dispatcher import Dispatcher
-from .errors import InvalidArgument
 from .execution import CommandContext
 from .registry import Arg, CommandSpec
 
@@ -16,10 +15,14 @@ STANDARD_RESOURCES = ("base", "arm", "compressor", "tool")
 """Resources of a mobile manipulator as LOCEM schedules them (one running command each)."""
 
 MAX_WAIT_S = 3600.0
+PROGRESS_STEPS = 20
+"""A WAIT followed by an action client reports its progress in at most this many steps ..."""
+PROGRESS_MIN_STEP_S = 0.05
+"""... of at least this many seconds each."""
 
 HELP = CommandSpec(
     "HELP", "List every command, or show one command's signature, units and ranges.",
-    args=(Arg.word("name", "command to describe; all commands when omitted", default=""),),
+    args=(Arg.command("name", "command to describe; all commands when omitted", default=""),),
     timeout=1.0, inline=True, query=True,
     result=(("commands", "all commands: name, usage, summary (without a name)"),
             ("command", "the described command: args with type, unit, range, default; interfaces; resources")),
@@ -68,11 +71,8 @@ class SystemCommands:
 
     def help(self, ctx: CommandContext, name: str) -> Dict[str, Any]:
         registry = self._dispatcher.registry
-        if name:
-            spec = registry.lookup(name) if name.upper() in registry.names() else None
-            if spec is None:
-                raise InvalidArgument("HELP: no command named '%s'%s; send HELP to list all commands"
-                                      % (name, registry.suggest(name)), argument="name")
+        if name:  # a declared name: an unknown one is refused when the command is bound, on every interface
+            spec = registry.lookup(name)
             return {"message": describe(spec, registry.handler(spec.name) is not None), "command": spec.describe()}
         lines: List[str] = []
         commands = []
@@ -99,13 +99,18 @@ class SystemCommands:
         return outcome
 
     def wait(self, ctx: CommandContext, seconds: float, hold: str) -> Dict[str, Any]:
-        step = 0.05
+        # one sleep on the execution's event (woken at once by cancel, STOP, pause); only a caller that follows
+        # progress (an action goal) gets it, in at most PROGRESS_STEPS steps of at least PROGRESS_MIN_STEP_S
+        if not ctx.follows_progress or seconds <= 0.0:
+            ctx.sleep(seconds)
+            return {"waited_s": round(seconds, 6)}
+        step = max(seconds / PROGRESS_STEPS, PROGRESS_MIN_STEP_S)
         waited = 0.0
         while waited < seconds:
             chunk = min(step, seconds - waited)
             ctx.sleep(chunk)
             waited += chunk
-            ctx.report(waited / seconds if seconds > 0 else 1.0, "waited %.2f of %.2f s" % (waited, seconds))
+            ctx.report(waited / seconds, "waited %.2f of %.2f s" % (waited, seconds))
         return {"waited_s": round(waited, 6)}
 
 
