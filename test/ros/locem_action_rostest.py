@@ -67,6 +67,20 @@ class LocemActionTest(unittest.TestCase):
         self.assertEqual(client.get_result().code, "INVALID_ARGUMENT")
         self.assertIn("argument 'seconds'", client.get_result().message)
 
+    def test_help_of_an_unknown_command_is_rejected_as_a_goal(self):
+        client = self.clients[0]
+        client.send_goal(CommandGoal("HELP NO_SUCH_COMMAND"))
+        self.assertTrue(client.wait_for_result(rospy.Duration(5)))
+        self.assertEqual(client.get_state(), GoalStatus.REJECTED)
+        result = client.get_result()
+        self.assertEqual((result.success, result.code), (False, "INVALID_ARGUMENT"))
+        self.assertIn("no command named 'NO_SUCH_COMMAND'", result.message)
+        self.assertIn("command registry", result.message)
+        client.send_goal(CommandGoal("HELP WAIT"))  # a known name is still described
+        self.assertTrue(client.wait_for_result(rospy.Duration(5)))
+        self.assertEqual(client.get_state(), GoalStatus.SUCCEEDED)
+        self.assertIn("WAIT seconds", client.get_result().message)
+
     def test_busy_goal_is_rejected_and_stop_aborts_the_running_one(self):
         first, second = self.clients
         first.send_goal(CommandGoal("WAIT 20 hold=base"))

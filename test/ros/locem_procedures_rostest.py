@@ -26,6 +26,7 @@ class LocemProceduresTest(unittest.TestCase):
                    for name in ("query_state", "cancel", "pause", "resume")}
         cls.call = staticmethod(rospy.ServiceProxy("/locem/command", Command))
         cls.states = []
+        cls.commands = []
         cls.lock = threading.Lock()
         rospy.Subscriber(NS + "state", ProcedureState, cls._record, queue_size=1000)
         rospy.sleep(1.0)
@@ -34,6 +35,7 @@ class LocemProceduresTest(unittest.TestCase):
     def _record(cls, message):
         with cls.lock:
             cls.states.append((message.id, message.state, message.code))
+            cls.commands.append(message.command)
 
     def op(self, name, procedure_id):
         return self.ops[name](procedure_id)
@@ -89,6 +91,22 @@ class LocemProceduresTest(unittest.TestCase):
         resumed = self.op("resume", p1)
         self.assertFalse(resumed.success)
         self.call("STOP")
+
+    def test_help_of_an_unknown_command_is_refused_and_never_queued(self):
+        refused = self.add("HELP NO_SUCH_COMMAND")
+        self.assertEqual((refused.success, refused.code, refused.id), (False, "INVALID_ARGUMENT", 0))
+        self.assertIn("no command named 'NO_SUCH_COMMAND'", refused.message)
+        self.assertIn("command registry", refused.message)
+        digits = self.add("WAIT \u0661")  # an Arabic-Indic one is not a number here
+        self.assertEqual((digits.success, digits.code), (False, "INVALID_ARGUMENT"))
+        self.assertIn("argument 'seconds'", digits.message)
+        known = self.queue("HELP WAIT")
+        self.assertTrue(wait_until(lambda: self.state(known) == "finished", 5))
+        self.assertEqual(self.op("query_state", known).result_code, "OK")
+        self.assertTrue(wait_until(lambda: self.history(known)[-1:] == ["finished"], 3))
+        with self.lock:  # nothing was queued or published for the refused ones
+            self.assertEqual({c for c in self.commands if c.startswith("HELP") or c.startswith("WAIT \u0661")},
+                             {"HELP WAIT"})
 
     def test_stop_cancels_the_running_procedure_and_the_queue(self):
         ids = [self.queue("WAIT 5") for _ in range(3)]

@@ -33,7 +33,7 @@ import traceback
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from .errors import Aborted, Busy, CommandTimeout, LocemError
-from .execution import CommandEvent, ExecState, Execution, Listener
+from .execution import CommandContext, CommandEvent, ExecState, Execution, Listener
 from .grammar import parse
 from .registry import BoundCommand, CommandRegistry, Interface
 from .response import Response
@@ -116,7 +116,7 @@ class Dispatcher:
             threading.Thread(target=self._run, args=(execution, handler),
                              name="locem-%s-%d" % (bound.name.lower(), execution.id), daemon=True).start()
         except RuntimeError as error:  # "can't start new thread": answer it like any other end, never lose it
-            execution._handler_returned.set()
+            execution._handler_returned = True
             self._release(execution)
             execution._finish(Response.from_error(Busy("%s could not start: %s; wait for running commands to "
                                                        "end or send STOP" % (bound.name, error))))
@@ -147,12 +147,12 @@ class Dispatcher:
                 hook_errors.append("%s: %s" % (name, error))
         deadline = time.monotonic() + self.stop_timeout
         with self._lock:
-            while any(not e._handler_returned.is_set() for e in victims):
+            while any(not e._handler_returned for e in victims):
                 left = deadline - time.monotonic()
                 if left <= 0:
                     break
                 self._released.wait(left)
-        still = [e.id for e in victims if not e._handler_returned.is_set()]
+        still = [e.id for e in victims if not e._handler_returned]
         return {"stopped": [e.id for e in victims], "still_running": still, "hook_errors": hook_errors}
 
     def running(self) -> List[Execution]:
@@ -191,10 +191,11 @@ class Dispatcher:
                 report[name] = {"link": "unknown", "last_error": "health query failed: %s" % error}
         return report
 
-    def status(self) -> Dict[str, Any]:
+    def status(self, exclude: Optional[int] = None) -> Dict[str, Any]:
+        """Running commands (but ``exclude``, e.g. the asking STATUS itself), occupied resources, health."""
         with self._lock:
             owners = {r: e.id for r, e in self._owners.items()}
-            running = [e.summary() for e in sorted(self._running.values(), key=lambda e: e.id)]
+            running = [e.summary() for e in sorted(self._running.values(), key=lambda e: e.id) if e.id != exclude]
         return {"uptime_s": round(time.monotonic() - self.started, 3), "running": running,
                 "resources": owners, "health": self.health()}
 
@@ -234,8 +235,6 @@ class Dispatcher:
         return execution
 
     def _run(self, execution: Execution, handler: Callable[..., Any]) -> None:
-        from .execution import CommandContext  # local: the context is an execution detail
-
         try:
             result = handler(CommandContext(execution), **dict(execution.bound.values))
             if result is not None and not isinstance(result, dict):
@@ -254,7 +253,7 @@ class Dispatcher:
             response = Response.from_error(LocemError("%s failed inside LOCEM: %s: %s"
                                                       % (execution.bound.name, type(error).__name__, error)))
         finally:
-            execution._handler_returned.set()
+            execution._handler_returned = True
         # resources first, answer second: whoever sees the answer (a service reply, the final status event, a
         # procedure queue) may send the next command on the same resource at once and must not get BUSY
         self._release(execution)
@@ -285,7 +284,7 @@ class Dispatcher:
             self._on_due(execution)
 
     def _on_due(self, execution: Execution) -> None:
-        if execution._handler_returned.is_set():
+        if execution._handler_returned:
             return
         now = time.monotonic()
         if execution.paused:  # re-armed on resume through the moved deadline

@@ -157,9 +157,20 @@ class Execution:
         self._listeners: List[Listener] = []
         self._feedback_listeners: List[Listener] = []
         self._lock = threading.RLock()
-        self._wake = threading.Event()
+        self._wake_event: Optional[threading.Event] = None  # made on first use: quick queries never sleep
         self._done = threading.Event()
-        self._handler_returned = threading.Event()
+        self._handler_returned = False  # set by the dispatcher once the handler has returned (or never started)
+
+    @property
+    def _wake(self) -> threading.Event:
+        """Set by pause, resume and every stop request; what a sleeping handler waits on."""
+        event = self._wake_event
+        if event is None:
+            with self._lock:
+                if self._wake_event is None:
+                    self._wake_event = threading.Event()
+                event = self._wake_event
+        return event
 
     # -- read side --------------------------------------------------------------------------------------
     @property
@@ -272,7 +283,8 @@ class Execution:
             else:
                 self.state = ExecState.FAILED
             self._done.set()
-        self._emit(self._event())
+        if self._listeners:  # a read-only query nobody follows has no one to tell
+            self._emit(self._event())
         return True
 
     def _event(self) -> CommandEvent:

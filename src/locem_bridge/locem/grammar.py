@@ -51,12 +51,13 @@ def parse(text: object) -> ParsedCommand:
         raise InvalidCommand(
             "command is %d characters long; at most %d are allowed" % (len(text), MAX_COMMAND_LENGTH)
         )
-    for position, char in enumerate(text):
-        if char != "\t" and not char.isprintable():
-            raise InvalidCommand(
-                "character U+%04X at position %d is not allowed; commands are printable text "
-                "(spaces and tabs separate tokens)" % (ord(char), position)
-            )
+    if not text.isprintable():  # the common case skips the per-character loop
+        for position, char in enumerate(text):
+            if char != "\t" and not char.isprintable():
+                raise InvalidCommand(
+                    "character U+%04X at position %d is not allowed; commands are printable text "
+                    "(spaces and tabs separate tokens)" % (ord(char), position)
+                )
     tokens = _tokenize(text)
     if not tokens:
         raise InvalidCommand("empty command; send a command name, e.g. HELP to list all commands")

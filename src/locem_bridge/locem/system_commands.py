@@ -85,8 +85,7 @@ class SystemCommands:
         return {"message": text, "commands": commands}
 
     def status(self, ctx: CommandContext) -> Dict[str, Any]:
-        report = self._dispatcher.status()
-        report["running"] = [r for r in report["running"] if r["id"] != ctx.id]
+        report = self._dispatcher.status(exclude=ctx.id)
         busy = ", ".join("%s: %d" % item for item in sorted(report["resources"].items())) or "all resources idle"
         report["message"] = "%d running; %s" % (len(report["running"]), busy)
         return report

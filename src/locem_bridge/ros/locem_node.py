@@ -14,6 +14,12 @@ procedure services     ``~procedure/{add,query_state,cancel,       ``locem_bridg
                        pause,resume}``                             ``locem_bridge/ProcedureControl``
 procedure publisher    ``~procedure/state`` (on change, latched)   ``locem_bridge/ProcedureState``
 =====================  ==========================================  ====================================
+
+Accounting of ``~command_in``: the subscriber keeps no bounded queue of its own (rospy's ``queue_size``
+discards all but the newest N messages of a burst without a word), so every message read is handed to the
+dispatcher in rospy's receive thread, and a sender faster than LOCEM is slowed by TCP instead of losing
+commands. Each one is answered on ``~status``: ``running`` then a final state, or ``rejected`` with its code
+(``BUSY`` past ``~max_running``). ``~status`` queues up to ``~status_queue_size`` events per subscriber.
 """
 
 import json
@@ -26,6 +32,7 @@ from actionlib_msgs.msg import GoalStatus
 
 from locem_bridge.locem.codes import Code
 from locem_bridge.locem.core import LocemCore
+from locem_bridge.locem.dispatcher import DEFAULT_MAX_RUNNING
 from locem_bridge.locem.errors import LocemError
 from locem_bridge.locem.execution import CommandEvent, Execution
 from locem_bridge.locem.procedures import ProcedureSnapshot
@@ -49,17 +56,22 @@ from locem_bridge.srv import (
 )
 
 
+STATUS_QUEUE_SIZE = 10000
+"""Default ``~status_queue_size``: events queued per ``~status`` subscriber before rospy drops the oldest."""
+
+
 class LocemNode:
     """Wraps a :class:`LocemCore`; ``start()`` advertises every interface (call after ``rospy.init_node``)."""
 
-    def __init__(self, core: LocemCore) -> None:
+    def __init__(self, core: LocemCore, status_queue_size: int = STATUS_QUEUE_SIZE) -> None:
         self.core = core
+        self._status_queue_size = int(status_queue_size)
         self._goals: Dict[str, Execution] = {}
         self._goals_lock = threading.Lock()
 
     def start(self) -> None:
         dispatcher = self.core.dispatcher
-        self._status_pub = rospy.Publisher("~status", Status, queue_size=100)
+        self._status_pub = rospy.Publisher("~status", Status, queue_size=self._status_queue_size)
         self._procedure_pub = rospy.Publisher("~procedure/state", ProcedureState, queue_size=100, latch=True)
         dispatcher.add_listener(self._publish_status)
         self.core.procedures.add_listener(self._publish_procedure)
@@ -72,7 +84,8 @@ class LocemNode:
             rospy.Service("~procedure/pause", ProcedureControl, self._procedure_op(self.core.procedures.pause)),
             rospy.Service("~procedure/resume", ProcedureControl, self._procedure_op(self.core.procedures.resume)),
         ]
-        self._subscriber = rospy.Subscriber("~command_in", CommandString, self._on_command_in, queue_size=100)
+        # queue_size=None: rospy discards nothing; the callback is quick, so TCP paces a sender (see module doc)
+        self._subscriber = rospy.Subscriber("~command_in", CommandString, self._on_command_in, queue_size=None)
         self._action = actionlib.ActionServer("~command_action", CommandAction, self._on_goal, self._on_cancel,
                                               auto_start=False)
         self._action.start()
@@ -199,10 +212,13 @@ def main() -> None:
     (dict deep-merged into the ``robot`` section, e.g. another address), ``~devices`` (comma list, default
     ``arm,compressor,base,scanner``), ``~site_config`` (site YAML for the simulated scanner), ``~initial_pose``
     ([x, y, theta] in map; default: the site's ``robot_start``, else the origin), ``~named_poses`` ({name: [x, y, theta]} for GOTO_TAG).
+    Always: ``~grace``, ``~stop_timeout`` (s), ``~max_running`` (commands running at once, default 64; one more is
+    answered BUSY), ``~status_queue_size`` (``~status`` events queued per subscriber, default 10000).
     """
     rospy.init_node("locem")
     core = LocemCore(grace=float(rospy.get_param("~grace", 1.0)),
-                     stop_timeout=float(rospy.get_param("~stop_timeout", 2.0)))
+                     stop_timeout=float(rospy.get_param("~stop_timeout", 2.0)),
+                     max_running=int(rospy.get_param("~max_running", DEFAULT_MAX_RUNNING)))
     robot = devices = None
     robot_config = str(rospy.get_param("~robot_config", "") or "")
     if robot_config:
@@ -227,7 +243,7 @@ def main() -> None:
         robot.start()
         devices = LocemDevices(robot, core.dispatcher.health,
                                localisation_topic=str(rospy.get_param("~localisation_topic", "") or ""))
-    node = LocemNode(core)
+    node = LocemNode(core, status_queue_size=int(rospy.get_param("~status_queue_size", STATUS_QUEUE_SIZE)))
     node.start()
     if devices is not None:
         devices.start()
