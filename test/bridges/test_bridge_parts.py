@@ -1,6 +1,7 @@
 """Device-free parts of the bridges: geometry, mecanum kinematics, configuration errors, the backend table, the
 declarations (units and ranges in HELP), and the frame chain map -> UR base used by the wall commands."""
 import math
+import os
 
 import numpy as np
 import pytest
@@ -53,15 +54,35 @@ def test_mecanum_inverse_and_forward_agree_and_limits_scale_the_twist():
 def test_config_errors_name_the_key_and_the_allowed_values(tmp_path):
     robot = load_robot_config(ROBOT_YAML, {"compressor": {"port": 5021}})
     assert robot["compressor"]["port"] == 5021 and robot["compressor"]["host"] == "127.0.0.1"
-    with pytest.raises(BridgeConfigError, match=r"robot.compressor.timeout = 'slow' must be a finite number"):
+    with pytest.raises(BridgeConfigError, match=r"robot.compressor.timeout: 'slow' must be a finite number"):
         need({"timeout": "slow"}, "timeout", float, where="robot.compressor")
-    with pytest.raises(BridgeConfigError, match=r"robot.arm.controller.host is missing"):
+    with pytest.raises(BridgeConfigError, match=r"robot.arm.controller.host: missing key"):
         need({"controller": {}}, "controller.host", str, where="robot.arm")
     bad = tmp_path / "bad.yaml"
     bad.write_text("robot: [1, 2]\n")
-    with pytest.raises(BridgeConfigError, match="must hold a mapping with a 'robot' section"):
+    with pytest.raises(BridgeConfigError) as exc:
         load_robot_config(str(bad))
+    assert str(exc.value) == "%s: robot: must be of type mapping, found [1, 2]" % bad
     assert deep_merge({"a": {"b": 1, "c": 2}}, {"a": {"b": 3}}) == {"a": {"b": 3, "c": 2}}
+
+
+def test_the_bridges_load_robot_files_through_the_one_validation_the_simulator_uses(tmp_path):
+    """A file (plus overrides) the bridges would misread does not load: one line naming file, key and problem."""
+    with pytest.raises(BridgeConfigError) as exc:
+        load_robot_config(ROBOT_YAML, {"arm": {"controller": {"rtde_port": 30014}}})
+    assert str(exc.value).startswith("%s: robot.arm.controller.rtde_port: 30014 cannot be used: ur_rtde always dials "
+                                     "the UR ports 29999 (dashboard), 30003 (script) and 30004 (RTDE); another robot "
+                                     "takes another address (host) (allowed: 30004)" % ROBOT_YAML)
+    with pytest.raises(BridgeConfigError, match=r"robot.arm.deadline.scale: 0.0 is out of range"):
+        load_robot_config(ROBOT_YAML, {"arm": {"deadline": {"scale": 0.0}}})
+    with pytest.raises(BridgeConfigError, match=r"robot.base.drives.wheels\[0\].nodeid: unknown key \(allowed: name, "
+                                                 r"node_id, polarity\)"):
+        load_robot_config(ROBOT_YAML, {"base": {"drives": {"wheels": [{"name": "w%d" % i, "nodeid": i, "polarity": 1}
+                                                                      for i in range(1, 5)]}}})
+    with pytest.raises(BridgeConfigError, match=r"robot.scanner.backend: 'lidar' is not allowed \(allowed: sim\)"):
+        load_robot_config(ROBOT_YAML, {"scanner": {"backend": "lidar"}})
+    robot = load_robot_config(ROBOT_YAML)
+    assert os.path.isabs(robot["base"]["eds"]) and os.path.isfile(robot["base"]["eds"])   # resolved at load
 
 
 def test_motion_deadline_settings_are_checked_and_default_to_the_documented_values():
@@ -76,9 +97,9 @@ def test_motion_deadline_settings_are_checked_and_default_to_the_documented_valu
     assert (base.deadline_scale, base.deadline_margin) == (1.0, 5.0)
     # the robot YAML: 100 ms producer heartbeat x consumer factor 2 -> a drive is silent after 200 ms
     assert base.hb_timeout == pytest.approx(0.2)
-    with pytest.raises(BridgeConfigError, match=r"robot.arm.deadline.scale = 0.0 is out of range; allowed 0.01 .. 100"):
+    with pytest.raises(BridgeConfigError, match=r"robot.arm.deadline.scale: 0.0 is out of range \(allowed: 0.01 .. 100"):
         UrRtdeArm(deep_merge(robot["arm"], {"deadline": {"scale": 0.0}}))
-    with pytest.raises(BridgeConfigError, match=r"robot.base.deadline.margin = 'long' must be a finite number"):
+    with pytest.raises(BridgeConfigError, match=r"robot.base.deadline.margin: 'long' must be a finite number"):
         Cia402Base(deep_merge(robot["base"], {"deadline": {"margin": "long"}}), eds)
 
 

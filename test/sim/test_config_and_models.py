@@ -57,13 +57,13 @@ def test_default_site_has_joints_from_panel_width_and_horizontal_joints(site_cfg
 
 
 @pytest.mark.parametrize("mutate, message", [
-    (lambda d: d["site"]["walls"][0].pop("height"), "missing key site.walls[0].height"),
-    (lambda d: d["site"]["walls"][0].update(height=-1), "site.walls[0].height = -1"),
+    (lambda d: d["site"]["walls"][0].pop("height"), "site.walls[0].height: missing key"),
+    (lambda d: d["site"]["walls"][0].update(height=-1), "site.walls[0].height: -1.0 is out of range (allowed: >= 0.1)"),
     (lambda d: d["site"]["walls"][0].update(id="1wall"), "not a valid feature id"),
     (lambda d: d["site"]["walls"][1].update(id="wall_1"), "used twice"),
-    (lambda d: d["site"]["walls"][0].update(horizontal_joints=[3.0]), "horizontal_joints[0] = 3.0"),
-    (lambda d: d["simulation"].update(time_scale="fast"), "simulation.time_scale must be a finite number"),
-    (lambda d: d["site"]["walls"][0].update(p1=[0.0, 3.6]), "apart, allowed >= 0.1 m"),
+    (lambda d: d["site"]["walls"][0].update(horizontal_joints=[3.0]), "horizontal_joints[0]: 3.0 is not a height above the skirting"),
+    (lambda d: d["simulation"].update(time_scale="fast"), "simulation.time_scale: must be a finite number, found 'fast'"),
+    (lambda d: d["site"]["walls"][0].update(p1=[0.0, 3.6]), "apart (allowed: >= 0.1 m)"),
 ])
 def test_bad_site_files_are_refused_with_a_clear_message(mutate, message, test_site_path):
     data = _raw(test_site_path)
@@ -74,11 +74,11 @@ def test_bad_site_files_are_refused_with_a_clear_message(mutate, message, test_s
 
 
 @pytest.mark.parametrize("mutate, message", [
-    (lambda d: d["robot"]["base"]["drives"]["wheels"][1].update(node_id=1), "node_id = 1 is used twice"),
+    (lambda d: d["robot"]["base"]["drives"]["wheels"][1].update(node_id=1), "wheels[1].node_id: 1 is used twice"),
     (lambda d: d["robot"]["base"]["drives"]["can"].update(interface="pcan"), "allowed: virtual, udp_multicast"),
     (lambda d: d["robot"]["base"]["drives"]["wheels"].pop(), "must list 4 wheels"),
-    (lambda d: d["robot"]["tools"]["sander"]["switch"].update(index=9), "index = 9 is out of range"),
-    (lambda d: d["robot"]["tools"].pop("spray_gun"), "missing key robot.tools.spray_gun"),
+    (lambda d: d["robot"]["tools"]["sander"]["switch"].update(index=9), "switch.index: 9 is out of range (allowed: <= 7)"),
+    (lambda d: d["robot"]["tools"].pop("spray_gun"), "robot.tools.spray_gun: missing key"),
     (lambda d: d["robot"]["tools"]["taping_tool"].update(tcp=[0, 0, 0.2]), "list of 6 finite numbers"),
 ])
 def test_bad_robot_files_are_refused_with_a_clear_message(mutate, message):
@@ -86,8 +86,82 @@ def test_bad_robot_files_are_refused_with_a_clear_message(mutate, message):
     data = _raw(default_robot_path())
     mutate(data)
     with pytest.raises(SimConfigError) as exc:
-        validate_robot(data)
+        validate_robot(data, os.path.dirname(default_robot_path()))
     assert message in str(exc.value)
+
+
+def _write(tmp_path, name, data):
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
+def _robot_copy(tmp_path, mutate):
+    """The shipped robot file, changed by ``mutate``, written next to a copy of its EDS (relative paths)."""
+    from locem_bridge.sim.config import default_robot_path
+    data = _raw(default_robot_path())
+    mutate(data)
+    eds = os.path.join(os.path.dirname(default_robot_path()), "cia402_drive.eds")
+    (tmp_path / "cia402_drive.eds").write_bytes(open(eds, "rb").read())
+    return _write(tmp_path, "robot.yaml", data)
+
+
+def test_a_bad_site_file_is_one_line_naming_file_key_problem_and_allowed_values(tmp_path, test_site_path):
+    data = _raw(test_site_path)
+    data["site"]["walls"][0]["material"] = "brick"
+    path = _write(tmp_path, "site.yaml", data)
+    with pytest.raises(SimConfigError) as exc:
+        load_site(path)
+    assert str(exc.value) == ("%s: site.walls[0].material: 'brick' is not allowed (allowed: plasterboard, concrete)"
+                              % path)
+    assert (exc.value.file, exc.value.key) == (path, "site.walls[0].material")
+
+
+@pytest.mark.parametrize("mutate, key", [
+    (lambda d: d["simulation"].update(outcomes={"grid": 0.05}), "simulation.outcomes"),
+    (lambda d: d["site"]["walls"][0].update(panel_widht=0.6), "site.walls[0].panel_widht"),
+    (lambda d: d.update(robot={}), "robot"),
+])
+def test_unknown_site_keys_are_refused_by_name(tmp_path, test_site_path, mutate, key):
+    data = _raw(test_site_path)
+    mutate(data)
+    path = _write(tmp_path, "site.yaml", data)
+    with pytest.raises(SimConfigError) as exc:
+        load_site(path)
+    assert str(exc.value).startswith("%s: %s: unknown key (allowed: " % (path, key))
+
+
+def test_a_misspelt_device_section_is_refused_instead_of_leaving_the_device_out(tmp_path):
+    def misspell(d):
+        d["robot"]["compresor"] = d["robot"].pop("compressor")
+    path = _robot_copy(tmp_path, misspell)
+    with pytest.raises(SimConfigError) as exc:
+        load_robot(path)
+    assert str(exc.value) == ("%s: robot.compresor: unknown key (allowed: arm, base, compressor, name, namespace, "
+                              "pedestal, scanner, tools)" % path)
+
+
+def test_relative_paths_resolve_against_the_robot_file_and_a_missing_one_is_named(tmp_path):
+    path = _robot_copy(tmp_path, lambda d: None)
+    assert load_robot(path)["robot"]["base"]["eds"] == str(tmp_path / "cia402_drive.eds")
+    path = _robot_copy(tmp_path, lambda d: d["robot"]["base"].update(eds="drives/x.eds"))
+    with pytest.raises(SimConfigError) as exc:
+        load_robot(path)
+    assert str(exc.value) == ("%s: robot.base.eds: %s does not exist (relative paths are read from the robot "
+                              "file's folder)" % (path, tmp_path / "drives" / "x.eds"))
+
+
+@pytest.mark.parametrize("key, port", [("rtde_port", 30014), ("dashboard_port", 29998), ("script_port", 30013)])
+def test_controller_ports_ur_rtde_cannot_dial_are_refused(tmp_path, key, port):
+    path = _robot_copy(tmp_path, lambda d: d["robot"]["arm"]["controller"].update({key: port}))
+    with pytest.raises(SimConfigError) as exc:
+        load_robot(path)
+    line = str(exc.value)
+    assert line.startswith("%s: robot.arm.controller.%s: %d cannot be used: ur_rtde always dials" % (path, key, port))
+    assert "another robot takes another address" in line and "\n" not in line
+    # the same refusal for a port given as an override (a launch's robot_overrides)
+    with pytest.raises(SimConfigError, match="ur_rtde always dials"):
+        load_robot(_robot_copy(tmp_path, lambda d: None), {"arm": {"controller": {key: port}}})
 
 
 def test_command_line_refuses_a_bad_site_file_and_exits_2(tmp_path):
@@ -97,7 +171,7 @@ def test_command_line_refuses_a_bad_site_file_and_exits_2(tmp_path):
     res = subprocess.run([sys.executable, "-m", "locem_bridge.sim", "--site", str(bad), "--no-ur"],
                          capture_output=True, text=True, timeout=60, env=env)
     assert res.returncode == 2
-    assert "site.walls must list at least one wall" in res.stderr
+    assert "%s: site.walls: must list at least one wall" % bad in res.stderr
 
 
 def test_clock_scales_sim_time_and_keeps_it_continuous_when_the_scale_changes():

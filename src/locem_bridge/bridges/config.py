@@ -1,12 +1,12 @@
 """The robot YAML as the bridges read it: one file for the real robot and the simulated worksite.
 
 ``load_robot_config(path, overrides)`` returns the ``robot`` section (a plain dict) with ``overrides`` deep-merged
-into it (e.g. a test's own loopback address: ``{"arm": {"controller": {"host": "127.70.0.1"}}}``) and the file's
-folder remembered under ``_dir`` (relative paths such as the drives' EDS resolve against it). :func:`need` reads
+into it (e.g. a test's own loopback address: ``{"arm": {"controller": {"host": "127.70.0.1"}}}``), validated by the
+simulator's robot-file validation (one schema for both), and the file's folder remembered under ``_dir``
+(relative paths such as the drives' EDS are resolved against it and checked at load). :func:`need` reads
 one key with a clear error naming the key path, what was found and what is allowed.
 """
 
-import copy
 import math
 import os
 from typing import Any, Dict, Mapping, Optional, Sequence
@@ -14,35 +14,27 @@ from typing import Any, Dict, Mapping, Optional, Sequence
 import yaml
 
 from .errors import BridgeConfigError
+from locem_bridge.sim.config import deep_merge  # noqa: F401 (one definition, re-exported for the bridges)
 
 _MISSING = object()
 
 
-def deep_merge(base: Dict[str, Any], extra: Mapping[str, Any]) -> Dict[str, Any]:
-    """``base`` updated recursively with ``extra`` (a new dict; dicts merge, everything else replaces)."""
-    out = copy.deepcopy(base)
-    for key, value in extra.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), dict):
-            out[key] = deep_merge(out[key], value)
-        else:
-            out[key] = copy.deepcopy(value)
-    return out
-
-
 def load_robot_config(path: str, overrides: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
-    """The ``robot`` section of the YAML file at ``path``, with ``overrides`` merged in."""
+    """The ``robot`` section of the YAML file at ``path``, with ``overrides`` merged in, validated.
+
+    The file and its overrides go through the one robot-file validation the simulator uses too
+    (:func:`locem_bridge.sim.config.load_robot`): unknown keys, missing keys, ranges, relative paths (resolved
+    against the file and checked) and the controller ports ur_rtde can dial. A problem raises
+    :class:`BridgeConfigError`, printed as one line ``FILE: KEY: PROBLEM (allowed: ...)``.
+    """
+    from locem_bridge.sim.config import load_robot
+    from locem_bridge.sim.errors import SimConfigError
+
     try:
-        with open(path, encoding="utf-8") as handle:
-            data = yaml.safe_load(handle)
-    except OSError as error:
-        raise BridgeConfigError("robot config %s cannot be read: %s" % (path, error))
-    except yaml.YAMLError as error:
-        raise BridgeConfigError("robot config %s is not valid YAML: %s" % (path, error))
-    if not isinstance(data, dict) or not isinstance(data.get("robot"), dict):
-        raise BridgeConfigError("robot config %s must hold a mapping with a 'robot' section" % path)
+        data = load_robot(path, dict(overrides) if overrides else None)
+    except SimConfigError as error:
+        raise BridgeConfigError(error.problem, file=error.file, key=error.key, allowed=error.allowed or None)
     robot = data["robot"]
-    if overrides:
-        robot = deep_merge(robot, overrides)
     robot["_dir"] = os.path.dirname(os.path.abspath(path))
     return robot
 
@@ -57,19 +49,19 @@ def need(section: Mapping[str, Any], dotted: str, kind: Any = None, default: Any
         if not isinstance(node, Mapping) or part not in node:
             if default is not _MISSING:
                 return default
-            raise BridgeConfigError("robot config: %s is missing" % path)
+            raise BridgeConfigError("missing key", key=path)
         node = node[part]
     if kind is float:
         if isinstance(node, bool) or not isinstance(node, (int, float)) or not math.isfinite(float(node)):
-            raise BridgeConfigError("robot config: %s = %r must be a finite number" % (path, node))
+            raise BridgeConfigError("%r must be a finite number" % (node,), key=path)
         node = float(node)
     elif kind is int:
         if isinstance(node, bool) or not isinstance(node, int):
-            raise BridgeConfigError("robot config: %s = %r must be an integer" % (path, node))
+            raise BridgeConfigError("%r must be an integer" % (node,), key=path)
     elif kind is not None and not isinstance(node, kind):
-        raise BridgeConfigError("robot config: %s = %r must be a %s" % (path, node, getattr(kind, "__name__", kind)))
+        raise BridgeConfigError("%r must be a %s" % (node, getattr(kind, "__name__", kind)), key=path)
     if lo is not None and node < lo or hi is not None and node > hi:
-        raise BridgeConfigError("robot config: %s = %r is out of range; allowed %s .. %s" % (path, node, lo, hi))
+        raise BridgeConfigError("%r is out of range" % (node,), key=path, allowed="%s .. %s" % (lo, hi))
     return node
 
 
@@ -78,7 +70,7 @@ def vector(section: Mapping[str, Any], dotted: str, n: int, where: str = "robot"
     value = need(section, dotted, where=where)
     if not isinstance(value, Sequence) or len(value) != n or not all(
             isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
-        raise BridgeConfigError("robot config: %s.%s = %r must be a list of %d finite numbers" % (where, dotted, value, n))
+        raise BridgeConfigError("%r must be a list of %d finite numbers" % (value, n), key="%s.%s" % (where, dotted))
     return [float(v) for v in value]
 
 

@@ -19,6 +19,7 @@ class                      LOCEM code          raised when
 
 from typing import Optional
 
+from locem_bridge.config_errors import Allowed, ConfigError, allowed_text
 from locem_bridge.locem.codes import Code
 from locem_bridge.locem.errors import LocemError
 
@@ -49,8 +50,21 @@ class NotConnected(BridgeError):
     code = Code.NOT_READY
 
 
-class BridgeConfigError(BridgeError):
+class BridgeConfigError(BridgeError, ConfigError):
+    """Prints as one line ``FILE: KEY: PROBLEM (allowed: ...)`` (:class:`~locem_bridge.config_errors.ConfigError`)."""
+
     code = Code.NOT_READY
+
+    def __init__(self, problem: str, file: str = "", key: str = "", allowed: Allowed = None,
+                 device: str = "") -> None:
+        BridgeError.__init__(self, problem, device=device)
+        self.problem, self.file, self.key, self.allowed = problem, file, key, allowed_text(allowed)
+        self.message = self.line()
+
+    def in_file(self, path: str) -> "BridgeConfigError":
+        ConfigError.in_file(self, path)
+        self.message = self.line()
+        return self
 
 
 class BadRequest(BridgeError):

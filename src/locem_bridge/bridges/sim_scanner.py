@@ -12,6 +12,7 @@ class SiteScanner(Scanner):
 
     def __init__(self, scanner_cfg: Mapping[str, Any], site: Any) -> None:
         """``site``: the site YAML path, or its already validated contents (``locem_bridge.sim.config``)."""
+        from locem_bridge.config_errors import ConfigError
         from locem_bridge.sim.config import load_site
         from locem_bridge.sim.perception import WallScanner
         from locem_bridge.sim.site import Site
@@ -20,8 +21,11 @@ class SiteScanner(Scanner):
             raise BridgeConfigError("the sim scanner needs the site configuration (~site_config)")
         try:
             site_cfg = load_site(site) if isinstance(site, str) else site
+        except ConfigError as error:          # one line: FILE: KEY: PROBLEM (allowed: ...)
+            raise BridgeConfigError(error.problem, file=error.file or str(site), key=error.key,
+                                    allowed=error.allowed or None)
         except Exception as error:
-            raise BridgeConfigError("site configuration %s: %s" % (site, error))
+            raise BridgeConfigError("cannot be loaded: %s" % error, file=str(site))
         sim = dict(site_cfg.get("simulation", {}))
         noise = float(dict(sim.get("perception", {})).get("position_noise", 0.0))
         self._scanner = WallScanner(Site(dict(site_cfg)), dict(scanner_cfg), noise, int(sim.get("seed", 1)))

@@ -8,10 +8,12 @@ found and what is allowed. Nothing here touches PyBullet or sockets.
 """
 from __future__ import annotations
 
+import copy
 import math
 import os
 import re
-from typing import Any, Dict, List, Optional, Sequence
+import sys
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import yaml
 
@@ -20,6 +22,61 @@ from .errors import SimConfigError
 FEATURE_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 TOOL_NAMES = ("taping_tool", "spray_gun", "sander")
 CAN_INTERFACES = ("virtual", "udp_multicast", "socketcan")
+ARM_BACKENDS = ("ur_rtde",)
+# The ports ur_rtde dials: its RTDEControlInterface / RTDEReceiveInterface / RTDEIOInterface take a host and no
+# port, so a UR controller on other ports cannot be reached by the arm bridge (another robot takes another
+# address). The UR stand-in itself takes any ports (Worksite(ur_ports=...)) for its own tests.
+UR_RTDE_PORTS = {"dashboard_port": 29999, "script_port": 30003, "rtde_port": 30004}
+
+# Every key a site or robot file may hold, per mapping (lists' items under their own name). A key not listed is
+# refused with its name: a misspelt section would otherwise be ignored and its device left out or on defaults.
+# A new key a loader reads is added here too.
+SITE_KEYS: Dict[str, Sequence[str]] = {
+    "": ("site", "simulation"),
+    "site": ("name", "room", "walls", "robot_start"),
+    "site.room": ("inside", "floor_size"),
+    "wall": ("id", "material", "p0", "p1", "height", "thickness", "panel_width", "joint_width", "skirting",
+             "horizontal_joints", "areas"),
+    "area": ("id", "s", "t"),
+    "simulation": ("time_scale", "world_rate", "seed", "gui", "perception", "outcome"),
+    "simulation.perception": ("position_noise",),
+    "simulation.outcome": ("grid", "tape_lateral_tolerance", "contact_tolerance", "spray_rate",
+                           "spray_target_thickness"),
+}
+ROBOT_KEYS: Dict[str, Sequence[str]] = {
+    "": ("robot",),
+    "robot": ("name", "namespace", "base", "pedestal", "arm", "tools", "compressor", "scanner"),
+    "robot.base": ("kind", "frame", "control_rate", "localisation_window", "named_poses", "chassis", "wheel",
+                   "limits", "drives", "eds", "deadline"),
+    "robot.base.chassis": ("length", "width", "height", "clearance", "mass"),
+    "robot.base.wheel": ("radius", "width", "half_wheelbase", "half_track"),
+    "robot.base.limits": ("max_wheel_speed", "max_linear_velocity", "max_angular_velocity", "linear_acceleration",
+                          "angular_acceleration"),
+    "robot.base.drives": ("profile", "mode", "can", "master_node_id", "heartbeat_ms", "consumer_timeout_factor",
+                          "tpdo_period_ms", "velocity_units_per_rad_s", "counts_per_rad", "profile_acceleration",
+                          "stop_deceleration", "wheels"),
+    "robot.base.drives.can": ("interface", "channel", "port", "bitrate"),
+    "wheel": ("name", "node_id", "polarity"),
+    "deadline": ("scale", "margin"),
+    "robot.pedestal": ("height", "size", "xy"),
+    "robot.arm": ("backend", "model", "description", "mount", "joint_names", "controller", "named_poses",
+                  "home_via", "wall_ready_flange", "deadline"),
+    "robot.arm.description": ("package", "urdf"),
+    "robot.arm.mount": ("xyz", "rpy"),
+    "robot.arm.controller": ("host", "dashboard_port", "script_port", "rtde_port", "rtde_frequency"),
+    "robot.tools": TOOL_NAMES,
+    "tool": ("tcp", "mass", "cog", "switch", "body"),
+    "robot.tools.taping_tool": ("tape_width",),
+    "robot.tools.spray_gun": ("spray_half_angle", "standoff"),
+    "robot.tools.sander": ("pad_radius",),
+    "switch": ("source", "index"),
+    "body": ("radius", "length"),
+    "robot.compressor": ("protocol", "host", "port", "device_id", "timeout", "pressure_range", "max_setpoint", "sim"),
+    "robot.compressor.sim": ("time_constant", "max_pressure", "valve_drop", "idle_current", "current_per_bar",
+                             "overpressure_limit"),
+    "robot.scanner": ("backend", "mount", "range", "fov"),
+    "robot.scanner.mount": ("xyz", "yaw"),
+}
 
 
 def repo_root() -> str:
@@ -40,15 +97,32 @@ def default_robot_path() -> str:
 
 def _load_yaml(path: str) -> Dict[str, Any]:
     if not os.path.isfile(path):
-        raise SimConfigError("configuration file %r does not exist" % path)
-    with open(path, "r") as handle:
-        try:
+        raise SimConfigError("file does not exist" if not os.path.exists(path) else "is not a file", file=path)
+    try:
+        with open(path, "r", encoding="utf-8") as handle:
             data = yaml.safe_load(handle)
-        except yaml.YAMLError as exc:
-            raise SimConfigError("configuration file %r is not valid YAML: %s" % (path, exc))
+    except OSError as exc:
+        raise SimConfigError("cannot be read: %s" % exc.strerror, file=path)
+    except UnicodeDecodeError as exc:
+        raise SimConfigError("is not UTF-8 text: %s" % exc.reason, file=path)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = "line %d" % (mark.line + 1) if mark is not None else ""
+        raise SimConfigError("not valid YAML: %s" % (getattr(exc, "problem", None) or exc), file=path, key=where)
     if not isinstance(data, dict):
-        raise SimConfigError("configuration file %r must hold a mapping at the top level" % path)
+        raise SimConfigError("must hold a mapping at the top level, found %s" % type(data).__name__, file=path)
     return data
+
+
+def only(d: Any, path: str, keys: Sequence[str]) -> None:
+    """Refuse a key of mapping ``d`` (at ``path``) that is not in ``keys``: a misspelt section must not be
+    silently ignored (the device it configures would start with defaults or not at all)."""
+    if not isinstance(d, dict):
+        return
+    for key in d:
+        if key not in keys and not (isinstance(key, str) and key.startswith("_")):
+            raise SimConfigError("unknown key", key="%s.%s" % (path, key) if path else str(key),
+                                 allowed=sorted(keys))
 
 
 def get(d: Dict[str, Any], key: str, path: str, kind: Any = None, default: Any = ...,
@@ -56,28 +130,33 @@ def get(d: Dict[str, Any], key: str, path: str, kind: Any = None, default: Any =
     """Fetch ``d[key]`` checking type, range and choices; ``path`` names the parent for messages."""
     full = "%s.%s" % (path, key) if path else key
     if not isinstance(d, dict):
-        raise SimConfigError("%s must be a mapping, found %r" % (path, d))
+        raise SimConfigError("must be a mapping, found %r" % (d,), key=path or "(top level)")
     if key not in d:
         if default is ...:
-            raise SimConfigError("missing key %s" % full)
+            raise SimConfigError("missing key", key=full, allowed=choices)
         return default
     value = d[key]
     if kind is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise SimConfigError("%s must be a finite number, found %r" % (full, value))
+            raise SimConfigError("must be a finite number, found %r" % (value,), key=full)
         value = float(value)
     elif kind is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise SimConfigError("%s must be an integer, found %r" % (full, value))
+            raise SimConfigError("must be an integer, found %r" % (value,), key=full)
     elif kind is not None and not isinstance(value, kind):
-        raise SimConfigError("%s must be of type %s, found %r" % (full, getattr(kind, "__name__", kind), value))
+        raise SimConfigError("must be of type %s, found %r" % (_kind_name(kind), value), key=full)
     if lo is not None and value < lo:
-        raise SimConfigError("%s = %r is out of range, allowed >= %r" % (full, value, lo))
+        raise SimConfigError("%r is out of range" % (value,), key=full, allowed=">= %r" % (lo,))
     if hi is not None and value > hi:
-        raise SimConfigError("%s = %r is out of range, allowed <= %r" % (full, value, hi))
+        raise SimConfigError("%r is out of range" % (value,), key=full, allowed="<= %r" % (hi,))
     if choices is not None and value not in choices:
-        raise SimConfigError("%s = %r is not allowed, allowed: %s" % (full, value, ", ".join(map(str, choices))))
+        raise SimConfigError("%r is not allowed" % (value,), key=full, allowed=choices)
     return value
+
+
+def _kind_name(kind: Any) -> str:
+    names = {dict: "mapping", list: "list", str: "string", bool: "boolean (true or false)"}
+    return names.get(kind, getattr(kind, "__name__", str(kind)))
 
 
 def vec(d: Dict[str, Any], key: str, path: str, n: int, default: Any = ...) -> List[float]:
@@ -86,38 +165,44 @@ def vec(d: Dict[str, Any], key: str, path: str, n: int, default: Any = ...) -> L
     value = get(d, key, path, default=default)
     if not isinstance(value, (list, tuple)) or len(value) != n or not all(
             isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in value):
-        raise SimConfigError("%s must be a list of %d finite numbers, found %r" % (full, n, value))
+        raise SimConfigError("must be a list of %d finite numbers, found %r" % (n, value), key=full)
     return [float(x) for x in value]
 
 
 def _feature_id(value: Any, full: str) -> str:
     if not isinstance(value, str) or not FEATURE_ID.match(value):
-        raise SimConfigError("%s = %r is not a valid feature id, allowed: [A-Za-z][A-Za-z0-9_]*" % (full, value))
+        raise SimConfigError("%r is not a valid feature id" % (value,), key=full, allowed="[A-Za-z][A-Za-z0-9_]*")
     return value
 
 
 def validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
     """Check a site document (already parsed) and fill defaults; returns the normalised dictionary."""
+    only(data, "", SITE_KEYS[""])
     site = get(data, "site", "", dict)
+    only(site, "site", SITE_KEYS["site"])
     get(site, "name", "site", str)
     room = get(site, "room", "site", dict, default={})
+    only(room, "site.room", SITE_KEYS["site.room"])
     walls = get(site, "walls", "site", list)
     if not walls:
-        raise SimConfigError("site.walls must list at least one wall")
+        raise SimConfigError("must list at least one wall", key="site.walls")
     ids = set()
     for i, wall in enumerate(walls):
         path = "site.walls[%d]" % i
+        if not isinstance(wall, dict):
+            raise SimConfigError("must be a mapping, found %r" % (wall,), key=path)
+        only(wall, path, SITE_KEYS["wall"])
         wid = _feature_id(get(wall, "id", path), path + ".id")
         if wid in ids:
-            raise SimConfigError("%s.id = %r is used twice; wall ids must be unique" % (path, wid))
+            raise SimConfigError("%r is used twice; wall ids must be unique" % (wid,), key=path + ".id")
         ids.add(wid)
         wall["material"] = get(wall, "material", path, str, default="plasterboard",
                                choices=("plasterboard", "concrete"))
         p0 = vec(wall, "p0", path, 2)
         p1 = vec(wall, "p1", path, 2)
         if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < 0.1:
-            raise SimConfigError("%s: p0 and p1 are %.3f m apart, allowed >= 0.1 m" % (
-                path, math.hypot(p1[0] - p0[0], p1[1] - p0[1])))
+            raise SimConfigError("p0 and p1 are %.3f m apart" % math.hypot(p1[0] - p0[0], p1[1] - p0[1]),
+                                 key=path, allowed=">= 0.1 m")
         wall["p0"], wall["p1"] = p0, p1
         wall["height"] = get(wall, "height", path, float, lo=0.1, hi=20.0)
         wall["thickness"] = get(wall, "thickness", path, float, default=0.0125, lo=0.001, hi=1.0)
@@ -128,13 +213,16 @@ def validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
             hj = get(wall, "horizontal_joints", path, list, default=[])
             for k, h in enumerate(hj):
                 if isinstance(h, bool) or not isinstance(h, (int, float)) or not wall["skirting"] < h < wall["height"]:
-                    raise SimConfigError("%s.horizontal_joints[%d] = %r must be a height in (%g, %g) (above the "
-                                         "skirting, below the wall top)" % (path, k, h, wall["skirting"],
-                                                                            wall["height"]))
+                    raise SimConfigError("%r is not a height above the skirting and below the wall top" % (h,),
+                                         key="%s.horizontal_joints[%d]" % (path, k),
+                                         allowed="(%g, %g)" % (wall["skirting"], wall["height"]))
             wall["horizontal_joints"] = [float(h) for h in hj]
             areas = get(wall, "areas", path, list, default=[])
             for k, area in enumerate(areas):
                 apath = "%s.areas[%d]" % (path, k)
+                if not isinstance(area, dict):
+                    raise SimConfigError("must be a mapping, found %r" % (area,), key=apath)
+                only(area, apath, SITE_KEYS["area"])
                 area["id"] = _feature_id(get(area, "id", apath), apath + ".id")
                 area["s"] = vec(area, "s", apath, 2)
                 area["t"] = vec(area, "t", apath, 2)
@@ -144,15 +232,18 @@ def validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
     site["room"] = room
     site["robot_start"] = vec(site, "robot_start", "site", 3, default=[0.0, 0.0, 0.0])
     sim = get(data, "simulation", "", dict, default={})
+    only(sim, "simulation", SITE_KEYS["simulation"])
     sim["time_scale"] = get(sim, "time_scale", "simulation", float, default=1.0, lo=0.01, hi=100.0)
     sim["world_rate"] = get(sim, "world_rate", "simulation", float, default=50.0, lo=1.0, hi=1000.0)
     sim["seed"] = get(sim, "seed", "simulation", int, default=1)
     sim["gui"] = get(sim, "gui", "simulation", bool, default=False)
     perc = get(sim, "perception", "simulation", dict, default={})
+    only(perc, "simulation.perception", SITE_KEYS["simulation.perception"])
     perc["position_noise"] = get(perc, "position_noise", "simulation.perception", float, default=0.0, lo=0.0, hi=1.0)
     sim["perception"] = perc
     out = get(sim, "outcome", "simulation", dict, default={})
     p = "simulation.outcome"
+    only(out, p, SITE_KEYS[p])
     out["grid"] = get(out, "grid", p, float, default=0.02, lo=0.002, hi=0.5)
     out["tape_lateral_tolerance"] = get(out, "tape_lateral_tolerance", p, float, default=0.015, lo=0.0, hi=0.5)
     out["contact_tolerance"] = get(out, "contact_tolerance", p, float, default=0.01, lo=0.0, hi=0.5)
@@ -163,25 +254,78 @@ def validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
     return data
 
 
-def validate_robot(data: Dict[str, Any]) -> Dict[str, Any]:
-    """Check a robot document (already parsed); returns the normalised dictionary."""
-    robot = get(data, "robot", "", dict)
+def _mapping(parent: Dict[str, Any], key: str, path: str, keys: Sequence[str], default: Any = ...) -> Dict[str, Any]:
+    """``parent[key]`` as a mapping whose keys are all in ``keys``."""
+    value = get(parent, key, path, dict, default=default)
+    only(value, "%s.%s" % (path, key) if path else key, keys)
+    return value
+
+
+def _item(value: Any, path: str, keys: Sequence[str]) -> Dict[str, Any]:
+    if not isinstance(value, dict):
+        raise SimConfigError("must be a mapping, found %r" % (value,), key=path)
+    only(value, path, keys)
+    return value
+
+
+def _backend(section: Dict[str, Any], key: str, path: str, kind: str, default: str) -> str:
+    from ..bridges.backends import BACKENDS      # the bridges' name -> backend table (imports no device library)
+    return get(section, key, path, str, default=default, choices=sorted(BACKENDS[kind]))
+
+
+def _deadline(section: Dict[str, Any], path: str) -> None:
+    """``deadline: {scale, margin}`` of a motion device (the bridges' defaults apply to what is left out)."""
+    dl = _mapping(section, "deadline", path, ROBOT_KEYS["deadline"], default={})
+    if "scale" in dl:
+        dl["scale"] = get(dl, "scale", path + ".deadline", float, lo=0.01, hi=100.0)
+    if "margin" in dl:
+        dl["margin"] = get(dl, "margin", path + ".deadline", float, lo=0.0, hi=600.0)
+
+
+def _existing_file(rel: Any, key: str, base_dir: Optional[str]) -> str:
+    """``rel`` resolved against ``base_dir`` (the robot file's folder) and checked to be a file."""
+    if not isinstance(rel, str) or not rel:
+        raise SimConfigError("must be a file path, found %r" % (rel,), key=key)
+    path = rel if os.path.isabs(rel) else os.path.join(base_dir or os.getcwd(), rel)
+    if not os.path.isfile(path):
+        raise SimConfigError("%s does not exist%s" % (path, "" if os.path.isabs(rel) else
+                                                        " (relative paths are read from the robot file's folder)"),
+                             key=key)
+    return os.path.abspath(path)
+
+
+def validate_robot(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str, Any]:
+    """Check a robot document (already parsed); returns the normalised dictionary.
+
+    ``base_dir`` is the robot file's folder: relative paths (``robot.base.eds``, ``robot.arm.description.urdf``
+    without a ``package``) are resolved against it, checked to exist and stored absolute. The bridges and the
+    simulator both load robot files through this one validation (:func:`load_robot`,
+    :func:`locem_bridge.bridges.config.load_robot_config`)."""
+    K = ROBOT_KEYS
+    only(data, "", K[""])
+    robot = _mapping(data, "robot", "", K["robot"])
     get(robot, "name", "robot", str)
-    base = get(robot, "base", "robot", dict)
+    get(robot, "namespace", "robot", str, default="")
+    base = _mapping(robot, "base", "robot", K["robot.base"])
     get(base, "kind", "robot.base", str, choices=("mecanum",))
-    ch = get(base, "chassis", "robot.base", dict)
+    ch = _mapping(base, "chassis", "robot.base", K["robot.base.chassis"])
     for key in ("length", "width", "height"):
         ch[key] = get(ch, key, "robot.base.chassis", float, lo=0.05, hi=5.0)
     ch["clearance"] = get(ch, "clearance", "robot.base.chassis", float, default=0.05, lo=0.0, hi=1.0)
-    wheel = get(base, "wheel", "robot.base", dict)
+    wheel = _mapping(base, "wheel", "robot.base", K["robot.base.wheel"])
     for key in ("radius", "width", "half_wheelbase", "half_track"):
         wheel[key] = get(wheel, key, "robot.base.wheel", float, lo=0.005, hi=5.0)
-    lim = get(base, "limits", "robot.base", dict)
+    lim = _mapping(base, "limits", "robot.base", K["robot.base.limits"])
     for key in ("max_wheel_speed", "max_linear_velocity", "max_angular_velocity"):
         lim[key] = get(lim, key, "robot.base.limits", float, lo=0.0)
-    drv = get(base, "drives", "robot.base", dict)
+    poses = get(base, "named_poses", "robot.base", dict, default={})
+    for name in list(poses):
+        poses[name] = vec(poses, name, "robot.base.named_poses", 3)
+    _deadline(base, "robot.base")
+    drv = _mapping(base, "drives", "robot.base", K["robot.base.drives"])
     p = "robot.base.drives"
-    can = get(drv, "can", p, dict)
+    _backend(drv, "profile", p, "base", "cia402")
+    can = _mapping(drv, "can", p, K["robot.base.drives.can"])
     can["interface"] = get(can, "interface", p + ".can", str, choices=CAN_INTERFACES)
     can["channel"] = str(get(can, "channel", p + ".can"))
     can["bitrate"] = get(can, "bitrate", p + ".can", int, default=1000000, lo=10000, hi=1000000)
@@ -195,45 +339,67 @@ def validate_robot(data: Dict[str, Any]) -> Dict[str, Any]:
     drv["profile_acceleration"] = get(drv, "profile_acceleration", p, float, lo=1e-3)
     wheels = get(drv, "wheels", p, list)
     if len(wheels) != 4:
-        raise SimConfigError("%s.wheels must list 4 wheels (front_left, front_right, rear_left, rear_right),"
-                             " found %d" % (p, len(wheels)))
+        raise SimConfigError("must list 4 wheels, found %d" % len(wheels), key=p + ".wheels",
+                             allowed="front_left, front_right, rear_left, rear_right")
     seen = set()
     for i, w in enumerate(wheels):
         wp = "%s.wheels[%d]" % (p, i)
+        _item(w, wp, K["wheel"])
         get(w, "name", wp, str)
         nid = get(w, "node_id", wp, int, lo=1, hi=127)
         if nid in seen:
-            raise SimConfigError("%s.node_id = %d is used twice; CAN node ids must be unique" % (wp, nid))
+            raise SimConfigError("%d is used twice; CAN node ids must be unique" % nid, key=wp + ".node_id")
         seen.add(nid)
         get(w, "polarity", wp, int, choices=(1, -1))
-    ped = get(robot, "pedestal", "robot", dict)
+    base["eds"] = _existing_file(get(base, "eds", "robot.base"), "robot.base.eds", base_dir)
+    ped = _mapping(robot, "pedestal", "robot", K["robot.pedestal"])
     ped["height"] = get(ped, "height", "robot.pedestal", float, lo=0.0, hi=3.0)
     ped["size"] = vec(ped, "size", "robot.pedestal", 2)
     ped["xy"] = vec(ped, "xy", "robot.pedestal", 2)
-    arm = get(robot, "arm", "robot", dict)
-    mount = get(arm, "mount", "robot.arm", dict)
+    arm = _mapping(robot, "arm", "robot", K["robot.arm"])
+    backend = _backend(arm, "backend", "robot.arm", "arm", "ur_rtde")
+    desc = _mapping(arm, "description", "robot.arm", K["robot.arm.description"], default={})
+    if "urdf" in desc:
+        get(desc, "urdf", "robot.arm.description", str)
+        if not desc.get("package") and not os.path.isabs(desc["urdf"]):
+            desc["urdf"] = _existing_file(desc["urdf"], "robot.arm.description.urdf", base_dir)
+        resolve_arm_urdf(arm)
+    mount = _mapping(arm, "mount", "robot.arm", K["robot.arm.mount"])
     mount["xyz"] = vec(mount, "xyz", "robot.arm.mount", 3)
     mount["rpy"] = vec(mount, "rpy", "robot.arm.mount", 3)
     names = get(arm, "joint_names", "robot.arm", list)
     if len(names) != 6:
-        raise SimConfigError("robot.arm.joint_names must list 6 joints, found %d" % len(names))
+        raise SimConfigError("must list 6 joints, found %d" % len(names), key="robot.arm.joint_names")
     poses = get(arm, "named_poses", "robot.arm", dict, default={})
     for name in list(poses):
         poses[name] = vec(poses, name, "robot.arm.named_poses", 6)
-    ctl = get(arm, "controller", "robot.arm", dict)
-    get(ctl, "host", "robot.arm.controller", str)
-    tools = get(robot, "tools", "robot", dict)
+    if arm.get("home_via") is not None and get(arm, "home_via", "robot.arm", str) not in poses:
+        raise SimConfigError("%r is not a named pose of the arm" % arm["home_via"], key="robot.arm.home_via",
+                             allowed=sorted(poses))
+    if "wall_ready_flange" in arm:
+        arm["wall_ready_flange"] = vec(arm, "wall_ready_flange", "robot.arm", 3)
+    _deadline(arm, "robot.arm")
+    ctl = _mapping(arm, "controller", "robot.arm", K["robot.arm.controller"])
+    cp = "robot.arm.controller"
+    get(ctl, "host", cp, str)
+    for key, port in sorted(UR_RTDE_PORTS.items()):
+        ctl[key] = get(ctl, key, cp, int, default=port, lo=1, hi=65535)
+        if backend == "ur_rtde" and ctl[key] != port:
+            raise SimConfigError("%d cannot be used: ur_rtde always dials the UR ports 29999 (dashboard), 30003 "
+                                 "(script) and 30004 (RTDE); another robot takes another address (host)"
+                                 % ctl[key], key="%s.%s" % (cp, key), allowed=port)
+    tools = _mapping(robot, "tools", "robot", K["robot.tools"])
     for name in TOOL_NAMES:
         tp = "robot.tools.%s" % name
-        tool = get(tools, name, "robot.tools", dict)
+        tool = _mapping(tools, name, "robot.tools", tuple(K["tool"]) + tuple(K[tp]))
         tool["tcp"] = vec(tool, "tcp", tp, 6)
         tool["mass"] = get(tool, "mass", tp, float, lo=0.0, hi=12.5)
         tool["cog"] = vec(tool, "cog", tp, 3, default=[0.0, 0.0, 0.0])
-        sw = get(tool, "switch", tp, dict)
+        sw = _mapping(tool, "switch", tp, K["switch"])
         src = get(sw, "source", tp + ".switch", str, choices=("ur_digital_out", "compressor_valve"))
         if src == "ur_digital_out":
             get(sw, "index", tp + ".switch", int, lo=0, hi=7)
-        body = get(tool, "body", tp, dict, default={"radius": 0.05, "length": 0.15})
+        body = _mapping(tool, "body", tp, K["body"], default={"radius": 0.05, "length": 0.15})
         body["radius"] = get(body, "radius", tp + ".body", float, lo=0.005, hi=0.5)
         body["length"] = get(body, "length", tp + ".body", float, lo=0.005, hi=1.0)
         tool["body"] = body
@@ -245,22 +411,25 @@ def validate_robot(data: Dict[str, Any]) -> Dict[str, Any]:
     sg["standoff"] = get(sg, "standoff", "robot.tools.spray_gun", float, default=0.3, lo=0.02, hi=2.0)
     sd = tools["sander"]
     sd["pad_radius"] = get(sd, "pad_radius", "robot.tools.sander", float, default=0.1, lo=0.005, hi=0.5)
-    comp = get(robot, "compressor", "robot", dict)
+    comp = _mapping(robot, "compressor", "robot", K["robot.compressor"])
     cp = "robot.compressor"
+    _backend(comp, "protocol", cp, "compressor", "modbus_tcp")
     get(comp, "host", cp, str)
     comp["port"] = get(comp, "port", cp, int, lo=1, hi=65535)
     comp["device_id"] = get(comp, "device_id", cp, int, default=1, lo=0, hi=247)
     comp["pressure_range"] = vec(comp, "pressure_range", cp, 2)
     comp["max_setpoint"] = get(comp, "max_setpoint", cp, float, lo=0.1, hi=600.0)
-    csim = get(comp, "sim", cp, dict, default={})
+    csim = _mapping(comp, "sim", cp, K["robot.compressor.sim"], default={})
     for key, dflt in (("time_constant", 2.0), ("max_pressure", 10.0), ("valve_drop", 1.0),
                       ("idle_current", 0.5), ("current_per_bar", 1.2), ("overpressure_limit", 9.0)):
         csim[key] = get(csim, key, cp + ".sim", float, default=dflt, lo=0.0)
     if csim["time_constant"] <= 0.0:
-        raise SimConfigError("robot.compressor.sim.time_constant must be > 0, found %r" % csim["time_constant"])
+        raise SimConfigError("%r must be > 0" % csim["time_constant"], key="robot.compressor.sim.time_constant",
+                             allowed="> 0")
     comp["sim"] = csim
-    sc = get(robot, "scanner", "robot", dict)
-    smount = get(sc, "mount", "robot.scanner", dict)
+    sc = _mapping(robot, "scanner", "robot", K["robot.scanner"])
+    _backend(sc, "backend", "robot.scanner", "scanner", "sim")
+    smount = _mapping(sc, "mount", "robot.scanner", K["robot.scanner.mount"])
     smount["xyz"] = vec(smount, "xyz", "robot.scanner.mount", 3)
     smount["yaw"] = get(smount, "yaw", "robot.scanner.mount", float, default=0.0)
     sc["range"] = get(sc, "range", "robot.scanner", float, lo=0.1, hi=100.0)
@@ -268,20 +437,77 @@ def validate_robot(data: Dict[str, Any]) -> Dict[str, Any]:
     return data
 
 
+def find_example_robot_data() -> List[str]:
+    """Candidate ``share/example-robot-data`` folders (env override, pip/cmeel wheels, system installs)."""
+    dirs = []
+    env = os.environ.get("EXAMPLE_ROBOT_DATA_DIR")
+    if env:
+        dirs.append(env)
+    for entry in sys.path:
+        cand = os.path.join(entry, "cmeel.prefix", "share", "example-robot-data")
+        if os.path.isdir(cand):
+            dirs.append(cand)
+    dirs += ["/opt/openrobots/share/example-robot-data", "/usr/share/example-robot-data",
+             "/opt/ros/noetic/share/example-robot-data"]
+    return [d for d in dirs if os.path.isdir(d)]
+
+
+def resolve_arm_urdf(arm_cfg: Dict[str, Any]) -> Tuple[str, str]:
+    """Return (urdf path, package share dir) for ``robot.arm.description``."""
+    desc = arm_cfg.get("description", {})
+    rel = desc.get("urdf", "robots/ur_description/urdf/ur10_robot.urdf")
+    key = "robot.arm.description.urdf"
+    if os.path.isabs(rel):
+        if not os.path.isfile(rel):
+            raise SimConfigError("%s does not exist" % rel, key=key)
+        return rel, os.path.dirname(rel)
+    for share in find_example_robot_data():
+        path = os.path.join(share, rel)
+        if os.path.isfile(path):
+            return path, share
+    raise SimConfigError("%r not found in any example-robot-data install (%s); install example-robot-data or set "
+                         "EXAMPLE_ROBOT_DATA_DIR" % (rel, ", ".join(find_example_robot_data()) or "none found"),
+                         key=key)
+
+
 def load_site(path: Optional[str] = None) -> Dict[str, Any]:
     """Load and validate a site file (default: ``config/sites/default.yaml``)."""
     path = path or default_site_path()
-    data = validate_site(_load_yaml(path))
+    try:
+        data = validate_site(_load_yaml(path))
+    except SimConfigError as exc:
+        raise exc.in_file(path)
     data["_path"] = os.path.abspath(path)
     return data
 
 
-def load_robot(path: Optional[str] = None) -> Dict[str, Any]:
-    """Load and validate a robot file (default: ``config/robots/rbkairos_ur10e.yaml``)."""
+def load_robot(path: Optional[str] = None, overrides: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+    """Load and validate a robot file (default: ``config/robots/rbkairos_ur10e.yaml``); ``overrides`` (a mapping
+    deep-merged into the ``robot`` section, e.g. another address) are checked with the file."""
     path = path or default_robot_path()
-    data = validate_robot(_load_yaml(path))
+    try:
+        data = _load_yaml(path)
+        if overrides:
+            if not isinstance(overrides, dict):
+                raise SimConfigError("robot overrides must be a mapping, found %r" % (overrides,))
+            if isinstance(data.get("robot"), dict):
+                data["robot"] = deep_merge(data["robot"], overrides)
+        data = validate_robot(data, os.path.dirname(os.path.abspath(path)))
+    except SimConfigError as exc:
+        raise exc.in_file(path)
     data["_path"] = os.path.abspath(path)
     return data
+
+
+def deep_merge(base: Dict[str, Any], extra: Mapping[str, Any]) -> Dict[str, Any]:
+    """``base`` updated recursively with ``extra`` (a new dict; dicts merge, everything else replaces)."""
+    out = copy.deepcopy(base)
+    for key, value in extra.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), dict):
+            out[key] = deep_merge(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
 
 
 def resolve_relative(cfg: Dict[str, Any], rel: str) -> str:

@@ -1,14 +1,17 @@
 """Exception hierarchy of the simulated worksite (one base class, specific subclasses)."""
 
+from ..config_errors import ConfigError
+
 
 class SimError(Exception):
     """Base class of every error raised by :mod:`locem_bridge.sim`."""
 
 
-class SimConfigError(SimError):
+class SimConfigError(SimError, ConfigError):
     """A site or robot configuration file is missing, malformed or out of range.
 
-    The message names the key path (e.g. ``site.walls[1].height``), what was found and what is allowed.
+    Prints as one line ``FILE: KEY: PROBLEM (allowed: ...)`` naming the key path (e.g.
+    ``site.walls[1].height``), what was found and what is allowed (:class:`~locem_bridge.config_errors.ConfigError`).
     """
 
 

@@ -29,7 +29,6 @@ import logging
 import math
 import os
 import shutil
-import sys
 import tempfile
 import threading
 from collections import deque
@@ -39,7 +38,7 @@ import numpy as np
 import pybullet as pb
 
 from .clock import SimClock
-from .config import TOOL_NAMES
+from .config import TOOL_NAMES, find_example_robot_data, resolve_arm_urdf  # noqa: F401 (re-exported)
 from .errors import SimConfigError, SimStateError
 from ..mecanum import MecanumKinematics
 from ..rate import FixedRate
@@ -50,37 +49,6 @@ from .site import Site
 log = logging.getLogger(__name__)
 
 BASE_SUBSTEP = 0.01    # sim s: the base pose is integrated through wheel angles at most this far apart
-
-
-def find_example_robot_data() -> List[str]:
-    """Candidate ``share/example-robot-data`` folders (env override, pip/cmeel wheels, system installs)."""
-    dirs = []
-    env = os.environ.get("EXAMPLE_ROBOT_DATA_DIR")
-    if env:
-        dirs.append(env)
-    for entry in sys.path:
-        cand = os.path.join(entry, "cmeel.prefix", "share", "example-robot-data")
-        if os.path.isdir(cand):
-            dirs.append(cand)
-    dirs += ["/opt/openrobots/share/example-robot-data", "/usr/share/example-robot-data",
-             "/opt/ros/noetic/share/example-robot-data"]
-    return [d for d in dirs if os.path.isdir(d)]
-
-
-def resolve_arm_urdf(arm_cfg: Dict[str, Any]) -> Tuple[str, str]:
-    """Return (urdf path, package share dir) for ``robot.arm.description``."""
-    desc = arm_cfg.get("description", {})
-    rel = desc.get("urdf", "robots/ur_description/urdf/ur10_robot.urdf")
-    if os.path.isabs(rel):
-        if not os.path.isfile(rel):
-            raise SimConfigError("robot.arm.description.urdf = %r does not exist" % rel)
-        return rel, os.path.dirname(rel)
-    for share in find_example_robot_data():
-        path = os.path.join(share, rel)
-        if os.path.isfile(path):
-            return path, share
-    raise SimConfigError("robot.arm.description.urdf = %r not found in any example-robot-data install (%s); "
-                         "install example-robot-data or set EXAMPLE_ROBOT_DATA_DIR" % (rel, find_example_robot_data()))
 
 
 def rotvec_to_quat(rv: Sequence[float]) -> Tuple[float, float, float, float]:

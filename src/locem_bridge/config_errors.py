@@ -1,0 +1,69 @@
+"""One error type for bad configuration files, printed as one line an integrator can act on.
+
+Every loader of a file a person edits (robot YAML, site YAML, HICEM parameters, Turtle ontologies, behavior-tree
+XML) raises a subclass of :class:`ConfigError`; it carries the file, the key path (or line / element), the
+problem and, where there is a closed set, the allowed values, and prints as::
+
+    FILE: KEY: PROBLEM (allowed: ...)
+
+Each layer keeps its own error family (``SimConfigError`` is a ``SimError``, ``BridgeConfigError`` a
+``BridgeError``, ...) and also derives from :class:`ConfigError`, so a node catches every configuration problem in
+one ``except ConfigError`` at start-up and prints :meth:`ConfigError.line` instead of a traceback.
+"""
+from typing import Any, Optional, Sequence, Union
+
+Allowed = Union[None, str, int, float, Sequence[Any]]
+
+
+def allowed_text(allowed: Allowed) -> str:
+    """``allowed`` as text: a string as it is, a sequence joined with commas."""
+    if allowed is None:
+        return ""
+    if isinstance(allowed, str):
+        return allowed
+    if isinstance(allowed, (list, tuple, set, frozenset)):
+        return ", ".join(str(a) for a in allowed)
+    return str(allowed)
+
+
+class ConfigError(Exception):
+    """A configuration file is missing, unreadable, malformed or holds a value that is not allowed.
+
+    ``file`` is the file's path ("" while a loader validates a parsed document; :meth:`in_file` fills it in),
+    ``key`` the dotted key path (``robot.arm.controller.rtde_port``), a line (``line 12``) or an element,
+    ``problem`` what is wrong with the value found, ``allowed`` what would be accepted.
+    """
+
+    def __init__(self, problem: str, file: str = "", key: str = "", allowed: Allowed = None) -> None:
+        self.problem = problem
+        self.file = file
+        self.key = key
+        self.allowed = allowed_text(allowed)
+        super().__init__(problem)
+
+    def in_file(self, path: str) -> "ConfigError":
+        """This error with ``file`` set to ``path`` unless it already names one (returns ``self``)."""
+        if not self.file:
+            self.file = path
+        return self
+
+    def line(self) -> str:
+        """``FILE: KEY: PROBLEM (allowed: ...)``, leaving out the parts that are empty; always one line."""
+        parts = [p for p in (self.file, self.key, self.problem) if p]
+        text = ": ".join(parts)
+        if self.allowed:
+            text += " (allowed: %s)" % self.allowed
+        return " ".join(text.split())
+
+    def __str__(self) -> str:
+        return self.line()
+
+
+def one_line(error: BaseException, file: Optional[str] = None) -> str:
+    """The one-line form of any error met while loading ``file`` (a :class:`ConfigError` prints itself)."""
+    if isinstance(error, ConfigError):
+        if file:
+            error.in_file(file)
+        return error.line()
+    text = " ".join(str(error).split()) or type(error).__name__
+    return "%s: %s" % (file, text) if file else text
