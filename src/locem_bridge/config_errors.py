@@ -8,7 +8,7 @@ problem and, where there is a closed set, the allowed values, and prints as::
 
 Each layer keeps its own error family (``SimConfigError`` is a ``SimError``, ``BridgeConfigError`` a
 ``BridgeError``, ...) and also derives from :class:`ConfigError`, so a node catches every configuration problem in
-one ``except ConfigError`` at start-up and prints :meth:`ConfigError.line` instead of a traceback.
+one ``except ConfigError`` at start-up and prints :meth:`ConfigError.one_line` instead of a traceback.
 """
 from typing import Any, Optional, Sequence, Union
 
@@ -47,7 +47,7 @@ class ConfigError(Exception):
             self.file = path
         return self
 
-    def line(self) -> str:
+    def one_line(self) -> str:
         """``FILE: KEY: PROBLEM (allowed: ...)``, leaving out the parts that are empty; always one line."""
         parts = [p for p in (self.file, self.key, self.problem) if p]
         text = ": ".join(parts)
@@ -56,14 +56,14 @@ class ConfigError(Exception):
         return " ".join(text.split())
 
     def __str__(self) -> str:
-        return self.line()
+        return self.one_line()
 
 
-def one_line(error: BaseException, file: Optional[str] = None) -> str:
+def describe(error: BaseException, file: Optional[str] = None) -> str:
     """The one-line form of any error met while loading ``file`` (a :class:`ConfigError` prints itself)."""
     if isinstance(error, ConfigError):
         if file:
             error.in_file(file)
-        return error.line()
+        return error.one_line()
     text = " ".join(str(error).split()) or type(error).__name__
     return "%s: %s" % (file, text) if file else text

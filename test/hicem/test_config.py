@@ -20,9 +20,9 @@ def test_shipped_parameters_and_blackboard_entries():
 
 
 @pytest.mark.parametrize("path,value,msg", [
-    (("hhlc", "tick_period_s"), "fast", "'hhlc.tick_period_s' must be a finite number"),
-    (("hhlc", "tick_period_s"), -0.1, "tick_period_s must be > 0"),
-    (("datastore", "hdict_synchronous"), "OFF", "FULL or NORMAL"),
+    (("hhlc", "tick_period_s"), "fast", "hhlc.tick_period_s: must be a finite number, got 'fast'"),
+    (("hhlc", "tick_period_s"), -0.1, "hhlc.tick_period_s: -0.1 must be > 0"),
+    (("datastore", "hdict_synchronous"), "OFF", "datastore.hdict_synchronous: 'OFF' is not allowed (allowed: FULL, NORMAL)"),
     (("hhlc", "resume_policy"), {"TAPE_LINE": ""}, "resume_policy.TAPE_LINE"),
     (("health", "modules"), [{"name": "x", "timeout": 1}], "unknown keys"),
     (("datastore", "prune"), [{"collection": "x", "age": 1}], "allowed keys"),
@@ -40,11 +40,33 @@ def test_missing_key_and_unreadable_file(tmp_path):
     del raw["locem"]["safe_commands"]
     with pytest.raises(ConfigError) as ei:
         HicemParams(raw)
-    assert "missing key 'locem.safe_commands'" in str(ei.value)
+    assert "locem.safe_commands: missing key" in str(ei.value)
     bad = tmp_path / "p.yaml"
     bad.write_text("hhlc: [unclosed")
     with pytest.raises(ConfigError) as ei:
         load_params(str(bad))
     assert "not valid YAML" in str(ei.value)
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError) as ei:
         load_params(str(tmp_path / "none.yaml"))
+    assert str(ei.value) == "%s: cannot be read: No such file or directory" % (tmp_path / "none.yaml")
+
+
+def test_a_bad_parameter_file_is_one_line_naming_the_file_and_the_key(tmp_path):
+    import yaml
+    raw = copy.deepcopy(RAW)
+    raw["locem"]["command_timeout_s"] = "soon"
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    with pytest.raises(ConfigError) as ei:
+        load_params(str(path))
+    assert str(ei.value) == "%s: locem.command_timeout_s: must be a finite number, got 'soon'" % path
+    raw = copy.deepcopy(RAW)
+    raw["health"]["modules"][0] = {"name": "x", "timeout": 1}
+    path.write_text(yaml.safe_dump(raw))
+    with pytest.raises(ConfigError) as ei:
+        load_params(str(path))
+    assert str(ei.value).startswith("%s: health.modules[0]: " % path) and "\n" not in str(ei.value)
+    path.write_text("hhlc:\n  tick_period_s: [1,\n")
+    with pytest.raises(ConfigError) as ei:
+        load_params(str(path))
+    assert str(ei.value).startswith("%s: line 3: not valid YAML" % path)

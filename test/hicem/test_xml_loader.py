@@ -119,7 +119,7 @@ def test_unknown_node_type_names_file_line_and_node_with_suggestion():
     e = load_error(tree_xml("<Sequence>\n  <AlwaysSucess/>\n</Sequence>"))
     assert (e.file, e.line, e.name) == ("bad.xml", 4, "AlwaysSucess")
     assert "unknown node type" in str(e) and "AlwaysSuccess" in str(e)
-    assert str(e).startswith("bad.xml:4: 'AlwaysSucess'")
+    assert str(e).startswith("bad.xml: line 4 'AlwaysSucess': unknown node type 'AlwaysSucess'")
 
 
 def test_unknown_explicit_action_id():
@@ -130,7 +130,7 @@ def test_unknown_explicit_action_id():
 def test_unknown_port_lists_the_allowed_ones():
     e = load_error(tree_xml('<Sequence>\n<Timeout msec="5" sec="1"><AlwaysSuccess/></Timeout></Sequence>'))
     assert (e.file, e.line, e.name) == ("bad.xml", 4, "Timeout")
-    assert str(e).startswith("bad.xml:4: ") and "unknown port 'sec'" in str(e) and "msec" in str(e)
+    assert str(e).startswith("bad.xml: line 4 'Timeout': ") and "unknown port 'sec'" in str(e) and "msec" in str(e)
 
 
 def test_scripting_attributes_are_rejected():

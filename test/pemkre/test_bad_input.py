@@ -273,3 +273,18 @@ def test_process_model_errors_name_the_node(tmp_path, make_engine):
 def test_second_process_while_one_runs(engine):
     _rejected(engine, lambda: engine.start_process(str(PLB.SprayingProcess)), TaskStateError,
               "still running", "abort_running")
+
+
+def test_a_turtle_syntax_error_is_one_line_naming_file_and_line(tmp_path):
+    from locem_bridge.config_errors import ConfigError
+    from locem_bridge.pemkre.ontology import load_files
+    d = _copy_ontologies(tmp_path)
+    bad = d / "process.ttl"
+    lines = bad.read_text().splitlines()
+    lines.append("this is ; not turtle ]")
+    bad.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ConfigError) as info:
+        load_files(sorted(str(p) for p in d.iterdir()))
+    line = str(info.value)
+    assert line.startswith("%s: line %d: Turtle syntax error: " % (bad, len(lines))), line
+    assert "\n" not in line

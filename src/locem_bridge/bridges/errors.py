@@ -59,11 +59,11 @@ class BridgeConfigError(BridgeError, ConfigError):
                  device: str = "") -> None:
         BridgeError.__init__(self, problem, device=device)
         self.problem, self.file, self.key, self.allowed = problem, file, key, allowed_text(allowed)
-        self.message = self.line()
+        self.message = self.one_line()
 
     def in_file(self, path: str) -> "BridgeConfigError":
         ConfigError.in_file(self, path)
-        self.message = self.line()
+        self.message = self.one_line()
         return self
 
 

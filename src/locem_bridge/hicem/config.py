@@ -23,15 +23,32 @@ def _get(d: Dict[str, Any], path: str, kind: type) -> Any:
     cur: Any = d
     for p in path.split("."):
         if not isinstance(cur, dict) or p not in cur:
-            raise ConfigError("HICEM parameters: missing key '%s'" % path)
+            raise ConfigError("missing key", key=path)
         cur = cur[p]
     if kind is float:
         if isinstance(cur, bool) or not isinstance(cur, (int, float)) or not math.isfinite(cur):
-            raise ConfigError("HICEM parameters: '%s' must be a finite number, got %r" % (path, cur))
+            raise ConfigError("must be a finite number, got %r" % (cur,), key=path)
         return float(cur)
     if not isinstance(cur, kind):
-        raise ConfigError("HICEM parameters: '%s' must be a %s, got %r" % (path, kind.__name__, cur))
+        raise ConfigError("must be a %s, got %r" % ({dict: "mapping", list: "list", str: "string"}.get(kind, kind.__name__),
+                                                     cur), key=path)
     return cur
+
+
+_KEYS = {"tick_period_s": "hhlc.tick_period_s", "idle_poll_s": "hhlc.idle_poll_s",
+         "watchdog_period_s": "health.watchdog_period_s", "command_timeout_s": "locem.command_timeout_s",
+         "safe_timeout_s": "locem.safe_timeout_s"}
+
+
+def _entry(parse: Any, value: Any, key: str) -> Any:
+    """``parse(value)`` for one list entry; whatever it refuses becomes a :class:`ConfigError` naming ``key``."""
+    try:
+        return parse(value)
+    except ConfigError:
+        raise
+    except Exception as exc:       # HealthError, DataStoreError, KeyError, TypeError of a malformed entry
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        raise ConfigError("%s%s" % ("missing key " if isinstance(exc, KeyError) else "", text), key=key)
 
 
 def flatten(d: Dict[str, Any], prefix: str = "cfg") -> Dict[str, Any]:
@@ -49,40 +66,51 @@ def flatten(d: Dict[str, Any], prefix: str = "cfg") -> Dict[str, Any]:
 class HicemParams:
     def __init__(self, raw: Dict[str, Any]) -> None:
         if not isinstance(raw, dict):
-            raise ConfigError("HICEM parameters must be a mapping at top level")
+            raise ConfigError("must hold a mapping at the top level, found %s" % type(raw).__name__)
         self.raw = raw
         self.tick_period_s = _get(raw, "hhlc.tick_period_s", float)
         self.idle_poll_s = _get(raw, "hhlc.idle_poll_s", float)
         self.resume_policy: Dict[str, str] = dict(_get(raw, "hhlc.resume_policy", dict))
         for k, v in self.resume_policy.items():
             if not isinstance(v, str) or not v:
-                raise ConfigError("HICEM parameters: hhlc.resume_policy.%s must be rerun, fail or a tree ID, got %r"
-                                  % (k, v))
+                raise ConfigError("%r is not a resume policy" % (v,), key="hhlc.resume_policy.%s" % k,
+                                  allowed="rerun, fail or a tree ID")
         self.safe_commands: List[str] = list(_get(raw, "locem.safe_commands", list))
         self.command_timeout_s = _get(raw, "locem.command_timeout_s", float)
         self.safe_timeout_s = _get(raw, "locem.safe_timeout_s", float)
         self.watchdog_period_s = _get(raw, "health.watchdog_period_s", float)
-        self.modules = [ModuleSpec.from_dict(m) for m in _get(raw, "health.modules", list)]
+        self.modules = [_entry(ModuleSpec.from_dict, m, "health.modules[%d]" % i)
+                        for i, m in enumerate(_get(raw, "health.modules", list))]
         self.persistent_collections = list(_get(raw, "datastore.persistent_collections", list))
-        self.prune_rules = [PruneRule.from_dict(r) for r in _get(raw, "datastore.prune", list)]
+        self.prune_rules = [_entry(PruneRule.from_dict, r, "datastore.prune[%d]" % i)
+                            for i, r in enumerate(_get(raw, "datastore.prune", list))]
         self.hdict_synchronous = str(_get(raw, "datastore.hdict_synchronous", str)).upper()
         if self.hdict_synchronous not in ("FULL", "NORMAL"):
-            raise ConfigError("HICEM parameters: datastore.hdict_synchronous must be FULL or NORMAL")
+            raise ConfigError("%r is not allowed" % self.hdict_synchronous, key="datastore.hdict_synchronous",
+                              allowed="FULL, NORMAL")
         for name in ("tick_period_s", "idle_poll_s", "watchdog_period_s", "command_timeout_s",
                      "safe_timeout_s"):
             if getattr(self, name) <= 0:
-                raise ConfigError("HICEM parameters: %s must be > 0" % name)
+                raise ConfigError("%r must be > 0" % getattr(self, name), key=_KEYS[name], allowed="> 0")
 
     def blackboard_entries(self) -> Dict[str, Any]:
         return flatten(self.raw)
 
 
 def load_params(path: str = DEFAULT_PARAMS_FILE) -> HicemParams:
+    """Read and check the parameter file; a problem raises :class:`ConfigError` naming the file (one line)."""
     try:
         with open(path, "r", encoding="utf-8") as f:
             raw = yaml.safe_load(f)
     except OSError as exc:
-        raise ConfigError("cannot read HICEM parameters %s: %s" % (path, exc.strerror))
+        raise ConfigError("cannot be read: %s" % exc.strerror, file=path)
+    except UnicodeDecodeError as exc:
+        raise ConfigError("is not UTF-8 text: %s" % exc.reason, file=path)
     except yaml.YAMLError as exc:
-        raise ConfigError("HICEM parameters %s are not valid YAML: %s" % (path, exc))
-    return HicemParams(raw)
+        mark = getattr(exc, "problem_mark", None)
+        raise ConfigError("not valid YAML: %s" % (getattr(exc, "problem", None) or exc), file=path,
+                          key="line %d" % (mark.line + 1) if mark is not None else "")
+    try:
+        return HicemParams(raw)
+    except ConfigError as exc:
+        raise exc.in_file(path)

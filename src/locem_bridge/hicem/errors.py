@@ -6,25 +6,27 @@ where there is a closed set, what is allowed.
 """
 from typing import Optional
 
+from ..config_errors import ConfigError as _ConfigFileError
+
 
 class HicemError(Exception):
     """Base class of every HICEM error."""
 
 
-class TreeLoadError(HicemError):
+class TreeLoadError(HicemError, _ConfigFileError):
     """A behavior-tree XML file cannot be turned into a tree (raised at load time, never while ticking).
 
     Carries ``file``, ``line`` (1-based, 0 when unknown) and ``name`` (the node, port or tree at fault) so an
-    integrator can jump straight to the spot in Groot2 or an editor.
+    integrator can jump straight to the spot in Groot2 or an editor; prints as one line
+    ``FILE: line N <element>: PROBLEM`` (:class:`locem_bridge.config_errors.ConfigError`).
     """
 
     def __init__(self, message: str, file: str = "<string>", line: int = 0, name: str = "") -> None:
-        self.file = file
+        where = " ".join(p for p in ("line %d" % line if line else "", "'%s'" % name if name else "") if p)
+        _ConfigFileError.__init__(self, message, file=file, key=where)
         self.line = line
         self.name = name
         self.reason = message
-        where = "%s:%d" % (file, line)
-        super().__init__("%s: %s%s" % (where, ("'%s': " % name) if name else "", message))
 
 
 class PortError(HicemError):
@@ -67,5 +69,5 @@ class ControllerError(HicemError):
     """The high-level controller was asked to do something its state does not allow."""
 
 
-class ConfigError(HicemError):
-    """The HICEM parameter file is missing a key or has a value of the wrong type."""
+class ConfigError(HicemError, _ConfigFileError):
+    """The HICEM parameter file is missing a key or has a value of the wrong type (one line: FILE: KEY: PROBLEM)."""

@@ -4,6 +4,8 @@ Every message names the culprit (the IRI, file, query or value) and, where there
 """
 from typing import Optional
 
+from ..config_errors import ConfigError
+
 
 class PemkreError(Exception):
     """Base class of every error raised by :mod:`locem_bridge.pemkre`."""
@@ -53,13 +55,17 @@ class UnknownQueryError(PemkreError, LookupError):
     code = "UNKNOWN_QUERY"
 
 
-class OntologyError(PemkreError):
-    """An ontology file cannot be used (missing, syntax error, inconsistent process model)."""
+class OntologyError(PemkreError, ConfigError):
+    """An ontology file cannot be used (missing, syntax error, inconsistent process model).
+
+    Prints as one line ``FILE: line N: PROBLEM`` when the file (``source``) and line are known
+    (:class:`locem_bridge.config_errors.ConfigError`).
+    """
 
     code = "ONTOLOGY_ERROR"
 
     def __init__(self, message: str, source: Optional[str] = None, line: Optional[int] = None) -> None:
-        super().__init__(message)
+        ConfigError.__init__(self, message, file=source or "", key="line %d" % line if line else "")
         self.source = source
         self.line = line
 

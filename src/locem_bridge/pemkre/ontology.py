@@ -67,19 +67,19 @@ def load_files(paths: Sequence[str]) -> LoadedOntologies:
             with open(path, "rb") as fh:
                 data = fh.read()
         except OSError as exc:
-            raise OntologyError("cannot read ontology file %s: %s" % (path, exc), source=path) from None
+            raise OntologyError("cannot read ontology file: %s" % (exc.strerror or exc), source=path) from None
         g = Graph()
         try:
             g.parse(data=data.decode("utf-8"), format="turtle", publicID="file://" + os.path.abspath(path))
         except UnicodeDecodeError as exc:
-            raise OntologySyntaxError("ontology file %s is not UTF-8: %s" % (path, exc), source=path) from None
+            raise OntologySyntaxError("ontology file is not UTF-8: %s" % exc.reason, source=path) from None
         except Exception as exc:  # rdflib raises several types for syntax errors
             msg = str(exc).strip().splitlines()
             m = _LINE_RE.search(str(exc))
             line = int(m.group(1)) if m else None
-            raise OntologySyntaxError("syntax error in ontology file %s%s: %s"
-                                      % (path, (" line %d" % line) if line else "", " ".join(msg)[:300]),
-                                      source=path, line=line) from None
+            text = re.sub(r"^at line \d+ of <[^>]*>:\s*", "", " ".join(msg))
+            raise OntologySyntaxError("Turtle syntax error: %s" % text[:300], source=path,
+                                      line=line) from None
         is_seed = any(True for o in g.subjects(RDF.type, OWL.Ontology) if (o, IS_WORLD_SEED, Literal(True)) in g)
         target, h = (seed, h_seed) if is_seed else (schema, h_schema)
         for t in g:
