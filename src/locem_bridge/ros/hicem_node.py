@@ -25,8 +25,10 @@ from typing import Any, Dict
 import rospkg
 import rospy
 
+from locem_bridge.hicem.config import load_params
 from locem_bridge.hicem.errors import ControllerError, HicemError, OperatorError
 from locem_bridge.hicem.executive import create_executive
+from locem_bridge.hicem.xml_loader import TreeLibrary
 from locem_bridge.job.call_log import instrument_from_env
 from locem_bridge.msg import HicemPrompt, HicemState
 from locem_bridge.srv import (HicemOperatorReply, HicemOperatorReplyResponse, HicemStartProcess,
@@ -34,6 +36,7 @@ from locem_bridge.srv import (HicemOperatorReply, HicemOperatorReplyResponse, Hi
 
 from .hicem_locem import LocemHealthFeed, RosLocemClient
 from .hicem_pemkre import RosPemkreClient
+from .startup import config_guard
 
 
 def _share_dir() -> str:
@@ -68,11 +71,15 @@ class HicemNode:
         params_file = _param("params_file", os.path.join(trees_dir, "hicem_params.yaml"))
         hdict = os.path.expanduser(_param("hdict_path", os.path.join(rospkg.get_ros_home(), "hicem_hdict.sqlite")))
         locem_ns = rospy.resolve_name(_param("locem_ns", "locem"))
+        # the files first: a bad one fails the node at once (one line), not after waiting for LOCEM and PEMKRE
+        params = load_params(params_file)
+        library = TreeLibrary()
+        library.load_directory(trees_dir)
         self.locem = RosLocemClient(locem_ns)
         # times each PEMKRE call into $LOCEM_CALL_LOG when set (bench/bench_job.py); otherwise the client itself
         self.pemkre = instrument_from_env(_pemkre_client(_param("pemkre", "ros")))
         self.ex = create_executive(self.pemkre, self.locem, hdict,
-                                   params_file=params_file, trees_dir=trees_dir)
+                                   params_file=params_file, trees_dir=trees_dir, params=params, library=library)
         self.ctrl = self.ex.controller
         self.state_pub = rospy.Publisher("~state", HicemState, queue_size=20, latch=True)
         self.prompt_pub = rospy.Publisher("~prompts", HicemPrompt, queue_size=50)
@@ -140,8 +147,13 @@ class HicemNode:
             engine.store.close()
 
 
+@config_guard("hicem")
 def main() -> None:
     rospy.init_node("hicem")
     node = HicemNode()
     rospy.on_shutdown(node.shutdown)
     rospy.spin()
+
+
+if __name__ == "__main__":
+    main()

@@ -18,23 +18,40 @@ import rospkg
 import rospy
 import yaml
 
+from locem_bridge.config_errors import ConfigError
 from locem_bridge.job.report import RunRecord, write_report
 from locem_bridge.job.tracker import JobStep, JobTracker
 from locem_bridge.msg import HicemPrompt, HicemState
 from locem_bridge.srv import HicemStartProcess, JsonCall, PemkreQuery
+from locem_bridge.ros.startup import config_guard
 
 
 def load_steps(path: str, validate_lines: Any) -> List[JobStep]:
-    with open(path, encoding="utf-8") as handle:
-        doc = yaml.safe_load(handle) or {}
+    """The job file's steps; a bad file raises :class:`ConfigError` (one line: file, key, problem)."""
+    try:
+        with open(path, encoding="utf-8") as handle:
+            doc = yaml.safe_load(handle) or {}
+    except OSError as exc:
+        raise ConfigError("cannot be read: %s" % exc.strerror, file=path)
+    except yaml.YAMLError as exc:
+        raise ConfigError("not valid YAML: %s" % (getattr(exc, "problem", None) or exc), file=path)
+    if not isinstance(doc, dict) or not isinstance(doc.get("steps", []), list):
+        raise ConfigError("must hold a mapping with a list 'steps'", file=path, key="steps")
     steps = []
-    for entry in doc.get("steps", []):
-        options = dict(entry.get("options") or {})
+    for i, entry in enumerate(doc.get("steps", [])):
+        key = "steps[%d]" % i
+        if not isinstance(entry, dict) or not isinstance(entry.get("name"), str) or \
+                not isinstance(entry.get("process"), str):
+            raise ConfigError("needs a name and a process (IRI), found %r" % (entry,), file=path, key=key)
+        options = entry.get("options") or {}
+        if not isinstance(options, dict):
+            raise ConfigError("must be a mapping, found %r" % (options,), file=path, key=key + ".options")
+        options = dict(options)
         if validate_lines not in ("", None) and "validateLines" in options:
             options["validateLines"] = str(validate_lines).lower() in ("true", "1", "yes")
         steps.append(JobStep(entry["name"], entry["process"], options))
     if not steps:
-        raise ValueError("%s lists no steps" % path)
+        raise ConfigError("lists no steps", file=path, key="steps")
     return steps
 
 
@@ -55,6 +72,7 @@ def _json_call(name: str, **args: Any) -> Dict[str, Any]:
     return json.loads(reply.result)
 
 
+@config_guard("job")
 def main() -> None:
     rospy.init_node("job")
     share = rospkg.RosPack().get_path("locem_bridge")
@@ -112,3 +130,7 @@ def main() -> None:
     ok = all(r.status == "succeeded" for r in tracker.records) and len(tracker.records) == len(steps)
     rospy.signal_shutdown("job done")
     raise SystemExit(0 if ok else 1)
+
+
+if __name__ == "__main__":
+    main()

@@ -54,6 +54,7 @@ from locem_bridge.srv import (
     ProcedureControl,
     ProcedureControlResponse,
 )
+from locem_bridge.ros.startup import config_guard
 
 
 STATUS_QUEUE_SIZE = 10000
@@ -203,6 +204,7 @@ def _action_result(response: Optional[Response]) -> CommandResult:
     return CommandResult(response.success, response.code.value, response.message, response.result_json)
 
 
+@config_guard("locem")
 def main() -> None:
     """Entry point of ``rosrun locem_bridge locem_node``.
 
@@ -230,9 +232,8 @@ def main() -> None:
         site_config = str(rospy.get_param("~site_config", "") or "") or None
         pose = rospy.get_param("~initial_pose", None) or None
         if pose is None and site_config:           # odometry starts where the site says the robot stands
-            import yaml
-            with open(site_config, encoding="utf-8") as handle:
-                pose = (yaml.safe_load(handle) or {}).get("site", {}).get("robot_start")
+            from locem_bridge.sim.config import load_site
+            pose = load_site(site_config)["site"]["robot_start"]
         robot = build_robot(robot_cfg, devices=[d.strip() for d in str(rospy.get_param(
                                 "~devices", "arm,compressor,base,scanner")).split(",") if d.strip()],
                             site=site_config,
@@ -259,3 +260,7 @@ def main() -> None:
     rospy.loginfo("LOCEM ready on %s: %d commands (%s)", rospy.resolve_name("~command"), len(served),
                   ", ".join(served))
     rospy.spin()
+
+
+if __name__ == "__main__":
+    main()

@@ -19,9 +19,10 @@ import re
 import subprocess
 import sys
 import time
-from typing import List, Optional
+from typing import Any, Dict, List, Optional
 
 from .processes import free_port
+from .startup import LINE as NODE_CONFIG_ERROR
 
 PROGRESS = re.compile(r"^\[(\d+/\d+ [^\]]+|job)\]")
 
@@ -35,6 +36,53 @@ def launch_command(args: argparse.Namespace, port: int) -> List[str]:
     if args.site:
         cmd.append("site:=%s" % os.path.abspath(args.site))
     return cmd + list(args.launch_arg)
+
+
+def _package_dir() -> str:
+    try:
+        import rospkg
+        return str(rospkg.RosPack().get_path("locem_bridge"))
+    except Exception:          # outside a sourced workspace: the source checkout
+        from locem_bridge.sim.config import repo_root
+        return repo_root()
+
+
+def preflight(args: argparse.Namespace, robot_overrides: Optional[Dict[str, Any]] = None) -> Optional[str]:
+    """Check the files the launch will read (site, robot plus its overrides, HICEM parameters and trees, Turtle
+    ontologies, job) with the nodes' own loaders; the one-line error, or None when all load (under a second)."""
+    from locem_bridge.config_check import check_files
+    from locem_bridge.config_errors import ConfigError
+
+    share = _package_dir()
+    launch = dict(a.split(":=", 1) for a in args.launch_arg if ":=" in a)
+
+    def path(name: str, default: str) -> str:
+        return os.path.abspath(launch.get(name) or default)
+    try:
+        overrides = dict(robot_overrides or {})
+        if launch.get("robot_overrides", "").strip():
+            import yaml
+            try:
+                extra = yaml.safe_load(launch["robot_overrides"])
+            except yaml.YAMLError as error:
+                raise ConfigError("not valid YAML: %s" % (getattr(error, "problem", None) or error),
+                                  key="robot_overrides:=")
+            if not isinstance(extra, dict):
+                raise ConfigError("must be a YAML mapping, found %r" % (extra,), key="robot_overrides:=")
+            from locem_bridge.sim.config import deep_merge
+            overrides = deep_merge(overrides, extra)
+        check_files(site=os.path.abspath(args.site) if args.site else path("site", os.path.join(
+                        share, "config", "sites", "default.yaml")),
+                    robot=path("robot", os.path.join(share, "config", "robots", "rbkairos_ur10e.yaml")),
+                    robot_overrides=overrides,
+                    params_file=path("params_file", os.path.join(share, "trees", "hicem_params.yaml")),
+                    trees_dir=path("trees_dir", os.path.join(share, "trees")),
+                    ontology_dir=path("ontology_dir", os.path.join(share, "ontologies")))
+        from .job_node import load_steps
+        load_steps(path("job", os.path.join(share, "config", "jobs", "plasterboard.yaml")), "")
+    except ConfigError as error:
+        return error.one_line()
+    return None
 
 
 def summarise(report_md: str) -> List[str]:
@@ -67,6 +115,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--launch-arg", action="append", default=[], help="extra roslaunch arg name:=value")
     parser.add_argument("--verbose", action="store_true", help="show every node's output")
     args = parser.parse_args(argv)
+    started = time.monotonic()
+    problem = preflight(args)
+    if problem:
+        print("[main] configuration error: %s" % problem, flush=True)
+        return 2
     args.hmi_port = args.hmi_port or free_port()
     port = args.port or free_port()
     env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % port, ROS_IP="127.0.0.1")
@@ -74,15 +127,18 @@ def main(argv: Optional[List[str]] = None) -> int:
     cmd = launch_command(args, port)
     print("[main] %s" % " ".join(cmd), flush=True)
     print("[main] operator page: http://127.0.0.1:%d/" % args.hmi_port, flush=True)
-    started = time.monotonic()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1,
                             start_new_session=True)
-    report = ""
+    report = config_error = ""
     try:
         assert proc.stdout is not None
         for raw in proc.stdout:
             line = re.sub(r"\x1b\[[0-9;]*m", "", raw.rstrip())
             ended_normally = bool(report) and "REQUIRED process" in line   # the job node ends the launch
+            if NODE_CONFIG_ERROR.match(line):   # a node refused its configuration: it will not get better
+                config_error = line
+                print(line, flush=True)
+                break
             if args.verbose or PROGRESS.match(line) or (("REQUIRED process" in line or "ERROR" in line)
                                                         and not ended_normally):
                 print(line, flush=True)
@@ -103,6 +159,9 @@ def main(argv: Optional[List[str]] = None) -> int:
                 os.killpg(proc.pid, 9)
                 proc.wait()
     elapsed = time.monotonic() - started
+    if config_error:
+        print("[main] stopped after %.0f s: a node refused its configuration (above)" % elapsed, flush=True)
+        return 2
     if not report:
         print("[main] the job wrote no report (%.0f s); see the ROS logs (~/.ros/log/latest)" % elapsed, flush=True)
         return 1

@@ -65,6 +65,7 @@ from locem_bridge.hmi.sim_hands import HandsError, hand_actions  # noqa: E402
 from locem_bridge.msg import HicemState  # noqa: E402
 from locem_bridge.srv import (HicemOperatorReply, HicemStartProcess, HicemStop, JsonCall,  # noqa: E402
                               PemkreQuery)
+from locem_bridge.ros.startup import config_guard  # noqa: E402
 
 STATE_FIELDS = ("process", "specific_process", "phase", "action_type", "task", "tree", "node", "path", "detail")
 DIAG_LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
@@ -416,6 +417,7 @@ class OperatorHmiNode:
         self.backend.close()
 
 
+@config_guard("operator_hmi")
 def main() -> None:
     rospy.init_node("operator_hmi")
     try:
@@ -425,3 +427,7 @@ def main() -> None:
         sys.exit(2)
     rospy.on_shutdown(node.shutdown)
     rospy.spin()
+
+
+if __name__ == "__main__":
+    main()

@@ -29,6 +29,7 @@ from typing import Any, Callable, Optional
 
 import rospy
 
+from locem_bridge.config_errors import ConfigError
 from locem_bridge.pemkre import JournaledStore, OxigraphStore, ProcessEngine
 from locem_bridge.pemkre.errors import PemkreError
 from locem_bridge.pemkre.store import TripleStore
@@ -36,6 +37,7 @@ from locem_bridge.pemkre.terms import bindings_from_strings
 from locem_bridge.srv import (PemkreNextAction, PemkreNextActionResponse, PemkreQuery, PemkreQueryResponse,
                               PemkreSetTaskStatus, PemkreSetTaskStatusResponse, PemkreStartProcess,
                               PemkreStartProcessResponse, PemkreUpdateWorld, PemkreUpdateWorldResponse)
+from locem_bridge.ros.startup import config_guard
 
 
 def _guard(response_cls: Callable[[], Any], body: Callable[[Any, Any], None]) -> Callable[[Any], Any]:
@@ -135,6 +137,7 @@ def open_store(kind: str, path: str, fsync: bool = False, fresh: bool = False) -
     raise ValueError("~store must be journal, rocksdb or memory, got %r" % kind)
 
 
+@config_guard("pemkre")
 def main() -> None:
     """Entry point of ``rosrun locem_bridge pemkre_node``."""
     rospy.init_node("pemkre")
@@ -148,6 +151,8 @@ def main() -> None:
             onto_dir = os.path.join(rospkg.RosPack().get_path("locem_bridge"), "ontologies")
         except Exception:
             onto_dir = ""
+    if onto_dir and not os.path.isdir(onto_dir):
+        raise ConfigError("ontology folder does not exist", file=onto_dir)
     files = sorted(os.path.join(onto_dir, f) for f in os.listdir(onto_dir) if f.endswith(".ttl")) if onto_dir else None
 
     def factory() -> ProcessEngine:
@@ -172,3 +177,7 @@ def main() -> None:
     rospy.loginfo("PEMKRE ready on %s (store %s at %s): processes %s; running: %s", rospy.resolve_name("~next_action"),
                   kind, path, ", ".join(node.engine.processes()), node.engine.active_process() or "none")
     rospy.spin()
+
+
+if __name__ == "__main__":
+    main()

@@ -36,6 +36,7 @@ from locem_bridge.sim.config import default_robot_path, default_site_path, load_
 from locem_bridge.sim.errors import SimError
 from locem_bridge.sim.worksite import Worksite
 from locem_bridge.srv import JsonCall, JsonCallResponse
+from locem_bridge.ros.startup import config_guard
 
 
 class SimNode:
@@ -124,6 +125,7 @@ def _serve(name: str, operation: Callable[[Dict[str, Any]], Dict[str, Any]]) -> 
     return handle
 
 
+@config_guard("sim")
 def main() -> None:
     """Entry point of ``rosrun locem_bridge sim_worksite``."""
     rospy.init_node("sim")
@@ -139,3 +141,7 @@ def main() -> None:
     for what, where in sorted(endpoints.items()):
         rospy.loginfo("sim_worksite: %s: %s", what, where)
     rospy.spin()
+
+
+if __name__ == "__main__":
+    main()

@@ -494,9 +494,20 @@ def load_robot(path: Optional[str] = None, overrides: Optional[Dict[str, Any]] =
                 data["robot"] = deep_merge(data["robot"], overrides)
         data = validate_robot(data, os.path.dirname(os.path.abspath(path)))
     except SimConfigError as exc:
-        raise exc.in_file(path)
+        raise exc.in_file(path + (" (with overrides)" if _overridden(exc.key, overrides) else ""))
     data["_path"] = os.path.abspath(path)
     return data
+
+
+def _overridden(key: str, overrides: Optional[Mapping[str, Any]]) -> bool:
+    """Whether the key path ``robot.a.b[2].c`` (or a parent of it) was set by ``overrides``."""
+    node: Any = overrides
+    parts = [p for p in re.sub(r"\[\d+\]", "", key).split(".")[1:] if p] if key.startswith("robot.") else []
+    for part in parts:
+        if not isinstance(node, Mapping) or part not in node:
+            return False
+        node = node[part]
+    return bool(parts)
 
 
 def deep_merge(base: Dict[str, Any], extra: Mapping[str, Any]) -> Dict[str, Any]:
