@@ -70,7 +70,7 @@ def test_the_bridges_load_robot_files_through_the_one_validation_the_simulator_u
     """A file (plus overrides) the bridges would misread does not load: one line naming file, key and problem."""
     with pytest.raises(BridgeConfigError) as exc:
         load_robot_config(ROBOT_YAML, {"arm": {"controller": {"rtde_port": 30014}}})
-    assert str(exc.value).startswith("%s: robot.arm.controller.rtde_port: 30014 cannot be used: ur_rtde always dials "
+    assert str(exc.value).startswith("%s (with overrides): robot.arm.controller.rtde_port: 30014 cannot be used: ur_rtde always dials "
                                      "the UR ports 29999 (dashboard), 30003 (script) and 30004 (RTDE); another robot "
                                      "takes another address (host) (allowed: 30004)" % ROBOT_YAML)
     with pytest.raises(BridgeConfigError, match=r"robot.arm.deadline.scale: 0.0 is out of range"):

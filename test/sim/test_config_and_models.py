@@ -149,6 +149,11 @@ def test_relative_paths_resolve_against_the_robot_file_and_a_missing_one_is_name
         load_robot(path)
     assert str(exc.value) == ("%s: robot.base.eds: %s does not exist (relative paths are read from the robot "
                               "file's folder)" % (path, tmp_path / "drives" / "x.eds"))
+    path = _robot_copy(tmp_path, lambda d: d["robot"]["arm"].update(description={"urdf": "arm/ur10e.urdf"}))
+    with pytest.raises(SimConfigError) as exc:
+        load_robot(path)
+    assert str(exc.value).startswith("%s: robot.arm.description.urdf: %s does not exist" % (path, tmp_path / "arm"
+                                                                                             / "ur10e.urdf"))
 
 
 @pytest.mark.parametrize("key, port", [("rtde_port", 30014), ("dashboard_port", 29998), ("script_port", 30013)])

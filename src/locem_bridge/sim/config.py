@@ -359,11 +359,11 @@ def validate_robot(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict
     arm = _mapping(robot, "arm", "robot", K["robot.arm"])
     backend = _backend(arm, "backend", "robot.arm", "arm", "ur_rtde")
     desc = _mapping(arm, "description", "robot.arm", K["robot.arm.description"], default={})
-    if "urdf" in desc:
+    if "urdf" in desc:         # a file path is checked now; one in a package when the simulator builds the arm
         get(desc, "urdf", "robot.arm.description", str)
-        if not desc.get("package") and not os.path.isabs(desc["urdf"]):
+        get(desc, "package", "robot.arm.description", str, default="", choices=("", "example-robot-data"))
+        if not desc.get("package") or os.path.isabs(desc["urdf"]):
             desc["urdf"] = _existing_file(desc["urdf"], "robot.arm.description.urdf", base_dir)
-        resolve_arm_urdf(arm)
     mount = _mapping(arm, "mount", "robot.arm", K["robot.arm.mount"])
     mount["xyz"] = vec(mount, "xyz", "robot.arm.mount", 3)
     mount["rpy"] = vec(mount, "rpy", "robot.arm.mount", 3)
