@@ -1,7 +1,9 @@
 """HICEM with the real PEMKRE engine (shipped ontologies and trees) and the LOCEM test double: a SPRAY_AREA
 command fails in the middle of an area (the compressor link dropped), PEMKRE's failure transition sends HICEM to
-RECOVER (arm back, STATUS until the compressor is up again), the loop sprays the same area again, and the
-spraying process ends with every area sprayed; the failure stays in the execution log and the KPIs."""
+RECOVER (STATUS until the compressor is up again, arm back), the loop sprays the same area again, and the
+spraying process ends with every area sprayed; the failure stays in the execution log and the KPIs. A SAND_AREA
+ends in a protective stop: RECOVER asks the operator, whose reset is sent as RESET_ARM, and the area is sanded
+on from its failed section; an operator who cannot clear the stop fails the process with that answer."""
 import copy
 
 import pytest
@@ -53,13 +55,20 @@ def engine(tmp_path):
     store.close()
 
 
-def _run(tmp_path, engine, locem):
-    ex = create_executive(EngineClient(engine), locem, str(tmp_path / "hdict.sqlite"), params=params())
-    ex.operator.add_listener(AutoOperator(ex.controller, {"mount_tool": "done"}))
+# RECOVER reads STATUS every poll_s of wall time here: a short poll keeps the suite fast
+FAST = {"recover__poll_s": 0.05}
+
+
+def _run(tmp_path, engine, locem, process=PLB.SprayingProcess, answers=None, **overrides):
+    ex = create_executive(EngineClient(engine), locem, str(tmp_path / "hdict.sqlite"),
+                          params=params(**dict(FAST, **overrides)))
+    operator = AutoOperator(ex.controller, dict({"mount_tool": "done"}, **(answers or {})))
+    ex.operator.add_listener(operator)
     ex.health.heartbeat("locem")
     beats = Heartbeats(ex.health)
     try:
-        phase = ex.controller.run_process(str(PLB.SprayingProcess), {})
+        phase = ex.controller.run_process(str(process), {})
+        _run.asked = operator.asked
         marks = {a["id"]: ex.data_handler.feature(a["id"]).get("status") for a in locem.site["areas"]}
         return phase, ex.controller.state(), marks
     finally:
@@ -89,7 +98,8 @@ def test_a_spray_area_that_fails_once_is_recovered_and_every_area_ends_sprayed(t
     assert sprays[6] == sprays[5] and sprays[4] not in sprays[6:] and len(set(sprays[6:])) == 3
     i_fail = [i for i, c in enumerate(locem.sent) if c.startswith("SPRAY_AREA ")][5]
     after = locem.sent[i_fail + 1:]
-    assert after[:6] == ["WALL_READY", "STATUS", "WAIT 1", "STATUS", "WAIT 1", "STATUS"]
+    # RECOVER: STATUS while the compressor is down (2), up (links), up (ready), then the arm retracts
+    assert after[:5] == ["STATUS", "STATUS", "STATUS", "STATUS", "WALL_READY"]
     assert locem.running() == []
     k = compute_kpis(engine, sp)
     by_type = {r["actionType"]: r for r in k["task_types"]}
@@ -99,11 +109,96 @@ def test_a_spray_area_that_fails_once_is_recovered_and_every_area_ends_sprayed(t
 
 def test_a_compressor_that_never_comes_back_fails_the_process_after_recover(tmp_path, engine):
     locem = LinkDropLocem(fail_at=1, down_polls=10 ** 6, site=_two_area_site())
-    phase, state, marks = _run(tmp_path, engine, locem)
+    phase, state, marks = _run(tmp_path, engine, locem, recover__links_timeout_s=0.5)
     assert phase == "failed"
     assert "RECOVER" in state["detail"] and "compressor: link down" in state["detail"]
-    attempts = params().raw["recover"]["attempts"]
-    assert locem.sent.count("STATUS") == attempts
+    assert "after 0.5 s" in state["detail"]
+    assert 5 <= locem.sent.count("STATUS") <= 12 and "WALL_READY" not in locem.sent[locem.sent.index("STATUS"):]
     assert engine.store.value(SITE_NS.wall_1_area_1, PPR.sprayingStatus) == PPR.unprocessed
     assert marks["wall_1_area_1"] != "sprayed"
+    assert locem.running() == []
+
+
+# ------------------------------------------------------------------------------- protective stop while sanding --
+PROTECTIVE_STOP = ("arm protective stop (safety mode 3); the motion was stopped by the controller; remove the cause "
+                   "and send RESET_ARM")
+
+
+class ProtectiveStopLocem(LocemDouble):
+    """The double with the arm hitting something during the n-th SAND_AREA: that command fails as LOCEM's sanding
+    does on a protective stop, STATUS reports the latched stop and every motion is refused until RESET_ARM."""
+
+    MOTIONS = ("WALL_READY", "GOTO", "SAND_AREA", "SPRAY_AREA", "MOVE_HOME")
+
+    def __init__(self, stop_at: int, **kw) -> None:
+        super().__init__(**kw)
+        self.stop_at, self.sands = stop_at, 0
+
+    def send(self, command: str):
+        name = command.split()[0]
+        latched = self.health["arm"]["device"] != "ok"
+        if name == "RESET_ARM":
+            self.health["arm"] = {"link": "up", "device": "ok", "last_error": ""}
+        elif name in self.MOTIONS and latched:
+            self.fail_next[name] = LocemReply(False, "HARDWARE_ERROR", "arm protective stop (safety mode 3) is "
+                                              "latched; remove the cause and send RESET_ARM")
+        elif name == "SAND_AREA":
+            self.sands += 1
+            if self.sands == self.stop_at:
+                self.fail_next["SAND_AREA"] = LocemReply(False, "HARDWARE_ERROR", PROTECTIVE_STOP)
+                self.health["arm"] = {"link": "up", "device": "safety stop: protective stop (safety mode 3)",
+                                      "safety_mode": "PROTECTIVE_STOP", "last_error": "latched"}
+        return super().send(command)
+
+
+def _sprayed_site():
+    site = _two_area_site()
+    for a in site["areas"]:
+        a["finish"] = "sprayed"
+    return site
+
+
+def _task_log(engine):
+    sp = engine.current_process()
+    return [(str(r["actionType"]), str(r["status"]), str(r.get("detail") or ""))
+            for r in engine.query("task_log", {"process": URIRef(sp)}).rows]
+
+
+def test_a_protective_stop_while_sanding_is_reset_by_the_operator_and_the_area_sanded_on(tmp_path, engine):
+    # 2 areas of 4 sections; the arm stops on the 7th SAND_AREA (area 2, section 3)
+    locem = ProtectiveStopLocem(stop_at=7, site=_sprayed_site())
+    phase, state, marks = _run(tmp_path, engine, locem, PLB.SandingProcess, {"safety_stop": "reset"})
+    assert phase == "ended", state
+    for a in ("wall_1_area_1", "wall_1_area_2"):
+        assert engine.store.value(SITE_NS[a], PPR.sandingStatus) == PPR.processed
+        assert marks[a] == "sanded"
+    log = _task_log(engine)
+    assert [x[:2] for x in log] == [("SCAN", "succeeded"), ("GET_TOOL", "succeeded"), ("SAND_AREA", "succeeded"),
+                                    ("SAND_AREA", "failed"), ("RECOVER", "succeeded"), ("SAND_AREA", "succeeded"),
+                                    ("GO_HOME", "succeeded")]
+    assert "protective stop" in log[3][2] and log[4][2] == "recovered"
+    assert _run.asked.count("safety_stop") == 1
+    # after the stop: STATUS (links up, the stop seen), the operator's reset, STATUS (ready), the arm retracts
+    i_stop = [i for i, c in enumerate(locem.sent) if c.startswith("SAND_AREA ")][6]
+    assert locem.sent[i_stop + 1:i_stop + 5] == ["STATUS", "RESET_ARM", "STATUS", "WALL_READY"]
+    # area 2 goes on at its failed (3rd) section: sections 1 and 2 are not sanded twice
+    sands = [c for c in locem.sent if c.startswith("SAND_AREA ")]
+    assert len(sands) == 4 + 3 + 2 and sands[7] == sands[6] and sands[8] not in sands[4:7]
+    assert not set(sands[7:]) & set(sands[4:6])
+    assert locem.running() == []
+
+
+def test_a_protective_stop_the_operator_cannot_clear_fails_the_process_with_that_answer(tmp_path, engine):
+    locem = ProtectiveStopLocem(stop_at=2, site=_sprayed_site())
+    phase, state, marks = _run(tmp_path, engine, locem, PLB.SandingProcess, {"safety_stop": "cannot_clear"})
+    assert phase == "failed"
+    assert "RECOVER" in state["detail"] and "operator answered cannot_clear" in state["detail"], state
+    log = _task_log(engine)
+    steps = [x[:2] for x in log]         # (the query repeats the failing task's row with the process's detail)
+    assert steps[:4] == [("SCAN", "succeeded"), ("GET_TOOL", "succeeded"), ("SAND_AREA", "failed"),
+                         ("RECOVER", "failed")] and set(steps[4:]) <= {("RECOVER", "failed")}, log
+    assert "operator answered cannot_clear to: protective stop (safety mode 3): check the arm" in log[3][2]
+    assert "RESET_ARM" not in locem.sent
+    assert locem.sent[-1] == "STATUS" or locem.sent[-1] == "STOP"      # nothing moved after the stop
+    assert engine.store.value(SITE_NS.wall_1_area_1, PPR.sandingStatus) != PPR.processed
     assert locem.running() == []

@@ -89,3 +89,42 @@ def test_stop_from_the_http_api_halts_the_real_controller(hicem):
         assert stale.status == 409 and stale.error["code"] == "prompt_not_open"
         assert mount["id"] in stale.error["message"]
         assert state(srv.url)["snapshot"]["phase"] == "stopped"
+
+
+def test_the_default_automatic_operator_resets_a_protective_stop_so_a_headless_job_goes_on():
+    """RECOVER (real tree) finds the arm in a latched protective stop; the automatic operator with its DEFAULT
+    configuration answers the safety_stop prompt with reset, HICEM sends RESET_ARM, and the process goes on."""
+    from hicem_rig import params
+    pemkre = PemkreDouble(extra_actions=["RECOVER"])
+    locem = LocemDouble(durations={"GOTO": 0.02, "APPLY_TAPE": 0.02, "HOME": 0.02})
+    locem.health["arm"] = {"link": "up", "device": "safety stop: protective stop (safety mode 3)", "last_error": ""}
+    sent = locem.send
+
+    def send(command):
+        if command == "RESET_ARM":
+            locem.health["arm"] = {"link": "up", "device": "ok", "last_error": ""}
+        return sent(command)
+    locem.send = send
+    ex = create_executive(pemkre, locem, None, params=params(recover__poll_s=0.05))
+    ex.health.heartbeat("locem")
+    beats = Heartbeats(ex.health)
+    backend = ExecutiveBackend.for_executive(ex, processes=[{"iri": PROCESS, "name": "Taping"}])
+    auto = AutoOperator(backend, AutoOperatorConfig.from_dict({"poll_period_s": 0.02}, base=DEFAULT_CONFIG))
+    auto.start()
+    try:
+        backend.start_process(PROCESS)
+        end = time.monotonic() + 30
+        while time.monotonic() < end and backend.snapshot()["phase"] not in ("ended", "failed", "stopped"):
+            time.sleep(0.02)
+    finally:
+        auto.stop()
+        beats.stop()
+        ex.close()
+    assert backend.snapshot()["phase"] == "ended", backend.snapshot()
+    stop = [a for a in auto.answers if a["kind"] == "safety_stop"]
+    assert [a["answer"] for a in stop] == ["reset"] and stop[0]["text"].startswith("protective stop (safety mode 3)")
+    assert stop[0]["open_for_s"] >= DEFAULT_CONFIG["kinds"]["safety_stop"]["delay_s"]
+    assert pemkre.executed("RECOVER")[0][2:4] == ["succeeded", "recovered"]
+    i_reset = locem.sent.index("RESET_ARM")
+    assert "WALL_READY" not in locem.sent[:i_reset] and locem.sent[i_reset + 2] == "WALL_READY"
+    assert ex.operator.interventions == len(auto.answers) and not auto.errors

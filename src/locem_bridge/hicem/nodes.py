@@ -1,6 +1,7 @@
 """The HICEM node library: generic nodes and plasterboard use-case nodes.
 
-Generic: CheckHealth, CheckDevicesUp (devices back after a failure, from LOCEM's STATUS), SendLocemCommand,
+Generic: CheckHealth, CheckDevicesUp (devices back after a failure, from LOCEM's STATUS), WaitForDevices (STATUS
+until they are, bounded), CheckSafetyStop (a latched safety stop in STATUS), SendLocemCommand,
 ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual, SelectEntry, IngestScan, MarkFeature.
 Use case: TagIdNameToObjectId (PEMKRE symbol → stored object id), GetTapingPosition (approach pose for a joint
 line), GetTapePath (line endpoints and wall normal), GetAreaRaster (base stations and raster rectangles for an
@@ -15,7 +16,7 @@ command arguments).
 """
 import math
 import re
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from py_trees.common import Status
 
@@ -85,6 +86,36 @@ class CheckHealth(ConditionLeaf):
         return Status.SUCCESS
 
 
+def devices_not_ready(status: Any, devices: Sequence[str], links_only: bool = False) -> List[str]:
+    """Why the devices of a LOCEM STATUS result are not ready: one text per device that is not (empty when all
+    are). A device is ready when its ``health`` entry has link 'up' and, unless ``links_only``, device 'ok' and
+    no 'fault'. ``devices`` empty: every backend STATUS reports."""
+    health = status.get("health") if isinstance(status, dict) else None
+    if not isinstance(health, dict):
+        return ["the STATUS result has no 'health' object (got %s)" % (
+            sorted(status) if isinstance(status, dict) else type(status).__name__)]
+    wanted = list(devices or sorted(health))
+    if not wanted:
+        return ["STATUS reports no device at all"]
+    down = []
+    for name in wanted:
+        h = health.get(name)
+        if not isinstance(h, dict):
+            down.append("%s: not in STATUS (it reports %s)" % (name, ", ".join(sorted(health)) or "nothing"))
+            continue
+        why = []
+        if h.get("link") != "up":
+            why.append("link %s" % h.get("link", "unknown"))
+        if not links_only and h.get("device", "ok") != "ok":
+            why.append("device %s" % h.get("device"))
+        if not links_only and h.get("fault"):
+            why.append("fault %s" % h.get("fault"))
+        if why:
+            err = h.get("last_error") or ""
+            down.append("%s: %s%s" % (name, ", ".join(why), " (%s)" % err if err else ""))
+    return down
+
+
 class CheckDevicesUp(ConditionLeaf):
     DESCRIPTION = ("SUCCESS when every listed device in a LOCEM STATUS result reports its link up and no fault "
                    "(its 'health' entry: link 'up', device 'ok', no 'fault'); FAILURE naming each device that "
@@ -94,32 +125,115 @@ class CheckDevicesUp(ConditionLeaf):
                         "backend STATUS reports"))
 
     def on_tick(self) -> Status:
+        down = devices_not_ready(self.get("status"), self.get("devices"))
+        if down:
+            return self.fail(down[0] if down[0].startswith(("the STATUS", "STATUS reports")) else
+                             "devices not ready: " + "; ".join(down))
+        return Status.SUCCESS
+
+
+class WaitForDevices(Leaf):
+    DESCRIPTION = ("Reads LOCEM's STATUS every poll seconds until LOCEM answers and every listed device is ready "
+                   "(check=links: its link is up; check=ready: link up, device 'ok', no fault), then writes the "
+                   "STATUS result and succeeds. Waits between reads on HICEM's own clock, so a LOCEM that does "
+                   "not answer yet (restarting, NOT_READY while it makes its devices safe) is waited for too; a "
+                   "STATUS without an answer within poll seconds is cancelled and read again. FAILURE after "
+                   "timeout seconds, naming what was still not ready.")
+    PORTS = (
+        input_port("timeout", FLOAT, None, "s", "give up after this long"),
+        input_port("poll", FLOAT, None, "s", "time between two STATUS reads (and the longest wait for one answer)"),
+        input_port("check", STRING, "ready", "", "links: every link up (device faults and safety stops are left "
+                   "to the tree); ready: link up, device ok, no fault", choices=("links", "ready")),
+        input_port("devices", STRING_LIST, "", "", "backends to check, e.g. 'compressor;arm'; empty = every "
+                   "backend STATUS reports"),
+        output_port("status", JSON, None, "", "the STATUS result that showed the devices ready"),
+    )
+
+    def on_start(self) -> Optional[Status]:
+        self._locem = self.ctx.require("locem", self.name)
+        self._timeout, self._poll = self.get("timeout"), self.get("poll")
+        if self._timeout < 0 or self._poll <= 0:
+            raise PortError("%s: timeout must be >= 0 s and poll > 0 s, got %g and %g" % (
+                self.name, self._timeout, self._poll))
+        self._t0 = self.ctx.clock()
+        self._handle: Any = None
+        self._next = self._t0
+        self._sent_at = self._t0
+        self._why = "no STATUS read yet"
+        self.reads = 0
+        return None
+
+    def _send(self, now: float) -> None:
+        self._sent_at, self._next = now, now + self._poll
+        self.reads += 1
+        try:
+            self._handle = self._locem.send("STATUS")
+        except LocemError as exc:
+            self._handle = None
+            self._why = "LOCEM does not answer (%s)" % exc
+            return
+        self.ctx.track(self._handle)
+
+    def _drop_handle(self) -> None:
+        h, self._handle = self._handle, None
+        if h is not None:
+            if not h.done():
+                h.cancel()
+            self.ctx.untrack(h)
+
+    def on_tick(self) -> Status:
+        now = self.ctx.clock()
+        h = self._handle
+        if h is not None and h.done():
+            self._drop_handle()
+            reply = h.reply()
+            if reply is None or not reply.success:
+                self._why = ("LOCEM answers %s to STATUS: %s" % (reply.code, reply.message) if reply is not None
+                             else "STATUS ended without a reply")
+            else:
+                down = devices_not_ready(reply.result, self.get("devices"), self.get("check") == "links")
+                if not down:
+                    self.set("status", reply.result)
+                    return Status.SUCCESS
+                self._why = "devices not ready: " + "; ".join(down)
+        elif h is not None and now - self._sent_at > self._poll:
+            self._drop_handle()
+            self._why = "LOCEM did not answer STATUS within %.3g s" % self._poll
+        if now - self._t0 > self._timeout:
+            self._drop_handle()
+            return self.fail("after %.3g s (%d STATUS reads): %s" % (self._timeout, self.reads, self._why))
+        if self._handle is None and now >= self._next:
+            self._send(now)
+            return self.on_tick() if self._handle is not None and self._handle.done() else Status.RUNNING
+        self.feedback_message = "waiting for devices: %s" % self._why
+        return Status.RUNNING
+
+    def on_halt(self) -> None:
+        self._drop_handle()
+
+
+class CheckSafetyStop(ConditionLeaf):
+    DESCRIPTION = ("SUCCESS when a device reports a latched safety stop in a LOCEM STATUS result (its 'health' "
+                   "device state starts with 'safety', e.g. the arm's 'safety stop: protective stop (safety mode "
+                   "3)'), writing the stop; FAILURE when it reports none. A latched stop refuses every motion "
+                   "until it is cleared (RESET_ARM, after an operator has checked the cause).")
+    PORTS = (
+        input_port("status", JSON, None, "", "the result of LOCEM's STATUS command"),
+        input_port("device", STRING, None, "", "backend to look at, e.g. arm"),
+        output_port("stop", STRING, None, "", "the latched stop, e.g. 'protective stop (safety mode 3)'"),
+    )
+
+    def on_tick(self) -> Status:
         status = self.get("status")
         health = status.get("health") if isinstance(status, dict) else None
-        if not isinstance(health, dict):
-            return self.fail("the STATUS result has no 'health' object (got %s)" % (
-                sorted(status) if isinstance(status, dict) else type(status).__name__))
-        wanted = list(self.get("devices") or sorted(health))
-        if not wanted:
-            return self.fail("STATUS reports no device at all")
-        down = []
-        for name in wanted:
-            h = health.get(name)
-            if not isinstance(h, dict):
-                down.append("%s: not in STATUS (it reports %s)" % (name, ", ".join(sorted(health)) or "nothing"))
-                continue
-            why = []
-            if h.get("link") != "up":
-                why.append("link %s" % h.get("link", "unknown"))
-            if h.get("device", "ok") != "ok":
-                why.append("device %s" % h.get("device"))
-            if h.get("fault"):
-                why.append("fault %s" % h.get("fault"))
-            if why:
-                err = h.get("last_error") or ""
-                down.append("%s: %s%s" % (name, ", ".join(why), " (%s)" % err if err else ""))
-        if down:
-            return self.fail("devices not ready: " + "; ".join(down))
+        h = health.get(self.get("device")) if isinstance(health, dict) else None
+        if not isinstance(h, dict):
+            return self.fail("STATUS has no health entry for '%s'" % self.get("device"))
+        state = str(h.get("device", ""))
+        if not state.lower().startswith("safety"):
+            return self.fail("%s reports no safety stop (device %s)" % (self.get("device"), state or "unknown"))
+        stop = state.split(":", 1)[1].strip() if ":" in state else state
+        self.set("stop", stop or state)
         return Status.SUCCESS
 
 
@@ -215,14 +329,27 @@ class WriteDataStore(Leaf):
 
 class WaitForOperator(Leaf):
     DESCRIPTION = ("Opens an operator prompt (text template filled from the blackboard) and stays RUNNING until "
-                   "it is answered; writes the answer. Halting it withdraws the prompt.")
+                   "it is answered; writes the answer. An answer listed in 'refuse' (the operator says it cannot "
+                   "be done) ends it in FAILURE with that answer and the prompt as the reason. Halting it "
+                   "withdraws the prompt.")
     PORTS = (
         input_port("kind", STRING, None, "", "prompt kind shown to the HMI, e.g. mount_tool, validate_line"),
         input_port("text", STRING, None, "", "question template, e.g. 'Mount the {param_tool}'"),
         input_port("choices", STRING_LIST, None, "", "allowed answers, e.g. 'valid;invalid'"),
         input_port("timeout", FLOAT, "-1", "s", "FAILURE if unanswered this long; -1 = wait forever"),
+        input_port("refuse", STRING_LIST, "", "", "answers (among choices) that fail the node, e.g. cannot_clear"),
         output_port("answer", STRING, None, "", "the operator's answer"),
     )
+
+    @classmethod
+    def validate_literals(cls, literals: "dict") -> Optional[str]:
+        refuse, choices = literals.get("refuse"), literals.get("choices")
+        if refuse and choices is not None:
+            unknown = [a for a in refuse if a not in choices]
+            if unknown:
+                return "refuse lists %s, which %s not among the choices %s" % (
+                    ", ".join(unknown), "is" if len(unknown) == 1 else "are", ";".join(choices))
+        return None
 
     def on_start(self) -> Optional[Status]:
         desk = self.ctx.require("operator", self.name)
@@ -236,6 +363,8 @@ class WaitForOperator(Leaf):
         p = self._prompt
         if p.state == "answered":
             self.set("answer", p.answer)
+            if p.answer in (self.get("refuse") or ()):
+                return self.fail("operator answered %s to: %s" % (p.answer, p.text))
             return Status.SUCCESS
         if p.state == "cancelled":
             return self.fail("prompt %s was withdrawn" % p.id)
@@ -610,6 +739,6 @@ class PlanTransit(Leaf):
         return Status.SUCCESS
 
 
-LIBRARY = (CheckHealth, CheckDevicesUp, SendLocemCommand, ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual,
-           SelectEntry, IngestScan, MarkFeature, TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments,
+LIBRARY = (CheckHealth, CheckDevicesUp, WaitForDevices, CheckSafetyStop, SendLocemCommand, ReadDataStore,
+           WriteDataStore, WaitForOperator, Log, CheckEqual, SelectEntry, IngestScan, MarkFeature, TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments,
            GetAreaRaster, PlanTransit)

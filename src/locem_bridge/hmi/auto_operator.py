@@ -19,6 +19,7 @@ Configuration (a dict, e.g. the ``auto_operator`` section of a YAML file; every 
       mount_tool:    {answer: done, delay_s: 2.0}
       validate_line: {answer: valid, delay_s: 0.5, per_feature: {invalid: [wall_1_joint_2]}}
       manual_taping: {answer: done, delay_s: 1.0}
+      safety_stop:   {answer: reset, delay_s: 0.5}   # RECOVER: arm protective stop checked, reset it
 
 ``per_feature`` maps an answer to the feature ids (joints, areas, walls, tools) it is given for; a prompt
 concerns a feature when one of its ``context`` values equals the id, or when the id appears as a whole word in
@@ -101,10 +102,13 @@ DEFAULT_CONFIG: Dict[str, Any] = {
         "validate_line": {"answer": "valid", "delay_s": 0.2},
         "manual_taping": {"answer": "done", "delay_s": 0.5},
         "finish_interrupted": {"answer": "done", "delay_s": 0.0},
+        "safety_stop": {"answer": "reset", "delay_s": 0.5},
     },
 }
 """What the automatic operator does when given no configuration: answers the plasterboard trees' prompts
-(trees/GET_TOOL.xml, VALIDATE_TAPE_LINE.xml, MANUAL_TAPING.xml, RESUME_TAPE_LINE.xml) positively, quickly."""
+(trees/GET_TOOL.xml, VALIDATE_TAPE_LINE.xml, MANUAL_TAPING.xml, RESUME_TAPE_LINE.xml, RECOVER.xml) positively,
+quickly: a latched safety stop (RECOVER's ``safety_stop`` prompt) is reset, so a headless job goes on; each such
+answer counts as an operator intervention in the run report."""
 
 
 class AutoOperatorConfig:
