@@ -202,3 +202,34 @@ def test_a_protective_stop_the_operator_cannot_clear_fails_the_process_with_that
     assert locem.sent[-1] == "STATUS" or locem.sent[-1] == "STOP"      # nothing moved after the stop
     assert engine.store.value(SITE_NS.wall_1_area_1, PPR.sandingStatus) != PPR.processed
     assert locem.running() == []
+
+
+# --------------------------------------------------------------------------------- unreachable: manual work --
+class UnreachableLocem(LocemDouble):
+    """The double refusing the n-th SPRAY_AREA as the arm bridge refuses a pose its IK cannot reach."""
+
+    def __init__(self, refuse_at: int, **kw) -> None:
+        super().__init__(**kw)
+        self.refuse_at, self.sprays = refuse_at, 0
+
+    def send(self, command: str):
+        if command.startswith("SPRAY_AREA "):
+            self.sprays += 1
+            if self.sprays == self.refuse_at:
+                self.fail_next["SPRAY_AREA"] = LocemReply(False, "INVALID_ARGUMENT", "pose [0.9, -1.1, 2.4, 0, 3.14, "
+                                                          "0] is not reachable by the arm: no IK solution")
+        return super().send(command)
+
+
+def test_a_section_out_of_reach_is_manual_work_and_the_process_succeeds(tmp_path, engine):
+    locem = UnreachableLocem(refuse_at=6, site=_two_area_site())       # area 2, section 2
+    phase, state, marks = _run(tmp_path, engine, locem)
+    assert phase == "ended", state
+    log = _task_log(engine)
+    assert [x[:2] for x in log] == [("SCAN", "succeeded"), ("GET_TOOL", "succeeded"), ("SPRAY_AREA", "succeeded"),
+                                    ("SPRAY_AREA", "succeeded"), ("GO_HOME", "succeeded")]
+    assert log[2][2] == "sprayed"
+    assert log[3][2] == ("sprayed; manual work on wall_1_area_2: section 2 (along 0.6..1.2 m, height 0..2.5 m)")
+    assert len([c for c in locem.sent if c.startswith("SPRAY_AREA ")]) == 8 and "RECOVER" not in locem.sent
+    for a in ("wall_1_area_1", "wall_1_area_2"):
+        assert engine.store.value(SITE_NS[a], PPR.sprayingStatus) == PPR.processed

@@ -11,7 +11,7 @@ from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
 from locem_bridge.hicem.interfaces import LocemReply
 from locem_bridge.hicem.node_base import NodeContext
 from locem_bridge.hicem.operator import OperatorDesk
-from locem_bridge.hicem.section_progress import PROGRESS
+from locem_bridge.hicem.section_progress import PROGRESS, parse_manual_work
 from locem_bridge.hicem.xml_loader import TreeLibrary
 
 S, F, R = Status.SUCCESS, Status.FAILURE, Status.RUNNING
@@ -103,3 +103,69 @@ def test_bad_ports_fail_with_the_reason():
     bb.set("secs", [{"origin": [0, 0, 0]}])
     assert tree.tick() == F
     assert "sections must be a list of objects with an 'index'" in tree.ctx.last_failure()[1]
+
+
+# ----------------------------------------------------------------------------- unreachable sections: manual work --
+UNREACHABLE = ("pose [0.5000, -1.2000, 2.6000, 0.0000, 3.1416, 0.0000] is not reachable by the arm: getInverseKinematics "
+               "found no solution")
+
+
+def _tick_refusing(tree, locem, refusals):
+    """Tick; the n-th SPRAY_AREA (1-based) is answered ``refusals[n]``."""
+    refusals = dict(refusals)
+    for _ in range(400):
+        n = sum(c.startswith("SPRAY_AREA ") for c in locem.sent)
+        if n + 1 in refusals:
+            locem.fail_next["SPRAY_AREA"] = refusals.pop(n + 1)
+        st = tree.tick()
+        if st != R:
+            return st
+    raise AssertionError("tree still running")
+
+
+def test_a_section_the_arm_cannot_reach_is_left_for_manual_work_and_the_area_goes_on(tmp_path):
+    # the 4.8 m area in 8 sections of 0.6 m; sections 3 and 8 are out of reach (LOCEM's IK refusal)
+    store = _store(tmp_path / "hdict.sqlite")
+    locem = LocemDouble()
+    tree, ctx = _spray_tree(store, locem)
+    assert _tick_refusing(tree, locem, {n: LocemReply(False, "INVALID_ARGUMENT", UNREACHABLE) for n in (3, 8)}) == S, ctx.failures
+    assert len(_sprays(locem)) == 8                       # every section tried once, none twice
+    detail = tree.blackboard.get("task_detail")
+    ext = params().raw["spray"]["edge_run_in"]
+    assert detail == ("sprayed; manual work on wall_1_area_1: section 3 (along 1.2..1.8 m, height 0..2.5 m), "
+                      "section 8 (along 4.2..4.8 m, height 0..2.5 m)"), detail
+    assert ext > 0                                       # the last section reaches beyond the area: clipped to it
+    assert parse_manual_work(detail) == [
+        {"area": "wall_1_area_1", "section": 3, "along": [1.2, 1.8], "height": [0.0, 2.5]},
+        {"area": "wall_1_area_1", "section": 8, "along": [4.2, 4.8], "height": [0.0, 2.5]}]
+    assert store.value(PROGRESS, "spray/wall_1_area_1") is None      # the area is done: record dropped
+    assert parse_manual_work("sprayed") == [] and parse_manual_work("") == []
+
+
+def test_other_refusals_still_fail_the_task_with_the_commands_reason(tmp_path):
+    for reply in (LocemReply(False, "HARDWARE_ERROR", "arm protective stop (safety mode 3): not reachable?"),
+                  LocemReply(False, "INVALID_ARGUMENT", "tool spray_gun is not mounted (mounted: sander)")):
+        store = _store(tmp_path / ("hdict_%s.sqlite" % reply.code))
+        locem = LocemDouble()
+        tree, ctx = _spray_tree(store, locem)
+        assert _tick_refusing(tree, locem, {2: reply}) == F
+        assert len(_sprays(locem)) == 2
+        node, reason = ctx.last_failure()
+        assert node == "locem_command" and reply.message in reason and reply.code in reason
+        assert store.value(PROGRESS, "spray/wall_1_area_1") == {"done": [0]}
+
+
+def test_a_retried_area_does_not_try_its_manual_section_again(tmp_path):
+    store = _store(tmp_path / "hdict.sqlite")
+    first = LocemDouble()
+    tree, _ = _spray_tree(store, first)
+    # section 2 out of reach, then the compressor link drops on section 4: the task fails
+    assert _tick_refusing(tree, first, {2: LocemReply(False, "INVALID_ARGUMENT", UNREACHABLE),
+                                        4: LocemReply(False, "HARDWARE_ERROR", "compressor: link down")}) == F
+    record = store.value(PROGRESS, "spray/wall_1_area_1")
+    assert record["done"] == [0, 1, 2] and [m["index"] for m in record["manual"]] == [1]
+    second = LocemDouble()
+    tree, ctx = _spray_tree(store, second)
+    assert _tick_refusing(tree, second, {}) == S, ctx.failures
+    assert len(_sprays(second)) == 5                     # sections 4..8; the manual one is not tried again
+    assert [m["section"] for m in parse_manual_work(tree.blackboard.get("task_detail"))] == [2]

@@ -62,3 +62,16 @@ def test_inconsistent_outcome_is_refused_and_nothing_is_written(tmp_path):
     with pytest.raises(ReportError, match="spray_coverage = 1.7 is not a fraction"):
         write_report(record(tmp_path, outcome=bad), str(results))
     assert not results.exists() or not os.listdir(str(results))
+
+
+def test_area_sections_left_for_manual_work_are_listed(tmp_path):
+    manual = [{"work": "sand", "area": "wall_1_area_1", "section": 3, "along": [1.2, 1.8], "height": [0.0, 2.5]}]
+    folder = write_report(record(tmp_path, manual_areas=manual), str(tmp_path / "results"))
+    report = json.loads(open(os.path.join(folder, "report.json")).read())
+    assert report["outcome"]["areas_manual"] == manual
+    md = open(os.path.join(folder, "report.md")).read()
+    assert "| area sections left for manual work | sand wall_1_area_1 section 3 (along 1.2..1.8 m, height 0..2.5 m) |" \
+        in md
+    folder = write_report(record(tmp_path), str(tmp_path / "results2"))
+    assert json.loads(open(os.path.join(folder, "report.json")).read())["outcome"]["areas_manual"] == []
+    assert "| area sections left for manual work | none |" in open(os.path.join(folder, "report.md")).read()

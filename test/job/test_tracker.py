@@ -85,3 +85,20 @@ def test_an_area_worked_again_after_recover_keeps_its_number():
         t.on_state(s)
     assert lines[-4:] == ["[2/2 spraying] SPRAY_AREA, area 1 of 2", "[2/2 spraying] SPRAY_AREA, area 2 of 2",
                           "[2/2 spraying] RECOVER", "[2/2 spraying] SPRAY_AREA, area 2 of 2"]
+
+
+def test_area_sections_left_for_manual_work_are_collected_from_the_reported_detail():
+    t, _lines, _clock = tracker()
+    t.begin(1)
+    detail = ("sprayed; manual work on wall_1_area_2: section 3 (along 1.2..1.8 m, height 0..2.5 m), section 4 "
+              "(along 1.8..2 m, height 0..2.5 m)")
+    for s in [state("urn:p#Spraying", "running", "SPRAY_AREA", "a1"),
+              state("urn:p#Spraying", "reporting", "SPRAY_AREA", "a1", "sprayed"),
+              state("urn:p#Spraying", "running", "SPRAY_AREA", "a2"),
+              state("urn:p#Spraying", "reporting", "SPRAY_AREA", "a2", detail),
+              state("urn:p#Spraying", "reporting", "SPRAY_AREA", "a2", detail),      # repeated: counted once
+              state("urn:p#Spraying", "reporting", "GO_HOME", "h", detail)]:       # not an area task
+        t.on_state(s)
+    assert t.manual_areas == [
+        {"work": "spray", "area": "wall_1_area_2", "section": 3, "along": [1.2, 1.8], "height": [0.0, 2.5]},
+        {"work": "spray", "area": "wall_1_area_2", "section": 4, "along": [1.8, 2.0], "height": [0.0, 2.5]}]

@@ -245,7 +245,8 @@ class SendLocemCommand(Leaf):
         input_port("command", STRING, None, "", "command template, e.g. 'GOTO {approach_pose}'"),
         input_port("timeout", FLOAT, "{@cfg.locem.command_timeout_s}", "s", "give up (and cancel) after this"),
         output_port("result", JSON, None, "", "the reply's result object"),
-        output_port("code", STRING, None, "", "the reply's code"),
+        output_port("code", STRING, None, "", "the reply's code (also on failure)"),
+        output_port("message", STRING, None, "", "the reply's message (also on failure)"),
     )
 
     def on_start(self) -> Optional[Status]:
@@ -257,6 +258,8 @@ class SendLocemCommand(Leaf):
             self._handle = locem.send(self._cmd)
         except LocemError as exc:
             self._handle = None
+            self.set("code", exc.code or "NOT_SENT")
+            self.set("message", str(exc))
             return self.fail("cannot send %r: %s" % (self._cmd, exc))
         self.ctx.track(self._handle)
         self.ctx.commands_sent.append(self._cmd)
@@ -277,6 +280,7 @@ class SendLocemCommand(Leaf):
         except LocemError as exc:
             return self.fail(str(exc))
         self.set("code", reply.code)
+        self.set("message", reply.message)
         if not reply.success:
             return self.fail("LOCEM %s for %r: %s" % (reply.code, self._cmd, reply.message))
         self.set("result", reply.result)

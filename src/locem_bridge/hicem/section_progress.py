@@ -9,14 +9,22 @@ shipped parameters, so it survives a restart), one entry per (work, area): ``{"d
 Use in a tree: ``PendingSections`` after ``GetAreaRaster`` gives the sections still to do, ``RecordSectionDone``
 after each section's command succeeded, ``ForgetSectionsDone`` once the whole area is marked done (the next
 job on the same area starts from the first section).
+
+Manual work: a section LOCEM refuses because the arm cannot reach it from its base pose (``LeaveSectionManual``
+after the section's command failed: the answer's code and a phrase of its message, ``area_work.unreachable_*``
+in the HICEM parameters) is recorded in the same entry, ``{"done": [...], "manual": [{index, along, height,
+reason}]}``, counted as handled, and the area goes on; ``AreaDetail`` then writes the task detail, e.g.
+``sanded; manual work on wall_1_area_1: section 3 (along 1.2..1.8 m, height 0..2.5 m)``, which PEMKRE logs and
+the run report lists (:func:`parse_manual_work`). Unreachable parts are manual work, not a failed process.
 """
-from typing import Any, List
+import re
+from typing import Any, Dict, List
 
 from py_trees.common import Status
 
 from .errors import PortError
 from .node_base import Leaf
-from .ports import INT, JSON, STRING, input_port, output_port
+from .ports import INT, JSON, STRING, STRING_LIST, input_port, output_port
 
 PROGRESS = "progress"
 
@@ -28,6 +36,42 @@ def progress_key(work: str, area_id: str) -> str:
 def _done(store: Any, work: str, area_id: str) -> List[int]:
     entry = store.get(PROGRESS, progress_key(work, area_id))
     return [int(i) for i in (entry.value.get("done", []) if entry is not None else [])]
+
+
+def _record(store: Any, work: str, area_id: str) -> Dict[str, Any]:
+    entry = store.get(PROGRESS, progress_key(work, area_id))
+    value = dict(entry.value) if entry is not None else {}
+    value.setdefault("done", [])
+    return value
+
+
+def _num(v: float) -> str:
+    s = ("%.2f" % v).rstrip("0").rstrip(".")
+    return "0" if s in ("-0", "") else s
+
+
+_MANUAL = re.compile(r"manual work on (\S+): (.*)$")
+_SECTION = re.compile(r"section (\d+) \(along (-?[0-9.]+)\.\.(-?[0-9.]+) m, height (-?[0-9.]+)\.\.(-?[0-9.]+) m\)")
+
+
+def manual_work_text(area_id: str, manual: List[Dict[str, Any]]) -> str:
+    """``manual work on <area>: section 3 (along 1.2..1.8 m, height 0..2.5 m), section 4 (...)``; sections are
+    numbered from 1, along = distance along the area from its origin, height = above the floor (m)."""
+    return "manual work on %s: %s" % (area_id, ", ".join(
+        "section %d (along %s..%s m, height %s..%s m)" % (int(m["index"]) + 1, _num(m["along"][0]),
+                                                         _num(m["along"][1]), _num(m["height"][0]),
+                                                         _num(m["height"][1]))
+        for m in sorted(manual, key=lambda m: int(m["index"]))))
+
+
+def parse_manual_work(detail: str) -> List[Dict[str, Any]]:
+    """The manual work a task detail lists (see :func:`manual_work_text`): ``[{area, section, along, height}]``
+    with section numbered from 1; empty when the detail lists none."""
+    m = _MANUAL.search(detail or "")
+    if not m:
+        return []
+    return [{"area": m.group(1), "section": int(s.group(1)), "along": [float(s.group(2)), float(s.group(3))],
+             "height": [float(s.group(4)), float(s.group(5))]} for s in _SECTION.finditer(m.group(2))]
 
 
 def _check_work(node: Leaf) -> str:
@@ -76,10 +120,76 @@ class RecordSectionDone(Leaf):
         store = self.ctx.require("store", self.name)
         work, area = _check_work(self), self.get("area_id")
         with store.transaction():
-            done = _done(store, work, area)
-            if self.get("index") not in done:
-                done.append(self.get("index"))
-            store.put(PROGRESS, progress_key(work, area), {"done": sorted(done)}, source="tree")
+            record = _record(store, work, area)
+            if self.get("index") not in record["done"]:
+                record["done"] = sorted(record["done"] + [self.get("index")])
+            store.put(PROGRESS, progress_key(work, area), record, source="tree")
+        return Status.SUCCESS
+
+
+class LeaveSectionManual(Leaf):
+    DESCRIPTION = ("After a section's command failed: when LOCEM refused it because the arm cannot reach it (the "
+                   "answer's code is one of `codes` and its message contains one of `phrases`), records the "
+                   "section as manual work with its extent in the data store collection 'progress' and succeeds, "
+                   "so the area goes on with its next section and the process does not fail for it. Any other "
+                   "failure: FAILURE, keeping the command's failure as the action's reason.")
+    PORTS = (
+        input_port("area_id", STRING, None, "", "stored area id"),
+        input_port("work", STRING, None, "", "what is done to the area (spray, sand)"),
+        input_port("section", JSON, None, "", "the section (GetAreaRaster): index, origin, width, height"),
+        input_port("code", STRING, None, "", "the failed command's code (GuardedCommand's code)"),
+        input_port("message", STRING, "", "", "the failed command's message"),
+        input_port("codes", STRING_LIST, "{@cfg.area_work.unreachable_codes}", "",
+                   "codes that can mean 'out of reach', e.g. INVALID_ARGUMENT"),
+        input_port("phrases", STRING_LIST, "{@cfg.area_work.unreachable_phrases}", "",
+                   "a phrase of the message that says so, e.g. 'not reachable'"),
+    )
+
+    def on_tick(self) -> Status:
+        code, message = self.get("code"), self.get("message") or ""
+        if code not in self.get("codes") or not any(p.lower() in message.lower() for p in self.get("phrases")):
+            last = self.ctx.last_failure()
+            if last is not None:        # keep the command's failure as the reason the action reports
+                self.ctx.report_failure(*last)
+            return Status.FAILURE
+        store = self.ctx.require("store", self.name)
+        hdh = self.ctx.require("data_handler", self.name)
+        work, area_id, sec = _check_work(self), self.get("area_id"), self.get("section")
+        try:
+            area = hdh.feature(area_id, "area")
+            along0 = sum((float(sec["origin"][k]) - float(area["origin"][k])) * float(area["u"][k]) for k in range(3))
+            along = [along0, along0 + float(sec["width"])]
+            height = [float(sec["origin"][2]), float(sec["origin"][2]) + float(sec["height"])]
+            index = int(sec["index"])
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise PortError("%s: section must be a GetAreaRaster section of area %s (%s)" % (self.name, area_id, exc))
+        along = [max(0.0, along[0]), min(float(area["width"]), along[1])]
+        with store.transaction():
+            record = _record(store, work, area_id)
+            record["manual"] = [m for m in record.get("manual", []) if int(m["index"]) != index] + [
+                {"index": index, "along": along, "height": height, "reason": "%s: %s" % (code, message)}]
+            store.put(PROGRESS, progress_key(work, area_id), record, source="tree")
+        self.ctx.log.warning("%s of %s, section %d left for manual work: %s", work, area_id, index + 1, message)
+        self.feedback_message = "section %d left for manual work" % (index + 1)
+        return Status.SUCCESS
+
+
+class AreaDetail(Leaf):
+    DESCRIPTION = ("The task detail of an area task: `done` alone, or followed by the sections left for manual work "
+                   "('sanded; manual work on wall_1_area_1: section 3 (along 1.2..1.8 m, height 0..2.5 m)'), "
+                   "read from the data store collection 'progress' before ForgetSectionsDone drops the record.")
+    PORTS = (
+        input_port("area_id", STRING, None, "", "stored area id"),
+        input_port("work", STRING, None, "", "what is done to the area (spray, sand)"),
+        input_port("done", STRING, None, "", "the word for a finished area, e.g. sanded"),
+        output_port("detail", STRING, None, "", "the task detail"),
+    )
+
+    def on_tick(self) -> Status:
+        store = self.ctx.require("store", self.name)
+        work, area_id = _check_work(self), self.get("area_id")
+        manual = _record(store, work, area_id).get("manual", [])
+        self.set("detail", self.get("done") + ("; " + manual_work_text(area_id, manual) if manual else ""))
         return Status.SUCCESS
 
 
@@ -97,4 +207,4 @@ class ForgetSectionsDone(Leaf):
         return Status.SUCCESS
 
 
-LIBRARY = (PendingSections, RecordSectionDone, ForgetSectionsDone)
+LIBRARY = (PendingSections, RecordSectionDone, ForgetSectionsDone, LeaveSectionManual, AreaDetail)

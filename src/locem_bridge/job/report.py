@@ -8,7 +8,9 @@
 
 ``tape_coverage`` is the mean covered fraction over the joints the robot was to tape (joints the operator sent to
 manual taping are reported as ``joints_manual`` and excluded); ``spray_coverage`` and ``sand_coverage`` are the
-covered fractions of all wall area. ``results/latest`` is a relative symlink to the newest run.
+covered fractions of all wall area. ``outcome.areas_manual`` lists the parts of areas HICEM left for manual work
+(a section the arm could not reach: ``{work, area, section, along, height}``, metres along the area and above the
+floor); the processes still succeed. ``results/latest`` is a relative symlink to the newest run.
 """
 
 import datetime
@@ -48,6 +50,7 @@ class RunRecord:
     timing: Dict[str, float] = field(default_factory=dict)
     pictures: List[str] = field(default_factory=list)
     started: Optional[datetime.datetime] = None
+    manual_areas: List[Dict[str, Any]] = field(default_factory=list)
 
 
 def run_name(now: Optional[datetime.datetime] = None) -> str:
@@ -75,6 +78,7 @@ def build_report(record: RunRecord, run: str) -> Dict[str, Any]:
         "sand_coverage": round(float(record.outcome.get("sand_coverage", 0.0)), 6),
         "operator_interventions": int(record.operator_interventions),
         "collisions": int(record.collisions),
+        "areas_manual": [dict(m) for m in record.manual_areas],
         "joints": joints,
         "walls": walls,
     }
@@ -108,6 +112,10 @@ def render_markdown(report: Dict[str, Any]) -> str:
               "| tape coverage | %.1f %% |" % (100 * o["tape_coverage"]),
               "| spray coverage | %.1f %% (thickness CV %.3f) |" % (100 * o["spray_coverage"], o["spray_thickness_cv"]),
               "| sand coverage | %.1f %% |" % (100 * o["sand_coverage"]),
+              "| area sections left for manual work | %s |" % (
+                  "; ".join("%s %s section %d (along %g..%g m, height %g..%g m)" % (
+                      m["work"], m["area"], m["section"], m["along"][0], m["along"][1], m["height"][0],
+                      m["height"][1]) for m in o.get("areas_manual", [])) or "none"),
               "| operator interventions | %d |" % o["operator_interventions"],
               "| collisions | %d |" % o["collisions"]]
     if report.get("timing"):

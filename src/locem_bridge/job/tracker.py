@@ -2,18 +2,22 @@
 
 ROS-free: the job node feeds it the fields of ``/hicem/state`` and ``/hicem/prompts`` messages as dicts. It
 turns them into one-line progress messages ("[2/3 spraying] SPRAY_AREA, area 2 of 4"), per-process records
-for the report, and the count of operator interventions (answered prompts, by kind).
+for the report, the count of operator interventions (answered prompts, by kind), and the parts of areas HICEM
+left for manual work (named in a spray or sand task's detail when it is reported).
 """
 
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Mapping, Optional
 
+from locem_bridge.hicem.section_progress import parse_manual_work
+
 from .report import ProcessRecord
 
 TERMINAL_PHASES = ("ended", "failed", "stopped")
 LINE_ACTIONS = ("VALIDATE_TAPE_LINE", "TAPE_LINE", "MANUAL_TAPING")
 AREA_ACTIONS = ("SPRAY_AREA", "SAND_AREA")
+AREA_WORK = {"SPRAY_AREA": "spray", "SAND_AREA": "sand"}
 
 
 @dataclass(frozen=True)
@@ -36,6 +40,7 @@ class JobTracker:
         self.clock = clock
         self.records: List[ProcessRecord] = []
         self.interventions: Dict[str, int] = {}
+        self.manual_areas: List[Dict[str, Any]] = []
         self.current: Optional[int] = None
         self._started = 0.0
         self._tasks: Dict[str, List[str]] = {}
@@ -84,6 +89,11 @@ class JobTracker:
             n = (self._joint_index if action in LINE_ACTIONS else
                  self._area_index if action in AREA_ACTIONS else len(seen))
             self.say("%s %s%s" % (self._tag(), action, self._count(action, n)))
+        if state.get("phase") == "reporting" and action in AREA_ACTIONS:
+            for part in parse_manual_work(str(state.get("detail", ""))):
+                part = dict(part, work=AREA_WORK[action])
+                if part not in self.manual_areas:
+                    self.manual_areas.append(part)
         if state.get("phase") in TERMINAL_PHASES and self._done is None:
             self._done = dict(state)
 

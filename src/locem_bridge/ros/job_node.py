@@ -124,7 +124,8 @@ def main() -> None:
     record = RunRecord(processes=tracker.records, outcome=outcome, operator_interventions=tracker.total_interventions,
                        collisions=int(outcome.get("collisions", 0)), settings=settings, kpis=kpis,
                        timing={"wall_clock_s": time.time() - started},
-                       pictures=[os.path.join(pictures_dir, p) for p in outcome.get("pictures", [])])
+                       pictures=[os.path.join(pictures_dir, p) for p in outcome.get("pictures", [])],
+                       manual_areas=tracker.manual_areas)
     folder = write_report(record, results_dir)
     print("[job] report: %s" % os.path.join(folder, "report.md"), flush=True)
     ok = all(r.status == "succeeded" for r in tracker.records) and len(tracker.records) == len(steps)
