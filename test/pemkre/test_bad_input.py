@@ -288,3 +288,36 @@ def test_a_turtle_syntax_error_is_one_line_naming_file_and_line(tmp_path):
     line = str(info.value)
     assert line.startswith("%s: line %d: Turtle syntax error: " % (bad, len(lines))), line
     assert "\n" not in line
+
+
+@pytest.mark.parametrize("depth", [33, 10000])
+def test_deeply_nested_json_is_refused_naming_the_argument_and_the_depth(make_engine, depth):
+    """'[[[[...]]]]' 10000 deep used to be an INTERNAL_ERROR (Python's recursion limit); now every JSON argument
+    of PEMKRE's services refuses it as INVALID_PARAMETER naming the argument and the allowed 32 levels, and
+    nothing is applied. 32 levels (the limit) still parse."""
+    from locem_bridge.pemkre.engine import MAX_JSON_DEPTH, load_json
+    assert MAX_JSON_DEPTH == 32
+    deep_text = "[" * depth + "]" * depth
+    deep_obj = {"walls": [], "joints": [], "areas": [], "extra": "x"}
+    node = deep_obj
+    for _ in range(depth - 1):                           # the same depth as a Python value (update_world(dict))
+        node["extra"] = {}
+        node = node["extra"]
+    e = make_engine("deep")
+    e.start_process(TAPING, {"validateLines": False})
+    scan = e.next_action()
+    assert scan.action_type == "SCAN"
+    e.set_task_status(scan.task, "in_progress")
+    for what, call in (
+            ("options", lambda: load_json('{"validateLines": %s}' % deep_text, "options")),
+            ("options", lambda: e.start_process(TAPING, {"validateLines": deep_obj}, abort_running=True)),
+            ("scan", lambda: e.update_world('{"walls": %s}' % deep_text)),
+            ("scan", lambda: e.update_world(deep_obj)),
+            ("detail (the SCAN result)", lambda: e.set_task_status(scan.task, "succeeded",
+                                                                   '{"joints": %s}' % deep_text))):
+        msg = _rejected(e, call, InvalidParameterError, what, "deeper than the allowed 32 levels")
+        assert InvalidParameterError.code == "INVALID_PARAMETER", msg
+    # the limit itself is fine, and the SCAN task still takes its (flat) result
+    assert load_json("[" * 32 + "]" * 32, "options") is not None
+    e.set_task_status(scan.task, "succeeded", json_dumps(scan_result(joints_per_wall=1)))
+    assert e.next_action().action_type == "GET_TOOL"

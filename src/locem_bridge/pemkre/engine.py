@@ -14,6 +14,9 @@ and finds the process that was running when the store was last used. Then, from 
   task fails its process, unless its node has failure transitions (``proc:onTaskFailure``): then the process
   stays running and the next :meth:`~ProcessEngine.next_action` walks the first failure transition whose
   condition holds (none holding fails the process then). The failed task stays failed in the log and the KPIs.
+  A report may carry a *request id* (any text, unique per report): it is stored with the status in the same
+  atomic change, so the same report sent again -- a client retrying after PEMKRE died before answering -- is
+  answered as already applied and changes nothing, also after a restart. ``start_process`` takes one too.
 * :meth:`ProcessEngine.query` runs a predefined query of the ontology with values passed as bindings.
 
 Every state change is one atomic :meth:`TripleStore.apply` holding the asserted triples and the inferred triples
@@ -25,6 +28,7 @@ clock) and ``reasoning_max_triples``: a change that hits a bound -- a world upda
 good state and the same call can be repeated.
 """
 import datetime
+import json
 import logging
 import re
 import secrets
@@ -72,6 +76,13 @@ META = Namespace(BASE + "meta#")
 TASK_STATUSES = ("in_progress", "succeeded", "failed")
 MAX_DETAIL_CHARS = 1_000_000
 _STORED_DETAIL_CHARS = 2000
+#: The deepest nesting of a JSON argument (options, SCAN results) PEMKRE takes; a SCAN result needs 4.
+MAX_JSON_DEPTH = 32
+#: The longest request id of a status report or a process start.
+MAX_REQUEST_ID_CHARS = 200
+#: Where request ids are remembered: bookkeeping, not the execution log (the KPIs never see them).
+_M_statusRequest = META.statusRequestId
+_M_startRequest = META.startRequestId
 #: Schema closures by ontology hash, shared by the engines of one process (a closure is never modified).
 _CLOSURE_CACHE: Dict[str, Graph] = {}
 
@@ -100,6 +111,51 @@ class TaskStatusReport:
     process: str
     effects_applied: int = 0
     world_triples_changed: int = 0
+    #: True when the request id was seen before: the report had already been applied, nothing changed now
+    repeated: bool = False
+
+
+def _json_depth(value: Any, what: str, limit: int) -> None:
+    """InvalidParameterError when ``value`` nests lists/objects deeper than ``limit`` (iterative: no recursion)."""
+    stack = [(value, 1)]
+    while stack:
+        v, depth = stack.pop()
+        if isinstance(v, Mapping):
+            children: Sequence[Any] = list(v.values())
+        elif isinstance(v, (list, tuple)):
+            children = v
+        else:
+            continue
+        if depth > limit:
+            raise InvalidParameterError("%s nests JSON arrays/objects deeper than the allowed %d levels"
+                                        % (what, limit))
+        stack.extend((c, depth + 1) for c in children)
+
+
+def load_json(text: Union[str, bytes], what: str, limit: int = MAX_JSON_DEPTH) -> Any:
+    """Parse a JSON argument of a PEMKRE call, refusing nesting deeper than ``limit`` levels.
+
+    Raises :class:`InvalidParameterError` naming ``what`` for a too deep document; ``ValueError`` for text that
+    is not JSON (callers report that in their own words).
+    """
+    try:
+        value = json.loads(text)
+    except RecursionError:
+        raise InvalidParameterError("%s nests JSON arrays/objects deeper than the allowed %d levels"
+                                    % (what, limit)) from None
+    _json_depth(value, what, limit)
+    return value
+
+
+def _check_request_id(request_id: Optional[str]) -> str:
+    if request_id is None:
+        return ""
+    if not isinstance(request_id, str):
+        raise InvalidParameterError("request id must be text, got %s" % type(request_id).__name__)
+    if len(request_id) > MAX_REQUEST_ID_CHARS or not all(" " < c < "\x7f" for c in request_id):
+        raise InvalidParameterError("request id %r is not allowed: at most %d printable ASCII characters without "
+                                    "spaces" % (request_id[:60], MAX_REQUEST_ID_CHARS))
+    return request_id
 
 
 @dataclass
@@ -252,14 +308,24 @@ class ProcessEngine:
             return str(self._active) if self._active is not None else None
 
     def start_process(self, process: str, options: Optional[Mapping[str, Any]] = None, *,
-                      abort_running: bool = False) -> str:
+                      abort_running: bool = False, request_id: str = "") -> str:
         """Create a specific process realizing the abstract ``process``; return its IRI.
 
         ``options`` maps option names declared by the process (e.g. ``validateLines``) to values. A process that
-        is still running makes this fail unless ``abort_running`` (then it is marked failed first).
+        is still running makes this fail unless ``abort_running`` (then it is marked failed first). A
+        ``request_id`` seen before returns the process that request started (nothing new is started).
         """
         with self._lock:
+            rid = _check_request_id(request_id)
             iri = check_iri(process, "process IRI")
+            if rid:
+                for sp0, _, _, _ in self.store.quads(None, _M_startRequest, Literal(rid), (G_META,)):
+                    if self._v(sp0, _P_realizes) != iri:
+                        raise InvalidParameterError("request id %r already started <%s>, a process realizing "
+                                                    "<%s>, not <%s>" % (rid, sp0, self._v(sp0, _P_realizes), iri))
+                    return str(sp0)
+            if options is not None:
+                _json_depth(options, "options", MAX_JSON_DEPTH)
             ap = self.model.processes.get(iri)
             if ap is None:
                 raise UnknownProcessError("<%s> is not an abstract process; known processes: %s"
@@ -280,6 +346,8 @@ class ProcessEngine:
                        (sp, _P_currentNode, ap.start, G_LOG), (sp, _P_taskCount, Literal(0), G_LOG)]
             for prop, value in opt_values:
                 cs.add.append((sp, prop, value, G_LOG))
+            if rid:
+                cs.add.append((sp, _M_startRequest, Literal(rid), G_META))
             self._commit(cs)
             self._active = sp
             return str(sp)
@@ -471,12 +539,24 @@ class ProcessEngine:
             cs.add.append((state.sp, _P_durationSeconds, Literal(max(0.0, now - started), datatype=XSD.double), G_LOG))
         return cs
 
-    def set_task_status(self, task: str, status: str, detail: str = "") -> TaskStatusReport:
-        """Record a task status reported by HICEM and apply the task's semantic effects (see module docstring)."""
+    def set_task_status(self, task: str, status: str, detail: str = "", request_id: str = "") -> TaskStatusReport:
+        """Record a task status reported by HICEM and apply the task's semantic effects (see module docstring).
+
+        A ``request_id`` already applied to this task answers ``repeated=True`` and changes nothing.
+        """
         with self._lock:
             if status not in TASK_STATUSES:
                 raise InvalidStatusError("task status %r is not allowed; use one of %s" % (status, ", ".join(TASK_STATUSES)))
+            rid = _check_request_id(request_id)
             t = check_iri(task, "task IRI")
+            if rid:
+                seen = self._status_request(rid)
+                if seen is not None:
+                    if seen != (t, status):
+                        raise InvalidParameterError("request id %r was already used for status %s of <%s>; a "
+                                                    "request id names one report" % (rid, seen[1], seen[0]))
+                    sp0 = self._v(t, _P_partOfProcess)
+                    return TaskStatusReport(str(t), status, str(sp0), repeated=True)
             if detail is None:
                 detail = ""
             if not isinstance(detail, str):
@@ -513,7 +593,8 @@ class ProcessEngine:
                 stored_detail = detail
                 world = ChangeSet()
                 if status == "succeeded" and tt.result_format == _P_ScanResultJson and detail.strip():
-                    world = scan_changes(detail, self.store, self.site)
+                    world = scan_changes(self._scan_argument(detail, "detail (the SCAN result)"), self.store,
+                                         self.site)
                     stored_detail = "scan result: %d world triples added, %d removed" % (len(world.add), len(world.remove))
                     world_changed = len(world.add) + len(world.remove)
                 if stored_detail:
@@ -541,8 +622,30 @@ class ProcessEngine:
                 if status == "failed" and not node.on_failure:
                     # no failure transition: the process fails with its task (else next_action walks one)
                     cs.extend(self._fail_changes(state, "task <%s> (%s) failed: %s" % (t, tt.action_type, detail)))
+            if rid:
+                cs.add.append((t, _M_statusRequest, Literal("%s %s" % (status, rid)), G_META))
             self._commit(cs, max_seconds=None)
             return TaskStatusReport(str(t), status, str(sp), effects_applied, world_changed)
+
+    def _status_request(self, rid: str) -> Optional[Tuple[URIRef, str]]:
+        """(task, status) of the report that carried request id ``rid``, if one was applied."""
+        for status in TASK_STATUSES:
+            for t0, _, _, _ in self.store.quads(None, _M_statusRequest, Literal("%s %s" % (status, rid)), (G_META,)):
+                return t0, status  # type: ignore[return-value]
+        return None
+
+    @staticmethod
+    def _scan_argument(scan: Union[str, bytes, Mapping[str, Any]], what: str) -> Union[str, bytes, Mapping[str, Any]]:
+        """A SCAN result with its nesting checked (parsed when it is text and parses)."""
+        if isinstance(scan, (str, bytes)):
+            try:
+                return load_json(scan, what)
+            except InvalidParameterError:
+                raise
+            except ValueError:
+                return scan  # not JSON: the SCAN parser says so in its words
+        _json_depth(scan, what, MAX_JSON_DEPTH)
+        return scan
 
     def _param(self, task: URIRef, node: FlowNode, name: Optional[str]) -> Optional[Node]:
         for prm in node.parameters:
@@ -553,7 +656,7 @@ class ProcessEngine:
     def update_world(self, scan: Union[str, bytes, Mapping[str, Any]], max_seconds: Optional[float] = None) -> int:
         """Merge a SCAN result (docs/contracts.md) into the world state; returns the number of triples changed."""
         with self._lock:
-            cs = scan_changes(scan, self.store, self.site)
+            cs = scan_changes(self._scan_argument(scan, "scan"), self.store, self.site)
             n = len(cs.add) + len(cs.remove)
             self._commit(cs, max_seconds=max_seconds)
             return n

@@ -31,6 +31,7 @@ import rospy
 
 from locem_bridge.config_errors import ConfigError
 from locem_bridge.pemkre import JournaledStore, OxigraphStore, ProcessEngine
+from locem_bridge.pemkre.engine import load_json
 from locem_bridge.pemkre.errors import PemkreError
 from locem_bridge.pemkre.store import TripleStore
 from locem_bridge.pemkre.terms import bindings_from_strings
@@ -83,13 +84,16 @@ class PemkreNode:
         options = {}
         if req.options.strip():
             try:
-                options = json.loads(req.options)
+                options = load_json(req.options, "options")
+            except InvalidParameterError:
+                raise
             except ValueError as exc:
                 raise InvalidParameterError("options must be a JSON object: %s" % exc) from None
             if not isinstance(options, dict):
                 raise InvalidParameterError("options must be a JSON object, got %s" % type(options).__name__)
         assert self.engine is not None
-        resp.specific_process = self.engine.start_process(req.process, options, abort_running=req.abort_running)
+        resp.specific_process = self.engine.start_process(req.process, options, abort_running=req.abort_running,
+                                                          request_id=req.request_id)
         resp.message = "started %s" % resp.specific_process
 
     def _next(self, req: Any, resp: Any) -> None:
@@ -101,7 +105,11 @@ class PemkreNode:
 
     def _status(self, req: Any, resp: Any) -> None:
         assert self.engine is not None
-        r = self.engine.set_task_status(req.task, req.status, req.detail)
+        r = self.engine.set_task_status(req.task, req.status, req.detail, request_id=req.request_id)
+        if r.repeated:
+            resp.message = "%s is %s: already applied (request id %s), nothing changed" % (
+                r.task, r.status, req.request_id)
+            return
         resp.message = "%s is %s (%d effect(s) applied, %d world triple(s) changed)" % (
             r.task, r.status, r.effects_applied, r.world_triples_changed)
 
