@@ -87,7 +87,8 @@ class FakeHicem:
             specific = "urn:fake:run"
             try:                                  # with a real PEMKRE node: a real specific process for the KPIs
                 rospy.wait_for_service("/pemkre/start_process", timeout=0.2)
-                reply = rospy.ServiceProxy("/pemkre/start_process", PemkreStartProcess)(req.process, req.options, True)
+                reply = rospy.ServiceProxy("/pemkre/start_process", PemkreStartProcess)(
+                    process=req.process, options=req.options, abort_running=True)
                 specific = reply.specific_process if reply.success else specific
             except rospy.ROSException:
                 pass

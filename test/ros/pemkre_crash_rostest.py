@@ -1,8 +1,11 @@
 #!/usr/bin/env python3
-"""rostest: SIGKILL the PEMKRE node mid-run; roslaunch respawns it; the run continues where it stopped."""
+"""rostest: SIGKILL the PEMKRE node mid-run; roslaunch respawns it; the run continues where it stopped. And
+HICEM's PEMKRE client (the real one, ros/hicem_pemkre.py) with a call in flight when PEMKRE is killed: the call
+is sent again after the respawn, completes within its deadline, and the report is applied once."""
 import json
 import os
 import signal
+import threading
 import time
 import unittest
 import xmlrpc.client
@@ -10,6 +13,7 @@ import xmlrpc.client
 import rosgraph
 import rospy
 import rostest
+from locem_bridge.ros.hicem_pemkre import RosPemkreClient
 from locem_bridge.srv import (PemkreNextAction, PemkreQuery, PemkreSetTaskStatus, PemkreStartProcess,
                               PemkreUpdateWorld)
 
@@ -37,12 +41,82 @@ def node_pid():
     return pid
 
 
+def wait_new_pid(old, timeout=60.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            pid = node_pid()
+            if pid != old:
+                return pid
+        except Exception:
+            pass
+        time.sleep(0.1)
+    raise AssertionError("no new /pemkre within %.0f s of the kill of pid %d" % (timeout, old))
+
+
 class PemkreCrashTest(unittest.TestCase):
-    def test_kill_dash_nine_mid_task_and_after_an_acknowledged_status(self):
+    @classmethod
+    def setUpClass(cls):
         rospy.init_node("pemkre_crash_test", anonymous=True)
+
+    def test_hicem_client_call_in_flight_outlives_kill_dash_nine(self):
+        """PEMKRE frozen (SIGSTOP) so the client's call is provably in flight, then SIGKILL: the call fails
+        underneath, the client sends it again to the respawned PEMKRE and returns normally."""
+        proxies()
+        client = RosPemkreClient("/pemkre", deadline_s=60.0)
+        client.report_world(SCAN)
+        client.start_process(TAPING, {"validateLines": False})
+        a = client.next_action()
+        self.assertEqual(a["action_type"], "GET_TOOL")
+        client.set_task_status(a["task"], "in_progress")
+        client.set_task_status(a["task"], "succeeded")
+        tape = client.next_action()
+        self.assertEqual(tape["action_type"], "TAPE_LINE")
+        client.set_task_status(tape["task"], "in_progress")
+        for call, args in (("set_task_status", (tape["task"], "succeeded")), ("next_action", ())):
+            pid = node_pid()
+            os.kill(pid, signal.SIGSTOP)
+            outcome = {}
+
+            def in_flight():
+                t0 = time.monotonic()
+                try:
+                    outcome["result"] = getattr(client, call)(*args)
+                except Exception as exc:          # reported by the assertions below
+                    outcome["error"] = exc
+                outcome["took"] = time.monotonic() - t0
+            th = threading.Thread(target=in_flight, daemon=True)
+            th.start()
+            time.sleep(1.0)
+            self.assertTrue(th.is_alive(), "the %s call did not wait for the frozen PEMKRE: %s" % (call, outcome))
+            os.kill(pid, signal.SIGKILL)
+            t_kill = time.monotonic()
+            new_pid = wait_new_pid(pid)
+            th.join(60.0)
+            self.assertFalse(th.is_alive(), "the %s call did not return within 60 s of the kill" % call)
+            self.assertNotIn("error", outcome)
+            self.assertNotEqual(new_pid, pid)
+            name, attempts, took = client.retried[-1]
+            self.assertEqual(name, call)
+            self.assertGreaterEqual(attempts, 2)
+            self.assertGreater(outcome["took"], 1.0)          # in flight from before the kill until after it
+        # the succeeded report reached the respawned PEMKRE once: the next action is the second joint
+        self.assertEqual(outcome["result"]["action_type"], "TAPE_LINE")
+        self.assertNotEqual(outcome["result"]["task"], tape["task"])
+        start, nxt, status, query, world = proxies()
+        log = json.loads(query("task_log", [], []).results)["results"]["bindings"]
+        mine = [r for r in log if r["task"]["value"] == tape["task"]]
+        self.assertEqual([r["status"]["value"] for r in mine], ["succeeded"])
+        # the same report sent again (a HICEM that restarted before recording the answer) changes nothing
+        again = status(tape["task"], "succeeded", "", "hicem-x")
+        self.assertFalse(again.success)          # a new id: PEMKRE refuses it as the task is no longer running
+        client.set_task_status(tape["task"], "succeeded")          # the client's own id: already applied, OK
+        self.assertEqual(nxt("").task, outcome["result"]["task"])
+
+    def test_kill_dash_nine_mid_task_and_after_an_acknowledged_status(self):
         start, nxt, status, query, world = proxies()
         self.assertTrue(world(json.dumps(SCAN)).success)
-        self.assertTrue(start(TAPING, '{"validateLines": false}', True).success)
+        self.assertTrue(start(TAPING, '{"validateLines": false}', True, "").success)
         done = []
         kills = 0
         for step in range(30):
@@ -51,7 +125,7 @@ class PemkreCrashTest(unittest.TestCase):
             if a.status != "action":
                 break
             if a.task_status == "issued":
-                self.assertTrue(status(a.task, "in_progress", "").success)
+                self.assertTrue(status(a.task, "in_progress", "", "").success)
             if step in (2, 4) and kills < 2:       # crash while the task is in progress: it must come back
                 pid = node_pid()
                 os.kill(pid, signal.SIGKILL)
@@ -67,7 +141,7 @@ class PemkreCrashTest(unittest.TestCase):
                 start, nxt, status, query, world = proxies()
                 again = nxt("")
                 self.assertEqual((again.task, again.action_type, again.task_status), (a.task, a.action_type, "in_progress"))
-            r = status(a.task, "succeeded", "")
+            r = status(a.task, "succeeded", "", "")
             self.assertTrue(r.success, r.message)
             done.append((a.action_type, a.parameters))
         self.assertEqual(kills, 2)

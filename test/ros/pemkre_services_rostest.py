@@ -57,11 +57,11 @@ class PemkreServicesTest(unittest.TestCase):
                 self.assertEqual(s, "<%s>" % a.task)      # N-Triples about the task
                 params[local(p.strip("<>"))] = local(o.strip("<>"))
             seen.append((a.action_type, params))
-            self.assertTrue(self.status(a.task, "in_progress", "").success)
+            self.assertTrue(self.status(a.task, "in_progress", "", "").success)
             detail = ""
             if a.action_type == "VALIDATE_TAPE_LINE":
                 detail = "valid" if params["line"] == "wall_1_joint_1" else "invalid"
-            r = self.status(a.task, "succeeded", detail)
+            r = self.status(a.task, "succeeded", detail, "")
             self.assertTrue(r.success, r.message)
         self.assertEqual([s[0] for s in seen], ["GET_TOOL", "VALIDATE_TAPE_LINE", "TAPE_LINE", "VALIDATE_TAPE_LINE",
                                                 "MANUAL_TAPING", "GO_HOME", "ended"])
@@ -83,16 +83,21 @@ class PemkreServicesTest(unittest.TestCase):
 
     def test_b_bad_input_is_refused_with_a_code_and_the_node_keeps_serving(self):
         cases = [
-            (lambda: self.start("not an iri", "", True), "MALFORMED_IRI", "absolute IRI"),
-            (lambda: self.start("https://example.org/Nope", "", True), "UNKNOWN_PROCESS", "TapingProcess"),
-            (lambda: self.start(TAPING, "{validateLines: yes", True), "INVALID_PARAMETER", "JSON"),
-            (lambda: self.start(TAPING, '{"speed": 2}', True), "INVALID_PARAMETER", "validateLines"),
-            (lambda: self.status("https://example.org/task_1", "succeeded", ""), "UNKNOWN_TASK", "task_1"),
-            (lambda: self.status("https://example.org/task_1", "done", ""), "INVALID_STATUS", "in_progress"),
+            (lambda: self.start("not an iri", "", True, ""), "MALFORMED_IRI", "absolute IRI"),
+            (lambda: self.start("https://example.org/Nope", "", True, ""), "UNKNOWN_PROCESS", "TapingProcess"),
+            (lambda: self.start(TAPING, "{validateLines: yes", True, ""), "INVALID_PARAMETER", "JSON"),
+            (lambda: self.start(TAPING, '{"speed": 2}', True, ""), "INVALID_PARAMETER", "validateLines"),
+            (lambda: self.status("https://example.org/task_1", "succeeded", "", ""), "UNKNOWN_TASK", "task_1"),
+            (lambda: self.status("https://example.org/task_1", "done", "", ""), "INVALID_STATUS", "in_progress"),
             (lambda: self.query("nope", [], []), "UNKNOWN_QUERY", "pending_joint_lines"),
             (lambda: self.query("feature_by_id", ["id"], ['"x" . <a> <b> <c']), "INVALID_PARAMETER", "N-Triples"),
             (lambda: self.query("feature_by_id", ["feature"], ['"x"']), "INVALID_PARAMETER", "accepts id"),
             (lambda: self.world('{"joints": [{"id": "9bad"}]}'), "WORLD_UPDATE", "joints[0].id"),
+            # 10000 levels of JSON: a clear refusal naming the argument and the depth, not an INTERNAL_ERROR
+            (lambda: self.start(TAPING, '{"validateLines": %s}' % ("[" * 10000 + "]" * 10000), True, ""),
+             "INVALID_PARAMETER", "options nests JSON arrays/objects deeper than the allowed 32 levels"),
+            (lambda: self.world('{"walls": %s}' % ("[" * 10000 + "]" * 10000)),
+             "INVALID_PARAMETER", "scan nests JSON arrays/objects deeper than the allowed 32 levels"),
         ]
         for call, code, fragment in cases:
             r = call()

@@ -13,7 +13,9 @@ action type → HDICT record ``phase=running`` → ``set_task_status(in_progress
   process state becomes ``stopped``. A crucial-module fault from the HEM halts the tree the same way at once
   (reported failed with the fault), then the loop waits for health to return before asking PEMKRE again.
 - An action type without a tree, a malformed PEMKRE answer or an exception from PEMKRE ends the process as
-  ``failed`` with the reason (PEMKRE told when possible); nothing is left running.
+  ``failed`` with the reason (PEMKRE told when possible); nothing is left running. PEMKRE being away
+  (:class:`PemkreUnavailableError`: restarting, not running) is not the process's failure: the call is repeated
+  (phase ``waiting_for_pemkre``) until PEMKRE answers, a stop arrives or ``pemkre_wait_s`` has passed.
 - :meth:`resume`: after a crash the HDICT says which process and action were interrupted. A finished but
   unreported outcome is reported; a running action is halted on the devices (safe commands) and then handled
   by ``hhlc.resume_policy``: ``rerun`` its tree, ``fail`` it ("interrupted ..."), or run a recovery tree (e.g.
@@ -34,7 +36,7 @@ from .blackboard import Blackboard
 from .config import HicemParams
 from .datastore import DataManager
 from .errors import ControllerError, HicemError, LocemError, PemkreError
-from .interfaces import NextAction, check_reply, parse_next_action
+from .interfaces import NextAction, PemkreUnavailableError, check_reply, parse_next_action
 from .node_base import NodeContext
 from .operator import OperatorDesk
 from .xml_loader import BuiltTree, TreeLibrary
@@ -117,6 +119,8 @@ class HighLevelController:
         self.data_handler = data_handler
         self.clock = clock
         self.log = log or LOG
+        #: how long a PEMKRE call waits for an away PEMKRE (s) before the process fails with it
+        self.pemkre_wait_s = 600.0
         self._wake = threading.Event()
         self._lock = threading.Lock()
         self._stop_reason: Optional[str] = None
@@ -455,8 +459,25 @@ class HighLevelController:
 
     def _pemkre_call(self, fn: Callable[..., Any], *args: Any) -> Any:
         t = time.perf_counter()
+        since: Optional[float] = None
+        before: Dict[str, Any] = {}
         try:
-            return fn(*args)
+            while True:
+                try:
+                    result = fn(*args)
+                    if since is not None:      # back to what the call was made for
+                        self.log.info("PEMKRE is back after %.1f s", time.monotonic() - since)
+                        self._set_state(phase=before.get("phase", ""), detail=before.get("detail", ""))
+                    return result
+                except PemkreUnavailableError as exc:
+                    if since is None:
+                        since, before = time.monotonic(), self.state()
+                    if self._stop_reason is not None or time.monotonic() - since >= self.pemkre_wait_s:
+                        raise
+                    self.log.warning("PEMKRE is away (%s); waiting for it", exc)
+                    self._set_state(phase="waiting_for_pemkre", detail=str(exc))
+                    self._wake.wait(self.params.idle_poll_s)
+                    self._wake.clear()
         finally:
             if self._current_stats is not None:
                 self._current_stats.pemkre_s += time.perf_counter() - t

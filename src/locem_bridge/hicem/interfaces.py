@@ -3,11 +3,14 @@
 - :class:`LocemClient` / :class:`CommandHandle`: send one LOCEM command string without blocking, poll it,
   cancel it. The ROS adapter implements it on the ``/locem/command_action`` action client; tests use in-process
   doubles. :class:`LocemReply` mirrors the service/action result (success, code, message, result JSON).
-- :class:`PemkreClient`: start_process / next_action / set_task_status / report_world (docs/contracts.md).
+- :class:`PemkreClient`: start_process / next_action / set_task_status / report_world (docs/contracts.md);
+  :func:`status_request_id`: the request id a client sends with a status report; a client raises
+  :class:`PemkreUnavailableError` when PEMKRE is away (any other :class:`PemkreError` is a refusal).
 - :func:`parse_next_action`: validates a PEMKRE next-action answer and decodes its N-Triples parameters into
   the ``param_<name>`` values trees see.
 """
 import abc
+import hashlib
 import re
 from typing import Any, Dict, List, Optional
 
@@ -74,6 +77,18 @@ class PemkreClient(abc.ABC):
     @abc.abstractmethod
     def report_world(self, update: Dict[str, Any]) -> None:
         """New or changed world features, in the SCAN result shape of docs/contracts.md."""
+
+
+class PemkreUnavailableError(PemkreError):
+    """PEMKRE did not answer within the client's deadline (not running, restarting): not the process's fault.
+    The controller waits for PEMKRE and repeats the call instead of failing the process."""
+
+
+def status_request_id(task: str, status: str) -> str:
+    """Request id of HICEM's report ``status`` for ``task`` (docs/contracts.md): a task takes each status once, so
+    every attempt of a report -- a retry across a PEMKRE restart, a re-report after HICEM's own restart -- carries
+    the same id and PEMKRE applies it once."""
+    return "hicem-%s-%s" % (status, hashlib.sha1(task.encode("utf-8")).hexdigest()[:24])
 
 
 class NextAction:

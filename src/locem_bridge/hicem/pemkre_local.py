@@ -6,7 +6,7 @@ run or integration tests. Duck-typed on the engine's methods (``start_process(ir
 from typing import Any, Dict, Optional
 
 from .errors import PemkreError
-from .interfaces import PemkreClient
+from .interfaces import PemkreClient, status_request_id
 
 
 class EngineClient(PemkreClient):
@@ -32,7 +32,9 @@ class EngineClient(PemkreClient):
                 "detail": getattr(a, "message", "")}
 
     def set_task_status(self, task: str, status: str, detail: str = "") -> None:
-        self._call("set_task_status", self.engine.set_task_status, task, status, detail)
+        # with the ROS client's request id: a report repeated after HICEM's own restart is applied once
+        self._call("set_task_status", lambda: self.engine.set_task_status(
+            task, status, detail, request_id=status_request_id(task, status)))
 
     def report_world(self, update: Dict[str, Any]) -> None:
         self._call("update_world", self.engine.update_world, update)

@@ -2,20 +2,21 @@
 
 - :class:`RosLocemClient`: one ``actionlib.ActionClient`` on ``<locem>/command_action``; every ``send`` is a goal
   of its own (several may run at once, e.g. under a Parallel node); ``cancel`` cancels that goal, which LOCEM
-  turns into a device stop.
+  turns into a device stop. A command sent while LOCEM is away (restarting) waits for it, within a deadline.
 - :class:`LocemHealthFeed`: polls ``STATUS`` through the ``<locem>/command`` service every ``period`` seconds —
   an answer is LOCEM's heartbeat, each backend's ``health`` entry becomes module ``locem/<backend>`` — and
   forwards ``diagnostics`` (``diagnostic_msgs/DiagnosticArray``) and ``<locem>/status`` (any message is a sign of life) to the HDH.
 """
 import json
 import threading
+import time
 from typing import Any, Optional
 
 import actionlib
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray
 
-from locem_bridge.hicem.errors import HicemError, LocemError
+from locem_bridge.hicem.errors import HicemError
 from locem_bridge.hicem.interfaces import CommandHandle, LocemClient, LocemReply
 from locem_bridge.msg import CommandAction, CommandGoal, Status
 from locem_bridge.srv import Command
@@ -24,18 +25,42 @@ _OK_LINKS = ("up", "ok", "connected", "ready", "simulated")
 
 
 class _Goal(CommandHandle):
-    def __init__(self, handle: Any, command: str) -> None:
-        self._gh = handle
+    """One command: sent at once when LOCEM's action server is there, else held (never sent) and sent as soon as
+    it is, within ``wait_s``; not sent by then, it ends ``NOT_READY`` naming the server and the command."""
+
+    def __init__(self, client: "RosLocemClient", command: str, wait_s: float) -> None:
+        self._client = client
         self.command = command
         self._lock = threading.Lock()
+        self._gh: Any = None
+        self._unsent: Optional[LocemReply] = None      # the reply of a command that never left HICEM
+        self._deadline = time.monotonic() + wait_s
+        self._wait_s = wait_s
+        self._try_send()
+
+    def _try_send(self) -> None:
+        """Send if not yet sent and the server is there (caller holds no lock or the lock)."""
+        if self._gh is not None or self._unsent is not None:
+            return
+        if self._client.server_ready():
+            self._gh = self._client.send_goal(self.command)
+            return
+        if time.monotonic() >= self._deadline:
+            self._unsent = LocemReply(False, "NOT_READY", "LOCEM action server %s not available for %.0f s: %r "
+                                      "was not sent" % (self._client.name, self._wait_s, self.command))
 
     def done(self) -> bool:
         with self._lock:
-            return self._gh.get_comm_state() == actionlib.CommState.DONE
+            self._try_send()
+            if self._unsent is not None:
+                return True
+            return self._gh is not None and self._gh.get_comm_state() == actionlib.CommState.DONE
 
     def reply(self) -> Optional[LocemReply]:
         if not self.done():
             return None
+        if self._unsent is not None:
+            return self._unsent
         res = self._gh.get_result()
         if res is None:
             return LocemReply(False, "ABORTED", "LOCEM goal ended (status %d) without a result"
@@ -49,21 +74,39 @@ class _Goal(CommandHandle):
 
     def cancel(self) -> None:
         with self._lock:
+            if self._gh is None:
+                if self._unsent is None:
+                    self._unsent = LocemReply(False, "ABORTED", "cancelled before LOCEM was there to take %r"
+                                              % self.command)
+                return
             if self._gh.get_comm_state() != actionlib.CommState.DONE:
                 self._gh.cancel()
 
 
 class RosLocemClient(LocemClient):
+    """LOCEM commands as actionlib goals. A command is sent again only when it provably never reached LOCEM: while
+    the action server is away (LOCEM restarting) it is held and sent when the server is back, within ``wait_s``
+    (see :class:`_Goal`). LOCEM commands are not idempotent (a TAPE twice tapes twice), so a goal whose server
+    vanished after it was sent is never sent again: that is a failure of the action (HICEM's health monitor
+    halts the tree when LOCEM's heartbeat stops; the trees' RECOVER handles the rest)."""
+
     def __init__(self, locem_ns: str, wait_s: float = 10.0) -> None:
         self.name = locem_ns.rstrip("/") + "/command_action"
+        self.wait_s = wait_s
         self._client = actionlib.ActionClient(self.name, CommandAction)
         if not self._client.wait_for_server(rospy.Duration(wait_s)):
-            rospy.logwarn("hicem: LOCEM action server %s not up yet; commands fail until it is", self.name)
+            rospy.logwarn("hicem: LOCEM action server %s not up yet; commands wait up to %.0f s for it",
+                          self.name, wait_s)
+
+    def server_ready(self) -> bool:
+        # a timeout of 0 means "forever" to actionlib: 1 ms is one look (plus its 10 ms sleep when not ready)
+        return bool(self._client.wait_for_server(rospy.Duration(0, 1000000)))
+
+    def send_goal(self, command: str) -> Any:
+        return self._client.send_goal(CommandGoal(command=command))
 
     def send(self, command: str) -> CommandHandle:
-        if not self._client.wait_for_server(rospy.Duration(0.05)):
-            raise LocemError("LOCEM action server %s is not available" % self.name, "NOT_READY")
-        return _Goal(self._client.send_goal(CommandGoal(command=command)), command)
+        return _Goal(self, command, self.wait_s)
 
 
 class LocemHealthFeed:

@@ -13,8 +13,10 @@ Interfaces (relative to the node, ``/hicem/...`` when the node is named ``hicem`
 Parameters: ``~params_file`` (HICEM parameters YAML; default ``trees/hicem_params.yaml`` of the package),
 ``~trees_dir``, ``~hdict_path`` (HDICT SQLite file; default ``$ROS_HOME/hicem_hdict.sqlite``), ``~locem_ns``
 (default ``locem``, resolved in the node's namespace), ``~pemkre``, ``~pemkre_ns``, ``~pemkre_store``,
-``~status_period`` (s between STATUS polls), ``~diagnostics_topic`` (default ``diagnostics``: ``/diagnostics``
-in the root namespace, the robot's own in a robot namespace), ``~resume`` (``auto``: continue an interrupted process found in
+``~status_period`` (s between STATUS polls), ``~pemkre_call_deadline`` (s one PEMKRE call is sent again while
+PEMKRE is away, default 10), ``~pemkre_wait`` (s the process waits for an away PEMKRE before it fails, default
+600), ``~locem_wait`` (s a LOCEM command waits for an away LOCEM action server before it fails, default 10),
+``~diagnostics_topic`` (default ``diagnostics``: ``/diagnostics`` in the root namespace, the robot's own in a robot namespace), ``~resume`` (``auto``: continue an interrupted process found in
 the HDICT at start-up; ``never``).
 Lifecycle: start → (resume) → serve until shutdown → the running tree is halted, the HDICT closed.
 """
@@ -54,7 +56,8 @@ def _param(name: str, default: Any) -> Any:
 
 def _pemkre_client(kind: str) -> Any:
     if kind == "ros":
-        return RosPemkreClient(rospy.resolve_name(_param("pemkre_ns", "pemkre")))
+        return RosPemkreClient(rospy.resolve_name(_param("pemkre_ns", "pemkre")),
+                               deadline_s=float(_param("pemkre_call_deadline", 10.0)))
     if kind == "embedded":
         from locem_bridge.hicem.pemkre_local import EngineClient
         from locem_bridge.pemkre import OxigraphStore, ProcessEngine
@@ -75,12 +78,13 @@ class HicemNode:
         params = load_params(params_file)
         library = TreeLibrary()
         library.load_directory(trees_dir)
-        self.locem = RosLocemClient(locem_ns)
+        self.locem = RosLocemClient(locem_ns, wait_s=float(_param("locem_wait", 10.0)))
         # times each PEMKRE call into $LOCEM_CALL_LOG when set (bench/bench_job.py); otherwise the client itself
         self.pemkre = instrument_from_env(_pemkre_client(_param("pemkre", "ros")))
         self.ex = create_executive(self.pemkre, self.locem, hdict,
                                    params_file=params_file, trees_dir=trees_dir, params=params, library=library)
         self.ctrl = self.ex.controller
+        self.ctrl.pemkre_wait_s = float(_param("pemkre_wait", 600.0))
         self.state_pub = rospy.Publisher("~state", HicemState, queue_size=20, latch=True)
         self.prompt_pub = rospy.Publisher("~prompts", HicemPrompt, queue_size=50)
         self.ctrl.add_state_listener(self._publish_state)

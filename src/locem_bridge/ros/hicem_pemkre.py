@@ -7,71 +7,151 @@ fills requests by field name, so it needs only these fields (a missing one is a 
   ``specific_process``; ``<pemkre>/next_action``: → ``status``, ``action_type``, ``task``, ``parameters``,
   ``message``; ``<pemkre>/set_task_status``: ``task``, ``status``, ``detail``;
   ``<pemkre>/update_world``: ``scan`` (SCAN result JSON text).
-A response with ``success`` false (or a service error) raises :class:`PemkreError` with PEMKRE's message.
+A response with ``success`` false raises :class:`PemkreError` with PEMKRE's message at once.
+
+Calls outlive a PEMKRE restart (respawned in about 2 s): while the service is away -- not registered, its
+registration left by a killed node (connection refused), or the connection dropped mid-call -- the call is sent
+again with backoff (``backoff_s`` doubling up to ``max_backoff_s``) until ``deadline_s`` after its start, then
+:class:`PemkreUnavailableError` names the peer, the call and the last reason (HICEM's controller then waits
+for PEMKRE and calls again, see :mod:`locem_bridge.hicem.controller`). A call is sent again after it may have
+reached PEMKRE only when it is idempotent: ``next_action`` (PEMKRE answers the same task until it is reported)
+and ``update_world`` (a merge) are; a status report and a process start are made so by a request id
+(``request_id``, docs/contracts.md): the same id for every attempt of one call, so PEMKRE applies it once even
+when it applied it and died before answering. A status report's id is derived from the task and the status (a
+task takes each status once), so a report HICEM repeats after its own restart is applied once too.
 """
 import json
-from typing import Any, Dict, Optional
+import os
+import time
+from typing import Any, Callable, Dict, Optional
 
 import rospy
 import rosservice
 
 from locem_bridge.hicem.errors import PemkreError
-from locem_bridge.hicem.interfaces import PemkreClient
+from locem_bridge.hicem.interfaces import PemkreClient, PemkreUnavailableError, status_request_id
+
+#: rospy's ServiceException texts for a request that provably never left this node (no service to send it to)
+_NOT_SENT = ("unavailable", "unable to connect to service", "unable to contact master")
+#: ... and for one that may have reached the service (connection lost after sending)
+_CUT = ("returned no response", "transport error completing service call")
+
+
+class _Away(Exception):
+    """PEMKRE's service is not there (``sent``: the request may have reached it)."""
+
+    def __init__(self, reason: str, sent: bool) -> None:
+        super().__init__(reason)
+        self.sent = sent
 
 
 class RosPemkreClient(PemkreClient):
-    def __init__(self, pemkre_ns: str, wait_s: float = 30.0) -> None:
+    def __init__(self, pemkre_ns: str, wait_s: float = 30.0, deadline_s: float = 10.0, backoff_s: float = 0.1,
+                 max_backoff_s: float = 2.0, log: Optional[Callable[[str], None]] = None) -> None:
         self.ns = pemkre_ns.rstrip("/")
-        self.wait_s = wait_s
+        self.wait_s = wait_s            # the first look-up of a service (PEMKRE starting with the launch)
+        self.deadline_s = deadline_s    # every call: how long PEMKRE may be away before the call fails
+        self.backoff_s = backoff_s
+        self.max_backoff_s = max_backoff_s
+        self._log = log or (lambda text: rospy.logwarn("hicem: %s", text))
         self._proxies: Dict[str, Any] = {}
+        #: calls that needed more than one attempt: (call, attempts, seconds), newest last (tests read it)
+        self.retried: list = []
 
-    def _proxy(self, name: str) -> Any:
+    def _proxy(self, name: str, timeout: float) -> Any:
         if name not in self._proxies:
             full = "%s/%s" % (self.ns, name)
             try:
-                rospy.wait_for_service(full, timeout=self.wait_s)
+                rospy.wait_for_service(full, timeout=max(0.05, timeout))
                 cls = rosservice.get_service_class_by_name(full)
             except (rospy.ROSException, rosservice.ROSServiceException) as exc:
-                raise PemkreError("PEMKRE service %s is not available: %s" % (full, exc))
+                raise _Away("service %s is not available: %s" % (full, exc), sent=False) from None
             self._proxies[name] = rospy.ServiceProxy(full, cls)
         return self._proxies[name]
 
-    def _call(self, name: str, **fields: Any) -> Any:
-        proxy = self._proxy(name)
+    def _request(self, name: str, proxy: Any, fields: Dict[str, Any]) -> Any:
         req = proxy.request_class()
         slots = list(getattr(req, "__slots__", []))
         for k, v in fields.items():
             if k not in slots:
-                if v in ("", None):
-                    continue
+                if v in ("", None) or k == "request_id":
+                    continue      # an older PEMKRE without request ids: sent without it
                 raise PemkreError("PEMKRE service %s/%s has no request field '%s' (fields: %s)" % (
                     self.ns, name, k, ", ".join(slots)))
             setattr(req, k, v)
+        return req
+
+    def _once(self, name: str, fields: Dict[str, Any], remaining: float) -> Any:
+        proxy = self._proxy(name, min(remaining, self.wait_s))
+        req = self._request(name, proxy, fields)
         try:
-            resp = proxy(req)
-        except (rospy.ServiceException, rospy.ROSException) as exc:
-            raise PemkreError("PEMKRE %s failed: %s" % (name, exc))
+            return proxy(req)
+        except rospy.ServiceException as exc:
+            text = str(exc)
+            if any(s in text for s in _NOT_SENT):
+                raise _Away(text, sent=False) from None
+            if any(s in text for s in _CUT):
+                raise _Away(text, sent=True) from None
+            raise PemkreError("PEMKRE %s failed: %s" % (name, exc)) from None
+        except rospy.exceptions.TransportException as exc:     # the socket died while sending
+            raise _Away("connection lost while sending: %s" % exc, sent=True) from None
+
+    def _call(self, name: str, idempotent: bool, what: str = "", **fields: Any) -> Any:
+        """One call, sent again while PEMKRE is away (see the module doc); PemkreError when it cannot be done."""
+        t0 = time.monotonic()
+        delay, attempts = self.backoff_s, 0
+        while True:
+            attempts += 1
+            remaining = self.deadline_s - (time.monotonic() - t0)
+            try:
+                resp = self._once(name, fields, remaining)
+                break
+            except _Away as away:
+                label = "%s%s" % (name, (" (%s)" % what) if what else "")
+                if away.sent and not idempotent:
+                    raise PemkreError("PEMKRE %s: the connection to %s was lost during the call (%s); not sent "
+                                      "again (not idempotent)" % (label, self.ns, away)) from None
+                if rospy.is_shutdown():
+                    raise PemkreUnavailableError("PEMKRE %s: node shutting down while %s was away (%s)"
+                                      % (label, self.ns, away)) from None
+                waited = time.monotonic() - t0
+                if waited + delay > self.deadline_s:
+                    raise PemkreUnavailableError("PEMKRE %s failed: %s did not answer within %.0f s (%d attempt(s)); last "
+                                      "reason: %s" % (label, self.ns, self.deadline_s, attempts, away)) from None
+                if attempts == 1:
+                    self._log("PEMKRE %s: %s is away (%s); retrying for up to %.0f s"
+                              % (label, self.ns, away, self.deadline_s))
+                self._proxies.pop(name, None)    # a respawned PEMKRE: look the service up afresh
+                time.sleep(delay)
+                delay = min(self.max_backoff_s, delay * 2)
+        if attempts > 1:
+            took = time.monotonic() - t0
+            self.retried.append((name, attempts, took))
+            self._log("PEMKRE %s answered after %d attempts over %.1f s" % (name, attempts, took))
         if hasattr(resp, "success") and not resp.success:
             raise PemkreError("PEMKRE %s refused: %s" % (name, getattr(resp, "message", "")))
         return resp
 
     def start_process(self, process_iri: str, options: Optional[Dict[str, Any]] = None) -> str:
         # HICEM is PEMKRE's only executor: a process it starts replaces one left running by a stop before its
-        # first task (PEMKRE marks that one failed), instead of being refused
-        resp = self._call("start_process", process=process_iri, options=json.dumps(options) if options else "",
-                          abort_running=True)
+        # first task (PEMKRE marks that one failed), instead of being refused. The request id makes a start
+        # that PEMKRE applied before dying answer that process when sent again (no second process).
+        rid = "hicem-start-%s" % os.urandom(9).hex()
+        resp = self._call("start_process", True, process_iri, process=process_iri,
+                          options=json.dumps(options) if options else "", abort_running=True, request_id=rid)
         for f in ("specific_process", "process"):
             if hasattr(resp, f):
                 return str(getattr(resp, f))
         return ""
 
     def next_action(self) -> Dict[str, Any]:
-        r = self._call("next_action")
+        r = self._call("next_action", True)
         return {"status": r.status, "action_type": getattr(r, "action_type", ""), "task": getattr(r, "task", ""),
                 "parameters": getattr(r, "parameters", ""), "detail": getattr(r, "message", "")}
 
     def set_task_status(self, task: str, status: str, detail: str = "") -> None:
-        self._call("set_task_status", task=task, status=status, detail=detail)
+        self._call("set_task_status", True, "%s %s" % (status, task), task=task, status=status, detail=detail,
+                   request_id=status_request_id(task, status))
 
     def report_world(self, update: Dict[str, Any]) -> None:
-        self._call("update_world", scan=json.dumps(update))
+        self._call("update_world", True, scan=json.dumps(update))

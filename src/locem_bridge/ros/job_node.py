@@ -3,13 +3,16 @@
 Parameters (private): ``job`` (YAML with ``steps: [{name, process, options}]``, default
 ``config/jobs/plasterboard.yaml``), ``validate_lines`` (overrides the taping option; empty = the file's),
 ``results_dir`` (default ``$LOCEM_RESULTS`` or ``./results``), ``process_timeout`` (s per process),
-``settings`` (JSON copied into the report). Services used: ``hicem/start_process``, ``sim/outcome``,
+``settings`` (JSON copied into the report), ``peer_wait`` (s to wait for HICEM or PEMKRE when they are away,
+default 120; see :class:`ProcessSequencer`: the job goes on with the next process only when a process failed
+by itself). Services used: ``hicem/start_process``, ``sim/outcome``,
 ``sim/scan``, ``sim/save_outcome``, and ``pemkre/query`` for the KPI table when present. Exits when the job is
 done (0 when every process ended, 1 otherwise), so a launch file can mark it ``required``.
 """
 
 import json
 import os
+import re
 import tempfile
 import time
 from typing import Any, Dict, List
@@ -20,7 +23,7 @@ import yaml
 
 from locem_bridge.config_errors import ConfigError
 from locem_bridge.job.report import RunRecord, write_report
-from locem_bridge.job.tracker import JobStep, JobTracker
+from locem_bridge.job.tracker import TERMINAL_PHASES, JobStep, JobTracker
 from locem_bridge.msg import HicemPrompt, HicemState
 from locem_bridge.srv import HicemStartProcess, JsonCall, PemkreQuery
 from locem_bridge.ros.startup import config_guard
@@ -65,6 +68,87 @@ def kpi_rows(reply: Any) -> List[Dict[str, Any]]:
     return rows
 
 
+#: HICEM's words for a process that failed because PEMKRE was away (hicem/controller.py, ros/hicem_pemkre.py),
+#: not because one of its tasks failed
+_PEER_AWAY = re.compile(r"PEMKRE .*failed: \S+ did not answer within")
+
+
+class ProcessSequencer:
+    """Runs one job step through HICEM, telling the process's own failure from its peers being away.
+
+    HICEM's ``start_process`` is waited for (HICEM respawning) within ``peer_wait`` s and sent again only when it
+    never reached HICEM; a start cut mid-way counts as done when ``/hicem/state`` shows the step's process. A
+    process that ends ``failed`` because PEMKRE stayed away past HICEM's own wait is started again once PEMKRE is
+    back (PEMKRE's world state makes the new run go on where the old one stopped), at most ``reruns`` times.
+    A respawned HICEM resumes its interrupted process by itself: the job just keeps waiting for its end.
+    """
+
+    def __init__(self, tracker: JobTracker, timeout: float, peer_wait: float, reruns: int = 2) -> None:
+        self.tracker = tracker
+        self.timeout = timeout
+        self.peer_wait = peer_wait
+        self.reruns = reruns
+        self.last_state: Dict[str, str] = {}
+
+    def on_state(self, msg: Any) -> None:
+        self.last_state = {"process": msg.process, "phase": msg.phase}
+
+    def _start(self, step: JobStep) -> Any:
+        """(success, message) of HICEM's start_process, waiting for HICEM while it is away."""
+        deadline = time.monotonic() + self.peer_wait
+        while not rospy.is_shutdown():
+            try:
+                rospy.wait_for_service("hicem/start_process", timeout=max(0.1, deadline - time.monotonic()))
+                reply = rospy.ServiceProxy("hicem/start_process", HicemStartProcess)(
+                    step.iri, json.dumps(dict(step.options)))
+                return reply.success, reply.message
+            except rospy.ROSException as exc:      # wait_for_service timed out
+                return False, "HICEM's start_process not available within %.0f s: %s" % (self.peer_wait, exc)
+            except rospy.ServiceException as exc:
+                text = str(exc)
+                never_sent = "unavailable" in text or "unable to connect" in text
+                if not never_sent and self.last_state.get("process") == step.iri and \
+                        self.last_state.get("phase") not in ("idle",) + TERMINAL_PHASES:
+                    return True, "started (the answer was lost: %s)" % text
+                if time.monotonic() >= deadline:
+                    return False, "HICEM's start_process failed for %.0f s: %s" % (self.peer_wait, text)
+                print("[job] HICEM away (%s); waiting for it" % text, flush=True)
+                rospy.sleep(0.5)
+        return False, "the launch is shutting down"
+
+    def run(self, index: int, step: JobStep) -> bool:
+        """Run ``step`` to its end; False when the job must end here (not started, timeout, STOP)."""
+        for attempt in range(self.reruns + 1):
+            self.tracker.begin(index)
+            ok, message = self._start(step)
+            if not ok:
+                self.tracker.end(status="failed", detail="not started: %s" % message)
+                return False
+            deadline = time.monotonic() + self.timeout
+            while self.tracker.finished is None and not rospy.is_shutdown() and time.monotonic() < deadline:
+                rospy.sleep(0.1)
+            if self.tracker.finished is None:
+                self.tracker.end(status="timeout" if not rospy.is_shutdown() else "stopped",
+                                 detail="no end state within %.0f s" % self.timeout)
+                return False
+            final = self.tracker.finished
+            if final.get("phase") == "failed" and _PEER_AWAY.search(final.get("detail", "")) and \
+                    attempt < self.reruns:
+                # not the process's failure: wait for PEMKRE, then the same process again (its record replaced)
+                print("[job] %s ended because PEMKRE was away (%s); waiting for it to run it again"
+                      % (step.name, final.get("detail", "")), flush=True)
+                try:
+                    rospy.wait_for_service("pemkre/next_action", timeout=self.peer_wait)
+                except rospy.ROSException:
+                    pass
+                self.tracker.end()
+                self.tracker.records.pop()
+                continue
+            # the operator pressed STOP: the job ends here; a failed process (a task of its own failed): go on
+            return self.tracker.end().status != "stopped"
+        return False
+
+
 def _json_call(name: str, **args: Any) -> Dict[str, Any]:
     reply = rospy.ServiceProxy(name, JsonCall)(json.dumps(args))
     if not reply.success:
@@ -86,27 +170,16 @@ def main() -> None:
     scan = _json_call("sim/scan")
     totals = {"joints": len(_json_call("sim/outcome").get("joints", {})), "areas": len(scan.get("areas", []))}
     tracker = JobTracker(steps, totals, say=lambda line: print(line, flush=True))
+    sequencer = ProcessSequencer(tracker, timeout, float(rospy.get_param("~peer_wait", 120.0)))
+    rospy.Subscriber("hicem/state", HicemState, sequencer.on_state)
     rospy.Subscriber("hicem/state", HicemState, lambda m: tracker.on_state(
         {"process": m.process, "phase": m.phase, "action_type": m.action_type, "task": m.task, "detail": m.detail}))
     rospy.Subscriber("hicem/prompts", HicemPrompt, lambda m: tracker.on_prompt(
         {"event": m.event, "kind": m.kind, "text": m.text, "answer": m.answer}))
-    start_process = rospy.ServiceProxy("hicem/start_process", HicemStartProcess)
     started = time.time()
     rospy.sleep(0.5)  # let the latched state arrive before the first start
     for index, step in enumerate(steps):
-        tracker.begin(index)
-        reply = start_process(step.iri, json.dumps(dict(step.options)))
-        if not reply.success:
-            tracker.end(status="failed", detail="not started: %s" % reply.message)
-            break
-        deadline = time.monotonic() + timeout
-        while tracker.finished is None and not rospy.is_shutdown() and time.monotonic() < deadline:
-            rospy.sleep(0.1)
-        if tracker.finished is None:
-            tracker.end(status="timeout" if not rospy.is_shutdown() else "stopped",
-                        detail="no end state within %.0f s" % timeout)
-            break
-        if tracker.end().status == "stopped":     # the operator pressed STOP: the job ends here
+        if not sequencer.run(index, step):
             break
     pictures_dir = tempfile.mkdtemp(prefix="locem_job_")
     try:
