@@ -55,6 +55,7 @@ class RosPemkreClient(PemkreClient):
         self.max_backoff_s = max_backoff_s
         self._log = log or (lambda text: rospy.logwarn("hicem: %s", text))
         self._proxies: Dict[str, Any] = {}
+        self._unanswered_start: Optional[tuple] = None     # ((process, options), request id) not yet answered
         #: calls that needed more than one attempt: (call, attempts, seconds), newest last (tests read it)
         self.retried: list = []
 
@@ -136,9 +137,13 @@ class RosPemkreClient(PemkreClient):
         # HICEM is PEMKRE's only executor: a process it starts replaces one left running by a stop before its
         # first task (PEMKRE marks that one failed), instead of being refused. The request id makes a start
         # that PEMKRE applied before dying answer that process when sent again (no second process).
-        rid = "hicem-start-%s" % os.urandom(9).hex()
-        resp = self._call("start_process", True, process_iri, process=process_iri,
-                          options=json.dumps(options) if options else "", abort_running=True, request_id=rid)
+        # A start that failed with PEMKRE away and is made again (HICEM's controller repeats it) keeps its id.
+        text = json.dumps(options) if options else ""
+        if self._unanswered_start is None or self._unanswered_start[0] != (process_iri, text):
+            self._unanswered_start = ((process_iri, text), "hicem-start-%s" % os.urandom(9).hex())
+        resp = self._call("start_process", True, process_iri, process=process_iri, options=text,
+                          abort_running=True, request_id=self._unanswered_start[1])
+        self._unanswered_start = None
         for f in ("specific_process", "process"):
             if hasattr(resp, f):
                 return str(getattr(resp, f))
