@@ -150,3 +150,94 @@ def test_link_drop_with_duration_comes_back_by_itself(served):
     assert ok
     assert time.monotonic() - t0 >= 0.5
     assert server.link_state == "up"
+
+
+# -- communication watchdog -----------------------------------------------------------------------------------
+def _spray(client, model):
+    """Motor on, pressure up, valve open (what a spraying LOCEM leaves)."""
+    assert not client.write_register(0, 300, device_id=DEV).isError()
+    assert not client.write_coil(0, True, device_id=DEV).isError()
+    assert abs(_wait_pressure(client, 3.0, 0.05, timeout=5.0) - 3.0) <= 0.05
+    assert not client.write_coil(1, True, device_id=DEV).isError()
+    assert model.snapshot()["valve_open"] and model.snapshot()["motor_on"]
+
+
+def _status(client):
+    regs = client.read_input_registers(0, count=5, device_id=DEV).registers
+    return {"tripped": bool(regs[3] & 16), "trips": regs[4], "valve_open": bool(regs[3] & 2),
+            "motor_running": bool(regs[3] & 1)}
+
+
+def test_watchdog_is_off_at_power_up_and_silence_changes_nothing(served):
+    model, server, client = served
+    assert client.read_holding_registers(0, count=2, device_id=DEV).registers == [0, 0]
+    _spray(client, model)
+    time.sleep(0.6)
+    assert model.snapshot()["valve_open"] and model.snapshot()["motor_on"]
+    assert server.state()["watchdog"]["trips"] == 0
+
+
+def test_requests_keep_the_watchdog_alive_and_silence_trips_it(served):
+    model, server, client = served
+    assert not client.write_register(1, 200, device_id=DEV).isError()          # 200 ms
+    assert client.read_holding_registers(1, count=1, device_id=DEV).registers == [200]
+    _spray(client, model)
+    # regular traffic (reads of any table) refreshes it: 1 s of polls at 10 Hz, still spraying
+    end = time.monotonic() + 1.0
+    while time.monotonic() < end:
+        assert not client.read_coils(0, count=2, device_id=DEV).isError()
+        last_request = time.time()
+        time.sleep(0.1)
+    assert model.snapshot()["valve_open"] and model.snapshot()["motor_on"]
+    assert server.state()["watchdog"]["trips"] == 0
+    # silence: the device stops itself, valve first, within timeout + check period (+ scheduling slack)
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline and (model.snapshot()["valve_open"] or model.snapshot()["motor_on"]):
+        time.sleep(0.01)
+    state = server.state()
+    assert not state["valve_open"] and not state["motor_on"], state
+    trip = [e for e in state["history"] if e["cause"] == "watchdog"]
+    assert [(e["what"], e["value"]) for e in trip] == [("valve_open", False), ("motor_on", False)]
+    assert 0.2 <= trip[0]["wall"] - last_request <= 0.2 + 0.25, (trip, last_request)
+    assert state["watchdog"]["tripped"] and state["watchdog"]["trips"] == 1
+    # the next client sees why: status bit 4, discrete input 4, the trip counter
+    assert _status(client) == {"tripped": True, "trips": 1, "valve_open": False, "motor_running": False}
+    assert client.read_discrete_inputs(4, count=1, device_id=DEV).bits[0] is True
+    # it trips once per silence, and stays latched until the timeout is written again
+    time.sleep(0.5)
+    assert server.state()["watchdog"]["trips"] == 2               # the read above ended the first silence
+    assert not client.write_register(1, 200, device_id=DEV).isError()
+    assert _status(client)["tripped"] is False and _status(client)["trips"] == 2
+    # nothing restarted by itself
+    assert not model.snapshot()["motor_on"]
+
+
+def test_watchdog_trips_while_the_link_is_dropped(served):
+    model, server, client = served
+    client.write_register(1, 300, device_id=DEV)
+    _spray(client, model)
+    server.drop_link(duration=None, mode="silent")         # requests held: they never reach the device
+    t0 = time.monotonic()
+    try:
+        client.read_input_registers(0, count=1, device_id=DEV)
+    except Exception:
+        pass
+    while time.monotonic() - t0 < 2.0 and model.snapshot()["motor_on"]:
+        time.sleep(0.01)
+    assert not model.snapshot()["motor_on"] and not model.snapshot()["valve_open"]
+    assert server.state()["watchdog"]["tripped"]
+    server.restore_link()
+
+
+def test_bad_watchdog_values_are_refused_and_nothing_is_half_applied(served):
+    model, server, client = served
+    for value in (1, 49, 60001):
+        rr = client.write_register(1, value, device_id=DEV)
+        assert rr.isError() and rr.exception_code == 3, value
+    rr = client.write_registers(0, [300, 10], device_id=DEV)           # good set-point, bad timeout
+    assert rr.isError() and rr.exception_code == 3
+    assert client.read_holding_registers(0, count=2, device_id=DEV).registers == [0, 0]
+    assert not client.write_registers(0, [300, 60000], device_id=DEV).isError()
+    assert client.read_holding_registers(0, count=2, device_id=DEV).registers == [300, 60000]
+    assert not client.write_register(1, 0, device_id=DEV).isError()           # off again
+    assert server.state()["watchdog"]["timeout_ms"] == 0

@@ -15,6 +15,9 @@ service             args (JSON object)                                     resul
 ``~clear_fault``    ``{"kind": ..., ...}``                                 ``{}``
 ``~outcome``        ``{}``                                                 outcome numbers (+ collisions)
 ``~save_outcome``   ``{"folder": "/abs/path"}``                            numbers + picture file names
+``~compressor``     ``{}``                                                 the compressor as the device knows
+                                                                           it: state, watchdog, valve / motor
+                                                                           history (Worksite.compressor_state)
 ==================  =====================================================  ======================================
 
 Topic ``~localisation`` (``geometry_msgs/PoseWithCovarianceStamped``, map frame, 5 Hz): the localisation a real
@@ -55,6 +58,7 @@ class SimNode:
             "clear_fault": lambda a: (site.clear_fault(_need(a, "kind"), **_rest(a, "kind")), {})[1],
             "outcome": lambda a: site.outcome(),
             "save_outcome": lambda a: site.save_outcome(_need(a, "folder")),
+            "compressor": lambda a: site.compressor_state(),
         }
         for name, operation in operations.items():
             self._services.append(rospy.Service("~" + name, JsonCall, _serve(name, operation)))

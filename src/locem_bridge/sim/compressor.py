@@ -18,12 +18,18 @@ discrete inputs    0        motor_running                motor on and no fault
 discrete inputs    1        valve_open                   spray valve open
 discrete inputs    2        pressure_in_range            measured pressure within ``pressure_range``
 discrete inputs    3        fault_active                 fault code != 0
+discrete inputs    4        watchdog_tripped             the communication watchdog stopped the device (latched
+                                                         until ``watchdog_timeout`` is written again)
 holding (RW)       0        pressure_setpoint            centibar (0.01 bar), 0 .. max_setpoint*100
+holding (RW)       1        watchdog_timeout             communication watchdog, ms: 0 = off (power-up value),
+                                                         50 .. 60000; writing it (any value) clears
+                                                         ``watchdog_tripped`` and restarts the timer
 input registers    0        measured_pressure            centibar
 input registers    1        motor_current                centiampere (0.01 A)
 input registers    2        fault_code                   0 none, 1 overpressure, 2 motor overload
 input registers    3        status_bits                  bit0 motor_running, bit1 valve_open, bit2 in range,
-                                                         bit3 fault_active
+                                                         bit3 fault_active, bit4 watchdog_tripped
+input registers    4        watchdog_trips               watchdog trips since power-up (saturates at 65535)
 =================  =======  ===========================  =====================================================
 
 Any other address -> exception 2 (ILLEGAL DATA ADDRESS); a setpoint outside the range -> exception 3
@@ -31,12 +37,25 @@ Any other address -> exception 2 (ILLEGAL DATA ADDRESS); a setpoint outside the 
 pressure climbs to the relief pressure; crossing ``overpressure_limit`` latches fault 1 and stops the motor.
 :meth:`CompressorModel.inject_motor_fault` latches fault 2. A fault is cleared by writing ``fault_reset``
 (only while the pressure is below the limit). Link drops are a property of the server, not of the model.
+
+Communication watchdog (as industrial controllers have one): once ``watchdog_timeout`` is non-zero, every
+request that reaches the device (any table, read or write, any connection) restarts its timer; when no request
+arrives for that long (wall clock: the link is the device's real-time behaviour, whatever the sim time scale),
+the device closes the spray valve and stops the motor by itself and latches ``watchdog_tripped``. It trips once
+per silence: the next request restarts the timer. The server checks it every :data:`WATCHDOG_CHECK_PERIOD`
+seconds, so the device is safe at most ``timeout + WATCHDOG_CHECK_PERIOD`` after the last request.
+
+:meth:`CompressorModel.history` is the device's own record of every valve and motor change (wall time
+``time.time()``, sim time, new value, cause: ``modbus``, ``watchdog``, ``test``), so a test can measure how long
+after an event the device became safe.
 """
 from __future__ import annotations
 
 import math
 import threading
-from typing import Any, Callable, Dict, List, Sequence
+import time
+from collections import deque
+from typing import Any, Callable, Deque, Dict, List, Optional, Sequence
 
 from .errors import DeviceStandInError
 
@@ -48,9 +67,16 @@ EXC_ILLEGAL_ADDRESS = 2
 EXC_ILLEGAL_VALUE = 3
 
 COILS = ("motor_on", "spray_valve", "fault_reset")
-DISCRETE_INPUTS = ("motor_running", "valve_open", "pressure_in_range", "fault_active")
-HOLDING_REGISTERS = ("pressure_setpoint",)
-INPUT_REGISTERS = ("measured_pressure", "motor_current", "fault_code", "status_bits")
+DISCRETE_INPUTS = ("motor_running", "valve_open", "pressure_in_range", "fault_active", "watchdog_tripped")
+HOLDING_REGISTERS = ("pressure_setpoint", "watchdog_timeout")
+INPUT_REGISTERS = ("measured_pressure", "motor_current", "fault_code", "status_bits", "watchdog_trips")
+
+#: allowed non-zero values of the ``watchdog_timeout`` holding register, ms
+WATCHDOG_MIN_MS, WATCHDOG_MAX_MS = 50, 60000
+#: wall seconds between two checks of the watchdog by the server
+WATCHDOG_CHECK_PERIOD = 0.02
+#: entries kept in the valve / motor history
+HISTORY_LENGTH = 256
 
 
 class RegisterAccessError(DeviceStandInError):
@@ -87,6 +113,7 @@ class CompressorModel:
         self.pressure = 0.0
         self.fault_code = FAULT_NONE
         self._regulator_stuck = False
+        self._history: Deque[Dict[str, Any]] = deque(maxlen=HISTORY_LENGTH)
 
     # -- physics -------------------------------------------------------------------------------------------
     def update(self) -> None:
@@ -132,15 +159,34 @@ class CompressorModel:
             return self.valve_open and self.pressure_in_range
 
     # -- commands ------------------------------------------------------------------------------------------
-    def set_motor(self, on: bool) -> None:
+    def set_motor(self, on: bool, cause: str = "modbus") -> None:
         with self._lock:
             self.update()
+            if self.motor_on != bool(on):
+                self._note("motor_on", bool(on), cause)
             self.motor_on = bool(on)
 
-    def set_valve(self, open_: bool) -> None:
+    def set_valve(self, open_: bool, cause: str = "modbus") -> None:
         with self._lock:
             self.update()
+            if self.valve_open != bool(open_):
+                self._note("valve_open", bool(open_), cause)
             self.valve_open = bool(open_)
+
+    def safe_stop(self, cause: str) -> None:
+        """Valve closed, then motor off (what the watchdog does)."""
+        with self._lock:
+            self.set_valve(False, cause)
+            self.set_motor(False, cause)
+
+    def _note(self, what: str, value: bool, cause: str) -> None:
+        self._history.append({"wall": time.time(), "sim": self._clock(), "what": what, "value": value,
+                              "cause": cause})
+
+    def history(self) -> List[Dict[str, Any]]:
+        """Every valve / motor change, oldest first: ``{wall, sim, what, value, cause}`` (see the module doc)."""
+        with self._lock:
+            return [dict(e) for e in self._history]
 
     def set_setpoint(self, bar: float) -> None:
         if not (isinstance(bar, (int, float)) and math.isfinite(bar) and 0.0 <= bar <= self.max_setpoint):
@@ -185,10 +231,56 @@ def _u16(value: float) -> int:
 
 
 class CompressorRegisterMap:
-    """Modbus view of a :class:`CompressorModel` (see the module docstring for the map)."""
+    """Modbus view of a :class:`CompressorModel` and its communication watchdog (see the module docstring).
 
-    def __init__(self, model: CompressorModel) -> None:
+    :param wall: monotonic wall clock of the watchdog (seconds).
+    """
+
+    def __init__(self, model: CompressorModel, wall: Callable[[], float] = time.monotonic) -> None:
         self.model = model
+        self._wall = wall
+        self._wd_lock = threading.Lock()
+        self.watchdog_ms = 0
+        self.watchdog_tripped = False
+        self.watchdog_trips = 0
+        self.last_trip: Optional[Dict[str, float]] = None
+        self._last_traffic = wall()
+        self._expired = False
+
+    # -- communication watchdog ----------------------------------------------------------------------------
+    def _traffic(self) -> None:
+        """A request reached the device: restart the watchdog timer."""
+        with self._wd_lock:
+            self._last_traffic = self._wall()
+            self._expired = False
+
+    def check_watchdog(self) -> bool:
+        """Trip the watchdog if it is armed and no request came for its timeout; True when it tripped now."""
+        with self._wd_lock:
+            if self.watchdog_ms <= 0 or self._expired:
+                return False
+            silent = self._wall() - self._last_traffic
+            if silent * 1000.0 < self.watchdog_ms:
+                return False
+            self._expired = True
+            self.watchdog_tripped = True
+            self.watchdog_trips += 1
+            self.last_trip = {"wall": time.time(), "silent_s": round(silent, 4)}
+        self.model.safe_stop("watchdog")
+        return True
+
+    def watchdog_state(self) -> Dict[str, Any]:
+        with self._wd_lock:
+            return {"timeout_ms": self.watchdog_ms, "tripped": self.watchdog_tripped, "trips": self.watchdog_trips,
+                    "last_trip": dict(self.last_trip) if self.last_trip else None,
+                    "silent_s": round(self._wall() - self._last_traffic, 4)}
+
+    def _set_watchdog(self, value: int) -> None:
+        with self._wd_lock:
+            self.watchdog_ms = int(value)
+            self.watchdog_tripped = False
+            self._last_traffic = self._wall()
+            self._expired = False
 
     @staticmethod
     def _check(names: Sequence[str], table: str, address: int, count: int, writable: bool = True) -> None:
@@ -198,6 +290,7 @@ class CompressorRegisterMap:
 
     def read_bits(self, table: str, address: int, count: int) -> List[bool]:
         """``table`` is ``coils`` or ``discrete_inputs``."""
+        self._traffic()
         m = self.model
         with m._lock:
             m.update()
@@ -206,29 +299,33 @@ class CompressorRegisterMap:
                 values = [m.motor_on, m.valve_open, False]
             elif table == "discrete_inputs":
                 self._check(DISCRETE_INPUTS, table, address, count)
-                values = [m.motor_running, m.valve_open, m.pressure_in_range, m.fault_code != FAULT_NONE]
+                values = [m.motor_running, m.valve_open, m.pressure_in_range, m.fault_code != FAULT_NONE,
+                          self.watchdog_tripped]
             else:
                 raise RegisterAccessError(EXC_ILLEGAL_ADDRESS, "unknown bit table %r" % table)
         return values[address:address + count]
 
     def read_registers(self, table: str, address: int, count: int) -> List[int]:
         """``table`` is ``holding`` or ``input``; values are raw 16-bit integers."""
+        self._traffic()
         m = self.model
         with m._lock:
             m.update()
             if table == "holding":
                 self._check(HOLDING_REGISTERS, table, address, count)
-                values = [_u16(m.setpoint * 100.0)]
+                values = [_u16(m.setpoint * 100.0), self.watchdog_ms]
             elif table == "input":
                 self._check(INPUT_REGISTERS, table, address, count)
                 status = (int(m.motor_running) | int(m.valve_open) << 1 | int(m.pressure_in_range) << 2
-                          | int(m.fault_code != FAULT_NONE) << 3)
-                values = [_u16(m.pressure * 100.0), _u16(m.motor_current * 100.0), m.fault_code, status]
+                          | int(m.fault_code != FAULT_NONE) << 3 | int(self.watchdog_tripped) << 4)
+                values = [_u16(m.pressure * 100.0), _u16(m.motor_current * 100.0), m.fault_code, status,
+                          _u16(self.watchdog_trips)]
             else:
                 raise RegisterAccessError(EXC_ILLEGAL_ADDRESS, "unknown register table %r" % table)
         return values[address:address + count]
 
     def write_bits(self, address: int, values: Sequence[bool]) -> None:
+        self._traffic()
         self._check(COILS, "coils", address, len(values))
         for i, v in enumerate(values):
             a = address + i
@@ -240,10 +337,18 @@ class CompressorRegisterMap:
                 self.model.reset_fault()
 
     def write_registers(self, address: int, values: Sequence[int]) -> None:
+        self._traffic()
         self._check(HOLDING_REGISTERS, "holding", address, len(values))
+        limit = int(round(self.model.max_setpoint * 100))
+        for i, v in enumerate(values):        # check every value first: nothing half-applied
+            if address + i == 0 and not 0 <= v <= limit:
+                raise RegisterAccessError(EXC_ILLEGAL_VALUE, "pressure_setpoint %d cbar out of range, allowed 0..%d"
+                                          % (v, limit))
+            if address + i == 1 and v != 0 and not WATCHDOG_MIN_MS <= v <= WATCHDOG_MAX_MS:
+                raise RegisterAccessError(EXC_ILLEGAL_VALUE, "watchdog_timeout %d ms out of range, allowed 0 (off) "
+                                          "or %d..%d" % (v, WATCHDOG_MIN_MS, WATCHDOG_MAX_MS))
         for i, v in enumerate(values):
             if address + i == 0:
-                if not 0 <= v <= int(round(self.model.max_setpoint * 100)):
-                    raise RegisterAccessError(EXC_ILLEGAL_VALUE, "pressure_setpoint %d cbar out of range, allowed 0..%d"
-                                              % (v, int(round(self.model.max_setpoint * 100))))
                 self.model.set_setpoint(v / 100.0)
+            elif address + i == 1:
+                self._set_watchdog(v)

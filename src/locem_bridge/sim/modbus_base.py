@@ -14,7 +14,11 @@ Link faults (:meth:`~CompressorServerBase.drop_link`): ``mode="close"`` closes t
 connection (clients get connection errors) and re-opens it after ``duration`` wall seconds; ``mode="silent"``
 keeps the connections but answers nothing until the link returns (clients time out; the held requests are
 answered late, when the link returns). ``duration=None`` keeps the link down until
-:meth:`~CompressorServerBase.restore_link`.
+:meth:`~CompressorServerBase.restore_link`. Requests held or refused by a dropped link never reach the device, so
+its communication watchdog (:class:`~locem_bridge.sim.compressor.CompressorRegisterMap`), checked by the server
+thread every ``WATCHDOG_CHECK_PERIOD`` seconds, trips during a drop as it does when the client dies.
+
+:meth:`~CompressorServerBase.state` is what a test reads: the model, the watchdog and the valve / motor history.
 
 Adapter contract: implement ``async _listen() -> server`` (raise ``OSError`` or any exception when the address
 cannot be bound) and ``async _shutdown(server)`` (close the listener and every connection); await :meth:`_gate`
@@ -26,9 +30,9 @@ import asyncio
 import logging
 import re
 import threading
-from typing import Any, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
-from .compressor import CompressorModel, CompressorRegisterMap, RegisterAccessError
+from .compressor import WATCHDOG_CHECK_PERIOD, CompressorModel, CompressorRegisterMap, RegisterAccessError
 from .errors import DeviceStandInError
 
 log = logging.getLogger("locem_bridge.sim.modbus_server")
@@ -72,7 +76,15 @@ class CompressorServerBase:
         self._server: Any = None
         self._link_up: Optional[asyncio.Event] = None
         self._restore_handle: Optional[asyncio.TimerHandle] = None
+        self._watchdog_handle: Optional[asyncio.TimerHandle] = None
         self.link_state = "down"
+
+    def state(self) -> Dict[str, Any]:
+        """The device as a test sees it: model snapshot, link, watchdog and the valve / motor history."""
+        out = self.model.snapshot()
+        out.update(link=self.link_state, watchdog=self.map.watchdog_state(), history=self.model.history(),
+                   requests=self.requests, refused=self.refused)
+        return out
 
     # -- adapter hooks -------------------------------------------------------------------------------------
     async def _listen(self) -> Any:
@@ -97,6 +109,16 @@ class CompressorServerBase:
         return exc.exception_code
 
     # -- lifecycle -----------------------------------------------------------------------------------------
+    def _watch(self) -> None:
+        """Check the device's communication watchdog, then again in ``WATCHDOG_CHECK_PERIOD`` (server thread)."""
+        try:
+            if self.map.check_watchdog():
+                log.warning("compressor %s:%d: communication watchdog tripped (no request for %d ms): spray valve "
+                            "closed, motor off", self.host, self.port, self.map.watchdog_ms)
+        finally:
+            if self._loop is not None and not self._loop.is_closed():
+                self._watchdog_handle = self._loop.call_later(WATCHDOG_CHECK_PERIOD, self._watch)
+
     async def _open(self) -> None:
         self._server = await self._listen()
         self.link_state = "up"
@@ -118,6 +140,7 @@ class CompressorServerBase:
             started.set()
             return
         started.set()
+        self._watch()
         self._loop.run_forever()
         try:
             self._loop.run_until_complete(self._close())
@@ -148,6 +171,8 @@ class CompressorServerBase:
         loop = self._loop
 
         def _halt() -> None:
+            if self._watchdog_handle is not None:
+                self._watchdog_handle.cancel()
             if self._link_up is not None:
                 self._link_up.set()             # release requests held by a silent drop
             loop.stop()

@@ -181,6 +181,12 @@ class Worksite:
             out["time_scale"] = self.clock.time_scale
         return out
 
+    def compressor_state(self) -> Dict[str, Any]:
+        """The compressor stand-in's own view: state, link, watchdog and valve / motor history (wall + sim time)."""
+        if self.modbus is None:
+            raise SimStateError("the worksite runs no compressor stand-in")
+        return self.modbus.state()
+
     def _need_world(self) -> World:
         if self.world is None:
             raise SimStateError("worksite is not running; call start() first")
