@@ -276,3 +276,67 @@ def test_emergency_stop_needs_reset_arm_after_release(rig, core):
     q = [0.1, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
     r = run(core, "MOVE_J %s" % " ".join(map(str, q)))
     assert r.success, r.message
+
+
+_LOCEM_CHILD = """
+import json, sys, time
+from locem_bridge.bridges.commands_arm import ArmCommands
+from locem_bridge.bridges.ur_arm import UrRtdeArm
+from locem_bridge.locem.core import LocemCore
+from locem_bridge.locem.registry import Interface
+arm = UrRtdeArm(json.loads(sys.argv[1]))
+arm.start()
+core = LocemCore()
+core.install(ArmCommands(arm))
+assert arm.wait_ready(20.0), arm.health()
+core.dispatcher.submit("MOVE_J 2.5 -1.5708 1.5708 -1.5708 -1.5708 0 speed=0.3", Interface.SERVICE)
+print("moving", flush=True)
+time.sleep(600)
+"""
+
+
+def test_bridge_arms_the_controller_watchdog_and_a_killed_locem_leaves_the_arm_stopped(robot):
+    """LOCEM (here a child process holding the arm bridge) killed with kill -9 during a long joint move: its
+    polls stop kicking the controller's RTDE watchdog, the controller stops the program and the arm."""
+    import json
+    import os
+    import signal
+    import subprocess
+    import sys
+    from locem_bridge.sim.ur.process import StandInProcess
+    address = next_ur_address()
+    standin = StandInProcess(address, time_scale=1.0).start()
+    src = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "src")
+    env = dict(os.environ, PYTHONPATH=src + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    child = subprocess.Popen([sys.executable, "-c", _LOCEM_CHILD, json.dumps(arm_cfg(robot, address))],
+                             stdout=subprocess.PIPE, env=env, text=True)
+    try:
+        assert child.stdout.readline().strip() == "moving"
+        assert wait_until(lambda: standin.get_state()["moving"], timeout=5.0)
+        state = standin.get_state()
+        assert state["rtde_watchdog"] == ["input_int_register_0", 1.0], state
+        time.sleep(1.5)                                   # the bridge's polls keep it alive
+        assert standin.get_state()["moving"] and standin.get_state()["watchdog_trips"] == 0
+        killed = time.monotonic()
+        os.kill(child.pid, signal.SIGKILL)
+        child.wait(5.0)
+        stopped = wait_until(lambda: (lambda s: s if not s["moving"] else None)(standin.get_state()), timeout=5.0)
+        elapsed = time.monotonic() - killed
+        assert stopped, standin.get_state()
+        assert stopped["program"] is None and stopped["runtime_state_name"] == "STOPPED", stopped
+        # 1 s watchdog + braking from 0.3 rad/s (the worker, orphaned, may also disconnect first)
+        assert elapsed <= 2.0, elapsed
+        # a fresh bridge (the respawned LOCEM) finds the arm stopped, uploads its script and arms the watchdog
+        arm = UrRtdeArm(arm_cfg(robot, address))
+        arm.start()
+        try:
+            assert arm.wait_ready(20.0), arm.health()
+            assert standin.get_state()["rtde_watchdog"] == ["input_int_register_0", 1.0]
+            assert not standin.get_state()["moving"]
+        finally:
+            arm.close()
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait(5.0)
+        standin.close()

@@ -27,6 +27,11 @@ requested force along it, speed-limited, while moves run along the other axes. M
 the compliant axis, the force along it is recorded (``actual_TCP_force``), and STOP / cancel / any stop of the arm
 end force mode first.
 
+Watchdog and safe state: the worker stops the arm (``stopJ``) and sets the controller's RTDE watchdog
+(``robot.arm.controller.watchdog_frequency``, default :data:`WATCHDOG_HZ` = 1 Hz) before the link is reported up,
+so commands answer ``NOT_READY`` until then; the 50 Hz state polls kick it, so when LOCEM dies the controller
+stops the program and the arm within 1 s (see :mod:`.ur_worker`). 1 Hz leaves a busy machine 20 missed polls.
+
 Safety: a protective stop, an emergency stop or any safety mode other than NORMAL / REDUCED is latched as
 :class:`~.errors.SafetyStop` (``HARDWARE_ERROR``) and refuses every motion until :meth:`reset` (``RESET_ARM``),
 which an operator sends after removing the cause; nothing clears it automatically.
@@ -65,6 +70,7 @@ REQUEST_TIMEOUT = 3.0
 PATH_UPLOAD_S = 2.0                      # s, budget for ur_rtde's script re-upload before a path starts
 PATH_CALL_TIMEOUT = 10.0                 # s, the movePath request (stop script, upload, wait until it runs)
 ROTATION_WEIGHT = 0.3                    # m per rad when a path length mixes translation and rotation
+WATCHDOG_HZ = 1.0                        # min frequency of the controller's RTDE watchdog (see the docstring)
 FORCE_FREE_SPEED = 2.0                   # m/s, force-mode limit entry of the non-compliant axes (unused by type 2)
 
 
@@ -77,6 +83,8 @@ class UrRtdeArm(Arm):
                               where="robot.arm")
         self.joint_names = list(need(cfg, "joint_names", list, where="robot.arm"))
         self.named_poses = {k: [float(x) for x in v] for k, v in need(cfg, "named_poses", dict, where="robot.arm").items()}
+        self.watchdog_hz = need(cfg, "controller.watchdog_frequency", float, default=WATCHDOG_HZ, lo=0.0, hi=100.0,
+                                where="robot.arm")
         self.poll_rate = poll_rate
         self.connect_timeout = connect_timeout
         self.deadline_scale = need(cfg, "deadline.scale", float, default=1.0, lo=0.01, hi=100.0, where="robot.arm")
@@ -105,7 +113,7 @@ class UrRtdeArm(Arm):
         env = dict(os.environ)
         env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         proc = subprocess.Popen([sys.executable, "-u", "-m", "locem_bridge.bridges.ur_worker", "--host", self.host,
-                                 "--frequency", repr(self.frequency)], stdin=subprocess.PIPE,
+                                 "--frequency", repr(self.frequency), "--watchdog", repr(self.watchdog_hz)], stdin=subprocess.PIPE,
                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,
                                 universal_newlines=True, bufsize=1)
         replies: "queue.Queue[Dict[str, Any]]" = queue.Queue()

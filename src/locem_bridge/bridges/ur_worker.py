@@ -11,6 +11,13 @@ Protocol: the worker connects (dashboard, receive, control, IO) and prints ``{"r
 ``{"id": n, "op": name, "args": [...]}`` with ``{"id": n, "ok": true, "result": ...}`` or
 ``{"id": n, "ok": false, "error": "..."}``. Motions are always started asynchronously, so every request is
 short and a stop can follow at once. EOF on stdin ends the worker.
+
+Safe state and watchdog: right after connecting, before it reports ready, the worker stops the arm (``stopJ``: a
+LOCEM that died may have left a motion running) and, unless ``--watchdog 0``, asks the control script for an RTDE
+watchdog (``setWatchdog``: the controller stops the program, and so the arm, when no input package reaches it for
+1 / frequency s). Every ``state`` request (the parent polls at 50 Hz) kicks it; a script re-upload (``reupload``,
+a path move) removes it on the controller, so those set it again. When LOCEM dies its poll stops, and with it the
+kicks, whether or not this worker lives on.
 """
 
 import argparse
@@ -33,8 +40,25 @@ def _connect(host: str, frequency: float) -> Dict[str, Any]:
     return {"dash": dash, "r": receive, "c": control, "io": io}
 
 
-def _ops(h: Dict[str, Any]) -> Dict[str, Callable[..., Any]]:
+STOP_DECEL_J = 10.0          # rad/s^2, the safe-state stopJ at connect
+
+
+def _arm_watchdog(c: Any, frequency: float) -> None:
+    if frequency > 0.0 and not c.setWatchdog(float(frequency)):
+        raise RuntimeError("setWatchdog(%g) refused by the controller" % frequency)
+
+
+def _ops(h: Dict[str, Any], watchdog: float = 0.0) -> Dict[str, Callable[..., Any]]:
     r, c, io, dash = h["r"], h["c"], h["io"], h["dash"]
+
+    def kicked_state() -> Dict[str, Any]:
+        if watchdog > 0.0:
+            c.kickWatchdog()
+        return state()
+
+    def rearmed(result: Any) -> Any:
+        _arm_watchdog(c, watchdog)
+        return result
 
     def state() -> Dict[str, Any]:
         return {"q": list(r.getActualQ()), "qd": list(r.getActualQd()), "tcp": list(r.getActualTCPPose()),
@@ -55,14 +79,14 @@ def _ops(h: Dict[str, Any]) -> Dict[str, Callable[..., Any]]:
         return out if isinstance(out, str) else str(out)
 
     return {
-        "state": state,
+        "state": kicked_state,
         "q": lambda: list(r.getActualQ()),
         "tcp": lambda: list(r.getActualTCPPose()),
         "moveJ": lambda q, v, a: bool(c.moveJ(list(q), float(v), float(a), True)),
         "moveL": lambda p, v, a: bool(c.moveL(list(p), float(v), float(a), True)),
         # one path of [x, y, z, rx, ry, rz, speed, accel, blend] rows; ur_rtde re-uploads its control script
         # with the path injected, then starts it (command 45) asynchronously
-        "movePath": lambda path: bool(c.moveL([[float(v) for v in row] for row in path], True)),
+        "movePath": lambda path: rearmed(bool(c.moveL([[float(v) for v in row] for row in path], True))),
         "stopJ": lambda a: c.stopJ(float(a), False),
         "stopL": lambda a: c.stopL(float(a), False),
         "forceMode": lambda frame, sel, wrench, typ, limits: bool(c.forceMode(
@@ -74,7 +98,7 @@ def _ops(h: Dict[str, Any]) -> Dict[str, Callable[..., Any]]:
         "setPayload": lambda m, cog: bool(c.setPayload(float(m), list(cog))),
         "setDO": lambda i, v: bool(io.setStandardDigitalOut(int(i), bool(v))),
         "dash": dash_cmd,
-        "reupload": lambda: bool(c.reuploadScript()),
+        "reupload": lambda: rearmed(bool(c.reuploadScript())),
         "ik": lambda p, qnear: list(c.getInverseKinematics(list(p), list(qnear))),
     }
 
@@ -83,15 +107,18 @@ def main(argv: List[str] = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m locem_bridge.bridges.ur_worker", description=__doc__)
     ap.add_argument("--host", required=True)
     ap.add_argument("--frequency", type=float, default=500.0)
+    ap.add_argument("--watchdog", type=float, default=0.0, help="RTDE watchdog min frequency, Hz (0 = none)")
     args = ap.parse_args(argv)
     out = sys.stdout
     try:
         handles = _connect(args.host, args.frequency)
+        handles["c"].stopJ(STOP_DECEL_J, False)          # safe state: whatever a dead LOCEM left moving stops
+        _arm_watchdog(handles["c"], args.watchdog)
     except Exception as exc:  # report why, the parent retries with backoff
         out.write(json.dumps({"ready": False, "error": "%s: %s" % (type(exc).__name__, exc)}) + "\n")
         out.flush()
         return 1
-    ops = _ops(handles)
+    ops = _ops(handles, args.watchdog)
     out.write(json.dumps({"ready": True}) + "\n")
     out.flush()
     for line in sys.stdin:

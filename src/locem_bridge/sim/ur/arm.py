@@ -18,10 +18,19 @@ State machines (values as in the UR RTDE guide / ur_rtde enums):
   --unlock protective stop / play--> PLAYING; stopScript, dashboard ``stop``, an emergency stop or a script runtime
   error (e.g. no IK solution) --> STOPPED.
 - safety_mode: NORMAL (1), PROTECTIVE_STOP (3), ROBOT_EMERGENCY_STOP (7).
+
+RTDE watchdog (URScript ``rtde_set_watchdog(variable, min_frequency, "stop")``, what ur_rtde's ``setWatchdog``
+(command 35, frequency in the first double register) makes its control script call): once set, every input data
+package that carries the control script's command register (``input_int_register_0``, or 24 with the upper range)
+feeds it, e.g. ur_rtde's ``kickWatchdog`` (command 0); when none arrives for 1 / min_frequency wall seconds (the
+link is real time, whatever the time scale) the program is stopped (runtime STOPPED, the arm brakes as on any
+program stop) and the reason is kept in ``last_error``. A client that vanishes (killed, unplugged) stops feeding
+it. As on the real controller, every watchdog is removed when the program stops; a new program must set it again.
 """
 import logging
 import math
 import threading
+import time
 from collections import namedtuple
 from typing import Callable, Dict, List, Optional, Sequence
 
@@ -159,6 +168,9 @@ class ArmCore:
         self._q_dirty = True
         self.controller_time = 0.0   # controller clock: control cycles x period (RTDE "timestamp")
         self._modes_dirty = True
+        self.rtde_watchdog: Optional[tuple] = None   # (input variable, min frequency Hz) of rtde_set_watchdog
+        self._watchdog_fed = 0.0                      # time.monotonic() of the last package carrying it
+        self.watchdog_trips = 0
         self._update_outputs(0.0)
 
     # ------------------------------------------------------------------------------------------------ helpers
@@ -189,7 +201,10 @@ class ArmCore:
         """Apply one decoded input data package (list of (name, value))."""
         with self.lock:
             d = {}
+            watched = self.rtde_watchdog[0] if self.rtde_watchdog is not None else None
             for name, value in pairs:
+                if name == watched:
+                    self._watchdog_fed = time.monotonic()
                 if name.startswith("input_int_register_"):
                     self.in_int[int(name[19:])] = value
                     self.values[name] = (value,)
@@ -260,6 +275,7 @@ class ArmCore:
             return "ignored"
 
     def _stop_program(self, reason: Optional[str]) -> None:
+        self.rtde_watchdog = None          # every watchdog is removed on program stop
         prog = self.program
         if prog is not None and prog.async_motion is not None:
             self._async_write(prog, -1)
@@ -402,6 +418,14 @@ class ArmCore:
             self.motion_time += dt
             mdt = dt * self.speed_fraction
             prog = self.program
+            wd = self.rtde_watchdog
+            if prog is not None and wd is not None and time.monotonic() - self._watchdog_fed > 1.0 / wd[1]:
+                self.watchdog_trips += 1
+                why = ("RTDE watchdog: no update of %s for %.2f s (min %.3g Hz): program stopped"
+                       % (wd[0], time.monotonic() - self._watchdog_fed, wd[1]))
+                LOG.warning("UR stand-in: %s", why)
+                self._stop_program(why)
+                prog = None
             if prog is not None and self.runtime_state == RUNTIME_PLAYING:
                 try:
                     self._program_cycle(prog)
@@ -749,7 +773,12 @@ class ArmCore:
             self.ft_zero = self.raw_force.copy()
             self._update_force_values()
         elif cmd == CMD_SET_WATCHDOG:
-            pass
+            freq = float(self.in_double[prog.off_f])
+            if not (math.isfinite(freq) and freq > 0.0):
+                raise ScriptRuntimeError("rtde_set_watchdog: min_frequency must be > 0 (got %r)" % freq)
+            self.rtde_watchdog = ("input_int_register_%d" % prog.off_i, freq)
+            self._watchdog_fed = time.monotonic()
+            LOG.info("UR stand-in: RTDE watchdog on %s at %.3g Hz (stop)", self.rtde_watchdog[0], freq)
         elif cmd == CMD_PROTECTIVE_STOP:
             self.protective_stop("protective_stop() requested by the control script")
             return False

@@ -206,7 +206,8 @@ class UrControllerStandIn:
     def get_state(self) -> dict:
         """Modes and flags: robot_mode, safety_mode, runtime_state (ints) and their names, last_error; ``moving``,
         ``motion_time`` (the controller's sim time, s) and ``last_moving_time`` (motion_time at the end of the last
-        control cycle in which the arm moved)."""
+        control cycle in which the arm moved); ``rtde_watchdog`` ([variable, min Hz] or None) and ``watchdog_trips``
+        (programs it stopped, see :mod:`.arm`)."""
         from .arm import ROBOT_MODE_NAMES, RUNTIME_NAMES, SAFETY_MODE_NAMES
         a = self.arm
         with a.lock:
@@ -215,7 +216,8 @@ class UrControllerStandIn:
                     "runtime_state": a.runtime_state, "runtime_state_name": RUNTIME_NAMES.get(a.runtime_state),
                     "program": a.program.name if a.program else None, "moving": a.is_moving(),
                     "motion_time": a.motion_time, "last_moving_time": a.last_moving_time,
-                    "last_error": a.last_error}
+                    "last_error": a.last_error, "watchdog_trips": a.watchdog_trips,
+                    "rtde_watchdog": list(a.rtde_watchdog) if a.rtde_watchdog else None}
 
     @property
     def refused(self) -> List[str]:
