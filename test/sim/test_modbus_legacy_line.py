@@ -57,9 +57,9 @@ EXPECTED_SEMANTICS: List[List[Any]] = [
     ["read input 2..6: exception", 2],
     ["write coil 7: exception", 2],
     ["read coil 40: exception", 2],
-    ["read discrete input 4: exception", 2],
+    ["read discrete input 5: exception", 2],
     ["write coils 1..3: exception", 2],
-    ["write holding 0..1: exception", 2],
+    ["write holding 0..2: exception", 2],
     ["set-point 50 bar: exception", 3],
     ["set-point 50 bar (fc 16): exception", 3],
     ["unit id 2: exception", 4],
@@ -198,9 +198,9 @@ def run_scenario(host: str, port: int, comp_cfg: Dict[str, Any], log: Callable[[
         note("read input 2..6: exception", code(client.read_input_registers(2, count=5, **ids)))
         note("write coil 7: exception", code(client.write_coil(7, True, **ids)))
         note("read coil 40: exception", code(client.read_coils(40, count=1, **ids)))
-        note("read discrete input 4: exception", code(client.read_discrete_inputs(4, count=1, **ids)))
+        note("read discrete input 5: exception", code(client.read_discrete_inputs(5, count=1, **ids)))
         note("write coils 1..3: exception", code(client.write_coils(1, [True, False, True], **ids)))
-        note("write holding 0..1: exception", code(client.write_registers(0, [100, 200], **ids)))
+        note("write holding 0..2: exception", code(client.write_registers(0, [100, 200, 300], **ids)))
         note("set-point 50 bar: exception", code(client.write_register(0, 5000, **ids)))
         note("set-point 50 bar (fc 16): exception", code(client.write_registers(0, [5000], **ids)))
         note("unit id 2: exception", code(client.read_input_registers(0, count=1, **{kw: DEV + 1})))
