@@ -26,6 +26,14 @@ Heartbeat consumer: a drive is silent when no heartbeat arrived for ``heartbeat_
 still at most that timeout + one control period (20 ms at 50 Hz) + the drives' braking at ``stop_deceleration``
 after the last heartbeat.
 
+Heartbeat producer (the drives' safety net when LOCEM dies): the master sends its own heartbeat (node
+``drives.master_node_id``, default 127, every ``heartbeat_ms``) and, while enabling each drive, makes the drive
+consume it (0x1016 sub 1, timeout ``drives.master_timeout_ms``, default :data:`MASTER_TIMEOUT_MS` = 500 ms, five
+heartbeats: a busy machine may delay a few). A drive whose master falls silent for that long stops by itself
+(quick stop, PRE-OPERATIONAL; see :mod:`locem_bridge.sim.drives`). A drive without 0x1016 is enabled anyway, with a
+warning that it will not stop by itself. A fresh master (a respawned LOCEM) commands every wheel to zero before it
+enables the drive, so nothing a previous LOCEM left running moves on.
+
 Poses: ``[x, y, theta]`` of base_footprint in ``map``; odometry starts at :meth:`set_pose` (initial pose).
 """
 
@@ -45,6 +53,7 @@ from ..rate import FixedRate
 log = logging.getLogger(__name__)
 
 SW_FAULT = 0x08
+MASTER_TIMEOUT_MS = 500
 
 
 class Cia402Base(Base):
@@ -66,6 +75,10 @@ class Cia402Base(Base):
         self.heartbeat_s = need(drives, "heartbeat_ms", float, lo=1.0, where=w + ".drives") / 1000.0
         self.hb_timeout = self.heartbeat_s * need(drives, "consumer_timeout_factor", float, default=1.5, lo=1.0,
                                                   where=w + ".drives")
+        self.master_id = need(drives, "master_node_id", int, default=127, lo=1, hi=127, where=w + ".drives")
+        self.master_timeout_ms = need(drives, "master_timeout_ms", int, default=MASTER_TIMEOUT_MS, lo=10, hi=65535,
+                                      where=w + ".drives")
+        self._hb_task: Any = None
         self.accel_units = int(need(drives, "profile_acceleration", float, lo=0.1, where=w + ".drives") * self.vel_scale)
         self.stop_decel_units = int(need(drives, "stop_deceleration", float, default=200.0, lo=1.0,
                                          where=w + ".drives") * self.vel_scale)
@@ -140,6 +153,12 @@ class Cia402Base(Base):
         if self._thread is not None:
             self._thread.join(3.0)
             self._thread = None
+        if self._hb_task is not None:
+            try:
+                self._hb_task.stop()
+            except Exception:
+                pass
+            self._hb_task = None
         if self.network is not None:
             try:
                 self._send_wheels([0.0] * 4)
@@ -160,8 +179,15 @@ class Cia402Base(Base):
 
     # -- enabling ----------------------------------------------------------------------------------------
     def _enable_all(self) -> None:
+        if self._hb_task is None:               # heartbeat producer first: the drives' monitoring starts with it
+            self._hb_task = self.network.send_periodic(0x700 + self.master_id, b"\x05", self.heartbeat_s)
         for i, node in enumerate(self.nodes):
             node.nmt.wait_for_heartbeat(max(1.0, 3 * self.heartbeat_s))
+            try:
+                node.sdo[0x1016][1].raw = (self.master_id << 16) | self.master_timeout_ms
+            except Exception as exc:  # SdoAbortedError / KeyError: the drive has no heartbeat consumer
+                log.warning("base: drive %d has no heartbeat consumer (0x1016: %s): it will not stop by itself when "
+                            "LOCEM dies", self.node_ids[i], exc)
             node.setup_402_state_machine()
             node.nmt.state = "OPERATIONAL"
             node.op_mode = "PROFILED VELOCITY"

@@ -16,6 +16,11 @@ Each :class:`Cia402Drive` implements
 - PDOs wired explicitly (a ``LocalNode`` does not apply RPDOs by itself): received RPDOs are decoded with the
   current mapping (0x1600..) and written through the object dictionary, only in OPERATIONAL; TPDOs
   (0x1800../0x1A00..) are sent cyclically with their event timer and at once when the statusword changes.
+- heartbeat consumer (0x1016 sub 1 = producer node id << 16 | time ms, written by the master when it enables
+  the drive): monitoring starts with the producer's first heartbeat; when the producer falls silent for longer
+  than that time (its process died, the cable is cut) the drive stops by itself: OPERATION ENABLED -> QUICK STOP
+  ACTIVE (braking at 0x6084), EMCY 0x8130 (heartbeat error), NMT PRE-OPERATIONAL (RPDOs ignored) until a master
+  enables it again; :meth:`Cia402Drive.check_consumer` is called every TPDO cycle of the drive set;
 - faults: :meth:`inject_fault` (FAULT state, 0x603F error code, EMCY), :meth:`inject_heartbeat_loss` (the node
   drops off the bus: no heartbeat, TPDOs or SDO answers, motor stops) and :meth:`restore` (it reboots).
 Malformed frames addressed to a drive (wrong length NMT/SDO/RPDO) are ignored and logged; ``refused`` counts them.
@@ -68,6 +73,7 @@ NMT_OPERATIONAL = 5
 NMT_PRE_OPERATIONAL = 127
 
 FAULT_OVERCURRENT = 0x2310
+EMCY_HEARTBEAT = 0x8130          # life guard / heartbeat error (CiA 301)
 
 
 def advance(v: float, angle: float, vt: float, a_up: float, a_down: float, dt: float) -> Tuple[float, float]:
@@ -156,6 +162,11 @@ class Cia402Drive:
         self._tpdo_due: Dict[int, float] = {}
         self._last_sw_sent: Optional[int] = None
         self._sample: Optional[Tuple[int, Tuple[float, float]]] = None
+        self.consumer: Optional[Tuple[int, float]] = None      # (producer node id, timeout s), from 0x1016 sub 1
+        self._consumer_seen: Optional[float] = None            # time.monotonic() of the producer's last heartbeat
+        self._consumer_cb: Any = None
+        self.consumer_trips = 0
+        self.last_consumer_trip: Optional[float] = None        # time.time() of the last trip
         od = self.node.data_store
         od.setdefault(0x1017, {})[0] = struct.pack("<H", self.heartbeat_ms)
         for n in (0, 1):
@@ -284,6 +295,59 @@ class Cia402Drive:
                     self.decel_units = value
         elif 0x1400 <= index <= 0x1403 or 0x1600 <= index <= 0x1603:
             self._rewire_rpdos_later = True
+        elif index == 0x1016 and subindex == 1:
+            self._set_consumer(struct.unpack_from("<I", data)[0])
+
+    # -- heartbeat consumer ------------------------------------------------------------------------------------
+    def _set_consumer(self, value: int) -> None:
+        producer, ms = (value >> 16) & 0x7F, value & 0xFFFF
+        net = self.network
+        if self._consumer_cb is not None and net is not None and self.consumer is not None:
+            try:
+                net.unsubscribe(0x700 + self.consumer[0], self._consumer_cb)
+            except (KeyError, ValueError):
+                pass
+        self._consumer_cb = None
+        self._consumer_seen = None
+        self.consumer = None
+        if ms == 0 or producer == 0:
+            return                                           # consumer off
+        self.consumer = (producer, ms / 1000.0)
+
+        def on_heartbeat(can_id: int, data: bytes, timestamp: float) -> None:
+            if self.online and len(data) == 1:
+                self._consumer_seen = time.monotonic()
+        self._consumer_cb = on_heartbeat
+        if net is not None:
+            net.subscribe(0x700 + producer, on_heartbeat)
+        log.info("drive %d (%s): consumes the heartbeat of node %d, timeout %d ms", self.node_id, self.name,
+                 producer, ms)
+
+    def check_consumer(self, now: float) -> bool:
+        """Stop the drive when the monitored producer fell silent (see the module docstring); True on a trip."""
+        consumer, seen = self.consumer, self._consumer_seen
+        if consumer is None or seen is None or not self.online or now - seen <= consumer[1]:
+            return False
+        self._consumer_seen = None                           # monitoring restarts with the next heartbeat
+        with self._lock:
+            self.update()
+            prev = self.state
+            if self.state == ENABLED:
+                self.state = QUICK_STOP
+            self.target_units = 0
+            self._mark()
+        self.consumer_trips += 1
+        self.last_consumer_trip = time.time()
+        log.warning("drive %d (%s): heartbeat of node %d silent for %.0f ms (timeout %.0f ms): %s -> %s, "
+                    "PRE-OPERATIONAL", self.node_id, self.name, consumer[0], (now - seen) * 1000.0,
+                    consumer[1] * 1000.0, prev, self.state)
+        self._send_status_tpdo()
+        try:
+            self.node.emcy.send(EMCY_HEARTBEAT, 0x11)         # error register: generic + communication
+            self.node.nmt.send_command(0x80)                 # PRE-OPERATIONAL
+        except Exception as exc:  # the bus may be gone while shutting down
+            log.warning("drive %d: heartbeat-loss reaction not sent: %s", self.node_id, exc)
+        return True
 
     # -- CiA 402 state machine -----------------------------------------------------------------------------
     def _controlword(self, cw: int) -> None:
@@ -375,6 +439,7 @@ class Cia402Drive:
             self.velocity = 0.0
             self._last_cw = 0
             self._mark()
+        self._set_consumer(0)                      # a reset restores the default: no consumer
         self.node.nmt.send_command(0x81)           # INITIALISING: boot-up message
         self.node.nmt.send_command(0x80)           # PRE-OPERATIONAL: starts the heartbeat from 0x1017
         self.online = True
@@ -744,6 +809,7 @@ class DriveSet:
             burst = []
             for d in self.drives:
                 try:
+                    d.check_consumer(now)
                     burst.append((d, d.due_tpdo_frames(now, sample_time)))
                 except Exception as exc:           # keep the loop alive, say what went wrong
                     log.warning("drive %d: cyclic TPDO failed: %s", d.node_id, exc)
