@@ -57,7 +57,8 @@ def _ops(h: Dict[str, Any], watchdog: float = 0.0) -> Dict[str, Callable[..., An
         return state()
 
     def rearmed(result: Any) -> Any:
-        _arm_watchdog(c, watchdog)
+        if c.isProgramRunning():            # a refused path halts the script: the next re-upload re-arms
+            _arm_watchdog(c, watchdog)
         return result
 
     def state() -> Dict[str, Any]:
