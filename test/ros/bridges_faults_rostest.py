@@ -78,18 +78,22 @@ class BridgesFaultsTest(unittest.TestCase):
                          % NORMAL)
         self.assertTrue(wait_until(lambda: self.rig.model.snapshot()["valve_open"], timeout=60.0))
         self.rig.server.drop_link(duration=None, mode="silent")
-        t0 = time.monotonic()
+        t0, t0_wall = time.monotonic(), time.time()
         reply = job.wait(10.0)
         self.assertIsNotNone(reply)
         self.assertEqual(reply.code, "HARDWARE_ERROR", reply.message)
         self.assertIn("compressor", reply.message)
         self.assertLess(job.ended - t0, 1.0)
-        self.assertTrue(self.rig.model.snapshot()["valve_open"])     # nobody could reach the valve yet
-        self.assertTrue(self.rig.model.snapshot()["motor_on"])
+        # nobody can reach the device, but its own communication watchdog closes the valve and stops the motor
+        self.assertTrue(wait_until(lambda: not self.rig.model.snapshot()["valve_open"]
+                                   and not self.rig.model.snapshot()["motor_on"], timeout=3.0))
+        stops = self.rig.model.history()[-2:]
+        self.assertEqual([(e["what"], e["cause"]) for e in stops], [("valve_open", "watchdog"), ("motor_on", "watchdog")])
+        self.assertLessEqual(stops[-1]["wall"] - t0_wall, 1.0, stops)
         self.assertDiagnosticsError("compressor", ["link down", "does not answer"], since=t0)
         self.rig.server.restore_link()
-        # the link is back: the backend brings the compressor to its safe state by itself (valve closed, motor
-        # off); no COMPRESSOR_OFF is sent here
+        # the link is back: the backend keeps the compressor in its safe state (valve closed, motor off) and
+        # re-arms the watchdog; no COMPRESSOR_OFF is sent here
         self.assertTrue(wait_until(lambda: not self.rig.model.snapshot()["valve_open"], timeout=3.0))
         self.assertNothingRunning()
 
