@@ -340,3 +340,16 @@ def test_bridge_arms_the_controller_watchdog_and_a_killed_locem_leaves_the_arm_s
             child.kill()
             child.wait(5.0)
         standin.close()
+
+
+def test_before_its_first_connection_every_arm_command_is_not_ready_with_the_reason(robot, core):
+    """A fresh LOCEM whose UR controller does not answer yet: NOT_READY naming why, never HARDWARE_ERROR."""
+    arm = UrRtdeArm(arm_cfg(robot, next_ur_address()), connect_timeout=2.0)     # nothing listens there
+    arm.start()
+    core.install(ArmCommands(arm))
+    try:
+        for text in ("GET_JOINTS", "GET_TCP_POSE", "MOVE_HOME", "MOVE_J 0 -1.5708 1.5708 -1.5708 -1.5708 0"):
+            r = run(core, text)
+            assert r.code.value == "NOT_READY" and "not connected yet" in r.message, (text, r.code, r.message)
+    finally:
+        arm.close()

@@ -142,6 +142,10 @@ class UrRtdeArm(Arm):
         with self._io_lock:
             proc = self._proc
             if proc is None or proc.poll() is not None:
+                if self.connections == 0:       # never connected since start: NOT_READY, the arm is stopped first
+                    raise NotConnected("UR controller %s is not connected yet (the arm is stopped and its watchdog "
+                                       "set before it accepts commands): %s" % (
+                                           self.host, self._health.last_error or "connecting"), device="arm")
                 raise LinkDown("UR controller %s is not connected (%s)" % (self.host, self._health.last_error
                                                                              or "reconnecting"), device="arm")
             self._ids += 1
