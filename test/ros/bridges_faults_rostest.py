@@ -114,7 +114,8 @@ class BridgesFaultsTest(unittest.TestCase):
         self.rig.drives.drive(2).restore()
         self.assertTrue(wait_until(lambda: self.locem("STATUS").data["health"]["base"]["link"] == "up"
                                    and not self.locem("STATUS").data["health"]["base"]["fault"], timeout=15.0))
-        self.assertTrue(self.locem("GOTO 2.4 2.8 1.5708").success)
+        reply = self.locem("GOTO 2.4 2.8 1.5708")
+        self.assertTrue(reply.success, (reply.code, reply.message))
         self.assertNothingRunning()
 
     def test_3_protective_stop_mid_move_l_is_latched_until_reset_arm(self):
