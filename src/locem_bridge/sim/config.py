@@ -52,7 +52,8 @@ ROBOT_KEYS: Dict[str, Sequence[str]] = {
     "robot.base.wheel": ("radius", "width", "half_wheelbase", "half_track"),
     "robot.base.limits": ("max_wheel_speed", "max_linear_velocity", "max_angular_velocity", "linear_acceleration",
                           "angular_acceleration"),
-    "robot.base.drives": ("profile", "mode", "can", "master_node_id", "heartbeat_ms", "consumer_timeout_factor",
+    "robot.base.drives": ("profile", "mode", "can", "master_node_id", "master_timeout_ms", "heartbeat_ms",
+                          "consumer_timeout_factor",
                           "tpdo_period_ms", "velocity_units_per_rad_s", "counts_per_rad", "profile_acceleration",
                           "stop_deceleration", "wheels"),
     "robot.base.drives.can": ("interface", "channel", "port", "bitrate"),
@@ -63,7 +64,8 @@ ROBOT_KEYS: Dict[str, Sequence[str]] = {
                   "home_via", "wall_ready_flange", "deadline"),
     "robot.arm.description": ("package", "urdf"),
     "robot.arm.mount": ("xyz", "rpy"),
-    "robot.arm.controller": ("host", "dashboard_port", "script_port", "rtde_port", "rtde_frequency"),
+    "robot.arm.controller": ("host", "dashboard_port", "script_port", "rtde_port", "rtde_frequency",
+                             "watchdog_frequency"),
     "robot.tools": TOOL_NAMES,
     "tool": ("tcp", "mass", "cog", "switch", "body"),
     "robot.tools.taping_tool": ("tape_width",),
@@ -71,7 +73,8 @@ ROBOT_KEYS: Dict[str, Sequence[str]] = {
     "robot.tools.sander": ("pad_radius",),
     "switch": ("source", "index"),
     "body": ("radius", "length"),
-    "robot.compressor": ("protocol", "host", "port", "device_id", "timeout", "pressure_range", "max_setpoint", "sim"),
+    "robot.compressor": ("protocol", "host", "port", "device_id", "timeout", "watchdog_timeout", "pressure_range",
+                         "max_setpoint", "sim"),
     "robot.compressor.sim": ("time_constant", "max_pressure", "valve_drop", "idle_current", "current_per_bar",
                              "overpressure_limit"),
     "robot.scanner": ("backend", "mount", "range", "fov"),
@@ -333,6 +336,9 @@ def validate_robot(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict
         can["port"] = get(can, "port", p + ".can", int, lo=1, hi=65535)
     drv["heartbeat_ms"] = get(drv, "heartbeat_ms", p, int, lo=0, hi=65535)
     drv["consumer_timeout_factor"] = get(drv, "consumer_timeout_factor", p, float, default=1.5, lo=1.0, hi=10.0)
+    # the drives stop by themselves when the master's heartbeat is silent this long (bridges/cia402_base.py)
+    drv["master_node_id"] = get(drv, "master_node_id", p, int, default=127, lo=1, hi=127)
+    drv["master_timeout_ms"] = get(drv, "master_timeout_ms", p, int, default=500, lo=10, hi=65535)
     drv["tpdo_period_ms"] = get(drv, "tpdo_period_ms", p, int, lo=1, hi=65535)
     drv["velocity_units_per_rad_s"] = get(drv, "velocity_units_per_rad_s", p, float, lo=1e-6)
     drv["counts_per_rad"] = get(drv, "counts_per_rad", p, float, lo=1e-6)
@@ -382,6 +388,8 @@ def validate_robot(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict
     ctl = _mapping(arm, "controller", "robot.arm", K["robot.arm.controller"])
     cp = "robot.arm.controller"
     get(ctl, "host", cp, str)
+    # RTDE watchdog the arm bridge sets (Hz; 0 = none): the arm stops when LOCEM's polls stop (bridges/ur_arm.py)
+    ctl["watchdog_frequency"] = get(ctl, "watchdog_frequency", cp, float, default=1.0, lo=0.0, hi=100.0)
     for key, port in sorted(UR_RTDE_PORTS.items()):
         ctl[key] = get(ctl, key, cp, int, default=port, lo=1, hi=65535)
         if backend == "ur_rtde" and ctl[key] != port:
@@ -417,6 +425,8 @@ def validate_robot(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict
     get(comp, "host", cp, str)
     comp["port"] = get(comp, "port", cp, int, lo=1, hi=65535)
     comp["device_id"] = get(comp, "device_id", cp, int, default=1, lo=0, hi=247)
+    # the device's communication watchdog, s: valve closed, motor off when LOCEM's polls stop (modbus_compressor)
+    comp["watchdog_timeout"] = get(comp, "watchdog_timeout", cp, float, default=0.5, lo=0.05, hi=60.0)
     comp["pressure_range"] = vec(comp, "pressure_range", cp, 2)
     comp["max_setpoint"] = get(comp, "max_setpoint", cp, float, lo=0.1, hi=600.0)
     csim = _mapping(comp, "sim", cp, K["robot.compressor.sim"], default={})
