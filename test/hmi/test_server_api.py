@@ -5,8 +5,10 @@ are served; every bad request gets a clear 4xx naming what was wrong and what is
 serving afterwards.
 """
 import json
+import logging
 import os
 import socket
+import struct
 import threading
 import time
 
@@ -471,4 +473,142 @@ def test_many_bad_requests_at_once_then_good_ones(server, double):
     assert not any(t.is_alive() for t in threads)
     assert post(server.url, "/api/processes/start", {"iri": TAPING}).status == 200
     assert wait_state(server.url, lambda d: d["snapshot"]["phase"] == "running")
-    assert double.calls == [("start_process", TAPING)]
+    stops = sum(1 for i in range(6) for j in range(10) if (i + j) % 4 == 0)
+    assert double.calls == [("stop",)] * stops + [("start_process", TAPING)]   # a broken STOP body still stops
+
+
+def test_stop_is_carried_out_whatever_its_body_holds(server, double):
+    r = post(server.url, "/api/stop", {"reason": "smoke", "force": True})
+    assert r.status == 200 and r.json == {"ok": True, "ignored": ["force", "reason"]}
+    assert request(server.url, "POST", "/api/stop", raw=b"{broken",
+                   headers={"Content-Type": "application/json"}).status == 200
+    assert request(server.url, "POST", "/api/stop", raw=b"stop now", headers={"Content-Type": "text/plain"}).status == 200
+    assert request(server.url, "POST", "/api/stop", raw=b"x" * (65 * 1024),
+                   headers={"Content-Type": "application/json"}).status == 200
+    assert double.calls == [("stop",)] * 4
+    # every other endpoint still refuses what it does not know, naming it
+    post(server.url, "/api/processes/start", {"iri": TAPING})
+    pid = double.prompts()[0]["id"]
+    r = post(server.url, "/api/prompts/%s/reply" % pid, {"answer": "done", "note": "x", "by": "me"})
+    assert r.status == 400 and r.error["code"] == "unknown_field"
+    assert "by, note" in r.error["message"] and "allowed: answer" in r.error["message"]
+    assert double.desk.get(pid).state == "open" and serving(server.url)
+
+
+def _short_post(port, path, announced, sent):
+    sock = socket.create_connection(("127.0.0.1", port), timeout=20)
+    sock.sendall(b"POST %s HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\nContent-Length: %d\r\n\r\n"
+                 % (path.encode(), announced) + sent)
+    return sock
+
+
+def test_a_short_body_is_a_400_within_seconds_and_others_are_served_meanwhile(server, double):
+    t0 = time.monotonic()
+    sock = _short_post(server.port, "/api/processes/start", 100, b'{"iri": ')
+    # while that client keeps the server waiting for the rest of its body, everyone else is served at once
+    for _ in range(3):
+        t1 = time.monotonic()
+        assert serving(server.url) and time.monotonic() - t1 < 1.0
+    answer = sock.makefile("rb").read()
+    elapsed = time.monotonic() - t0
+    sock.close()
+    assert answer.startswith(b"HTTP/1.0 400 "), answer[:200]
+    body = json.loads(answer.split(b"\r\n\r\n", 1)[1])
+    assert body["error"]["code"] == "incomplete_body" and "8 of the 100 bytes" in body["error"]["message"]
+    assert server.body_timeout_s - 0.5 < elapsed < server.body_timeout_s + 2.0 < 10.0
+    assert double.calls == []
+    # a client that hangs up half-way is answered at once, not after the timeout
+    sock = _short_post(server.port, "/api/processes/start", 100, b'{"iri": ')
+    sock.shutdown(socket.SHUT_WR)
+    t0 = time.monotonic()
+    answer = sock.makefile("rb").read()
+    sock.close()
+    assert b" 400 " in answer.split(b"\r\n", 1)[0] and b"connection ended after 8 of the 100" in answer
+    assert time.monotonic() - t0 < 1.0 and double.calls == []
+
+
+def test_a_short_stop_body_still_stops(server, double):
+    sock = _short_post(server.port, "/api/stop", 100, b'{"why": ')
+    answer = sock.makefile("rb").read()
+    sock.close()
+    assert answer.startswith(b"HTTP/1.0 200 ") and double.calls == [("stop",)]
+
+
+def _reset(sock):
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+    sock.close()
+
+
+def test_clients_hanging_up_are_one_quiet_line(caplog, double):
+    caplog.set_level(logging.INFO, logger="locem_bridge.hmi")
+    with HmiServer(double, "127.0.0.1", 0, heartbeat_s=0.1, body_timeout_s=0.5, shutdown_poll_s=0.05) as srv:
+        requests = [b"GET /static/app.js HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n",
+                    b"GET /api/events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n",
+                    b"POST /api/processes/start HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
+                    b"Content-Length: 50\r\n\r\n{\"i",
+                    b"POST /api/stop HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
+                    b"Content-Length: 50\r\n\r\n{\"i",
+                    b"GET /api/sta"]
+        for req in requests:
+            for how in ("close", "reset", "reset later"):
+                sock = socket.create_connection(("127.0.0.1", srv.port), timeout=5)
+                sock.sendall(req)
+                if how == "reset later":
+                    time.sleep(0.7)
+                _reset(sock) if how.startswith("reset") else sock.close()
+                time.sleep(0.1)
+        time.sleep(0.5)
+        assert serving(srv.url)
+    records = [r for r in caplog.records if r.name.startswith("locem_bridge.hmi")]
+    assert not [r for r in records if r.exc_info or r.levelno >= logging.WARNING], [
+        r.getMessage() for r in records if r.exc_info or r.levelno >= logging.WARNING]
+    hung = [r.getMessage() for r in records if "hung up" in r.getMessage()]
+    assert hung and all("\n" not in m for m in hung)
+
+
+def test_other_sites_pages_cannot_read_or_hold_streams(server, double):
+    evil = {"Origin": "http://evil.example"}
+    for path in ("/api/events", "/api/state"):
+        r = get(server.url, path, headers=evil)
+        assert r.status == 403 and r.error["code"] == "forbidden_origin" and "evil.example" in r.error["message"]
+    # an <img>/<script> load from another page carries no Origin, but the browser marks it cross-site
+    for site in ("cross-site", "same-site"):
+        r = get(server.url, "/api/events", headers={"Sec-Fetch-Site": site, "Sec-Fetch-Mode": "no-cors"})
+        assert r.status == 403 and site in r.error["message"]
+    # the page itself and a typed-in address keep working
+    assert get(server.url, "/", headers={"Sec-Fetch-Site": "cross-site", "Sec-Fetch-Mode": "navigate"}).status == 200
+    assert get(server.url, "/api/state", headers={"Sec-Fetch-Site": "same-origin",
+                                                  "Origin": "http://127.0.0.1:%d" % server.port}).status == 200
+    assert get(server.url, "/api/state", headers={"Sec-Fetch-Site": "none"}).status == 200
+
+
+def _stream_from(port, source):
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.settimeout(5)
+    sock.bind((source, 0))
+    sock.connect(("127.0.0.1", port))
+    sock.sendall(b"GET /api/events HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n")
+    f = sock.makefile("rb")
+    status = f.readline()
+    rest = f.read() if b" 200 " not in status else b""
+    return sock, status, rest
+
+
+def test_one_client_cannot_take_every_stream_slot(double):
+    with HmiServer(double, "127.0.0.1", 0, max_streams=4, max_streams_per_client=2, heartbeat_s=0.1,
+                   shutdown_poll_s=0.05) as srv:
+        held = []
+        for _ in range(2):
+            sock, status, _ = _stream_from(srv.port, "127.0.0.1")
+            assert b" 200 " in status
+            held.append(sock)
+        sock, status, rest = _stream_from(srv.port, "127.0.0.1")
+        sock.close()
+        assert b" 503 " in status and b"per client" in rest and b"127.0.0.1" in rest
+        for source in ("127.0.0.2", "127.0.0.3"):     # other clients still get theirs
+            sock, status, _ = _stream_from(srv.port, source)
+            assert b" 200 " in status, status
+            held.append(sock)
+        for sock in held:
+            sock.close()
+        assert serving(srv.url)

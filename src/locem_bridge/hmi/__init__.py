@@ -32,7 +32,9 @@ All JSON bodies are UTF-8 objects. POSTs need ``Content-Type: application/json``
                                             browser reconnects by itself)
 ``GET  /api/processes``                     ``{"processes": [R]}``
 ``POST /api/processes/start``               ``{"iri": str}`` -> ``{"ok": true, "started": iri, "result": ...}``
-``POST /api/stop``                          ``{}`` (or no body) -> ``{"ok": true}``; never refused
+``POST /api/stop``                          ``{}`` (or no body, or anything) -> ``{"ok": true}`` (plus
+                                            ``"ignored": [fields]`` when the body had some); never refused for
+                                            its body (only Host/Origin checks apply)
 ``GET  /api/prompts``                       ``{"prompts": [P]}`` (open prompts only)
 ``POST /api/prompts/<id>/reply``            ``{"answer": str}`` -> ``{"ok": true, "prompt": id, "answer": str}``
 ``GET  /api/kpis``                          ``{"kpis": K}``
@@ -47,13 +49,14 @@ W = ``{"id": wall_id, "version": token, "url": "/api/walls/<id>.png?v=<token>" |
 is not written yet); K = ``{table_name: [flat row objects]}``; E = ``{"time", "level", "text"}``.
 
 Errors are ``{"error": {"status": int, "code": str, "message": str}}`` with: 400 ``malformed_json``,
-``bad_body``, ``missing_body``, ``missing_field``, ``unknown_field``, ``answer_not_allowed``; 403
-``forbidden_host`` (loopback server asked for another Host), ``forbidden_origin`` (a POST from a page served
-elsewhere); 404 ``not_found`` (unknown endpoint; the message lists the endpoints), ``unknown_process``,
+``bad_body``, ``missing_body``, ``missing_field``, ``unknown_field`` (naming the fields), ``answer_not_allowed``,
+``incomplete_body`` (fewer bytes than ``Content-Length`` within a few seconds); 403
+``forbidden_host`` (loopback server asked for another Host), ``forbidden_origin`` (a request from a page served
+elsewhere: another ``Origin``, or ``Sec-Fetch-Site`` cross-site/same-site on ``/api``); 404 ``not_found`` (unknown endpoint; the message lists the endpoints), ``unknown_process``,
 ``unknown_wall``, ``picture_not_ready``; 405 ``method_not_allowed``; 409
 ``prompt_not_open`` (answered, withdrawn or never asked; the message lists the open prompts), ``refused`` (the
 backend declined, with its reason); 411/413/415 for body framing, size and type; 502 ``backend_error`` /
-``bad_picture``; 503 ``backend_unavailable``, ``too_many_streams``. The server keeps serving after any of them.
+``bad_picture``; 503 ``backend_unavailable``, ``too_many_streams`` (in all, or per client address). The server keeps serving after any of them.
 
 Run it against the robot with ``rosrun locem_bridge operator_hmi`` (default http://127.0.0.1:8088/; ``_mode:=auto``
 for the automatic operator alone, ``_mode:=both`` for both; see ``locem_bridge.ros.operator_hmi``).

@@ -6,22 +6,29 @@ and the serving thread; port 0 picks a free port, see :attr:`HmiServer.url`) -> 
 (stops serving, ends every event stream, joins threads). Also usable as a context manager.
 
 Safety: while bound to a loopback address, requests whose ``Host`` header names another host are refused (403,
-against DNS rebinding); POSTs that carry an ``Origin`` other than this server are refused (403, against
-cross-site requests from other pages in the operator's browser), and POST bodies must be
-``Content-Type: application/json``. Bodies are limited to 64 KiB; a client silent for ``request_timeout_s`` is
-dropped; event streams are limited to ``max_streams`` at once and ``stream_lifetime_s`` each (the browser
-reconnects by itself). Every rejection is a JSON error (see the package docstring) and the server keeps serving.
+against DNS rebinding); requests that carry an ``Origin`` other than this server, or that the browser marks as
+coming from another site's page (``Sec-Fetch-Site: cross-site`` / ``same-site``) are refused (403, against other
+pages in the operator's browser posting commands or holding event streams), and POST bodies must be
+``Content-Type: application/json``. Bodies are limited to 64 KiB and must arrive within ``body_timeout_s`` (a
+body shorter than its ``Content-Length`` is a 400 after that, in its own thread: other clients are served
+meanwhile); a client silent for ``request_timeout_s`` is dropped; event streams are limited to ``max_streams``
+at once, ``max_streams_per_client`` per client address, and ``stream_lifetime_s`` each (the browser reconnects
+by itself). STOP is the emergency path: it is carried out whatever its body holds (unknown fields, broken JSON,
+another content type), only the Host/Origin checks apply; other endpoints refuse unknown fields with a 400
+naming them. A client that hangs up is one quiet log line, not a traceback. Every rejection is a JSON error
+(see the package docstring) and the server keeps serving.
 """
 import json
 import logging
 import os
 import re
 import socket
+import sys
 import threading
 import time
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 from urllib.parse import unquote, urlsplit
 
 from .backend import HmiBackend
@@ -34,6 +41,8 @@ STATIC_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; ch
                 ".css": "text/css; charset=utf-8", ".svg": "image/svg+xml", ".png": "image/png",
                 ".ico": "image/x-icon"}
 MAX_BODY = 64 * 1024
+HANG_UPS = (ConnectionError, socket.timeout, TimeoutError)   # a client went away or stopped sending
+SAME_SITE_FETCH = ("same-origin", "none")      # Sec-Fetch-Site values of the page itself or a typed-in address
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 PROMPT_REPLY = re.compile(r"/api/prompts/([^/]+)/reply\Z")
 WALL_PNG = re.compile(r"/api/walls/([^/]+)\.png\Z")
@@ -70,6 +79,11 @@ class _Server(ThreadingHTTPServer):
         super().__init__(addr, _Handler)
 
     def handle_error(self, request: Any, client_address: Any) -> None:  # keep serving, log once
+        err = sys.exc_info()[1]
+        if isinstance(err, HANG_UPS):
+            LOG.info("HMI client %s hung up (%s)", client_address[0] if client_address else "?",
+                     type(err).__name__)
+            return
         LOG.exception("HMI request from %s failed", client_address)
 
 
@@ -130,18 +144,29 @@ class _Handler(BaseHTTPRequestHandler):
             path = urlsplit(self.path).path
             self.app.route(self, method, path)
         except RequestError as err:
-            self._error(err)
+            self._answer_error(err)
         except BackendRefused as err:
             self.app.hub.note("refused: %s" % err, "error")
-            self._error(RequestError(409, "refused", str(err)))
+            self._answer_error(RequestError(409, "refused", str(err)))
         except BackendUnavailable as err:
             self.app.hub.note("backend unavailable: %s" % err, "error")
-            self._error(RequestError(503, "backend_unavailable", str(err)))
-        except (BrokenPipeError, ConnectionResetError):
-            pass
+            self._answer_error(RequestError(503, "backend_unavailable", str(err)))
+        except HANG_UPS as err:
+            self.close_connection = True
+            LOG.info("HMI client %s hung up during %s %s (%s)", self.client_address[0], method, self.path,
+                     type(err).__name__)
         except Exception as err:  # noqa: BLE001 - a backend bug is reported, the server keeps serving
             LOG.exception("HMI %s %s failed", method, self.path)
-            self._error(RequestError(502, "backend_error", "%s: %s" % (type(err).__name__, err)))
+            try:
+                self._error(RequestError(502, "backend_error", "%s: %s" % (type(err).__name__, err)))
+            except HANG_UPS:
+                self.close_connection = True
+
+    def _answer_error(self, err: RequestError) -> None:
+        try:
+            self._error(err)
+        except HANG_UPS:
+            self.close_connection = True
 
     def _check_host(self) -> None:
         host = (self.headers.get("Host") or "").strip()
@@ -150,26 +175,65 @@ class _Handler(BaseHTTPRequestHandler):
             raise RequestError(403, "forbidden_host", "Host %r is not served here; use one of: %s" % (
                 host, ", ".join(sorted(allowed))))
         origin = self.headers.get("Origin")
-        if self.command == "POST" and origin is not None:
-            parts = urlsplit(origin)
-            if parts.netloc.lower() != host.lower():
-                raise RequestError(403, "forbidden_origin", "cross-site request from %r refused; the page must be "
-                                   "served by this HMI (%s)" % (origin, host))
+        if origin is not None and urlsplit(origin).netloc.lower() != host.lower():
+            raise RequestError(403, "forbidden_origin", "cross-site request from %r refused; the page must be "
+                               "served by this HMI (%s)" % (origin, host))
+        fetch_site = (self.headers.get("Sec-Fetch-Site") or "").strip().lower()
+        if fetch_site and fetch_site not in SAME_SITE_FETCH and urlsplit(self.path).path.startswith("/api"):
+            raise RequestError(403, "forbidden_origin", "request from another site's page refused (Sec-Fetch-Site: "
+                               "%s); open the operator page itself (%s)" % (fetch_site, host))
 
-    def read_json(self, allowed: Tuple[str, ...], required: Tuple[str, ...]) -> Dict[str, Any]:
+    def read_body(self) -> Tuple[str, bytes]:
+        """``(content type, body bytes)``; the body must arrive within ``body_timeout_s`` (400 otherwise)."""
         ctype = (self.headers.get("Content-Type") or "").split(";")[0].strip().lower()
         length_text = self.headers.get("Content-Length")
         if length_text is None:
-            if required:
-                raise RequestError(411, "length_required", "a JSON body with Content-Length is required")
-            return {}
+            return ctype, b""
         try:
             length = int(length_text)
         except ValueError:
             raise RequestError(400, "bad_length", "Content-Length %r is not a number" % length_text)
         if length < 0 or length > MAX_BODY:
             raise RequestError(413, "body_too_large", "body of %d bytes; at most %d allowed" % (length, MAX_BODY))
-        raw = self.rfile.read(length) if length else b""
+        return ctype, self._read_exactly(length)
+
+    def _read_exactly(self, length: int) -> bytes:
+        chunks: List[bytes] = []
+        got = 0
+        limit = self.app.body_timeout_s
+        deadline = time.monotonic() + limit
+        try:
+            while got < length:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise socket.timeout()
+                self.connection.settimeout(left)
+                chunk = self.rfile.read1(length - got)
+                if not chunk:
+                    break
+                chunks.append(chunk)
+                got += len(chunk)
+        except socket.timeout:
+            self.close_connection = True
+            raise RequestError(400, "incomplete_body", "body incomplete: %d of the %d bytes Content-Length announced "
+                               "arrived within %.1f s" % (got, length, limit))
+        finally:
+            try:
+                self.connection.settimeout(self.timeout)
+            except OSError:
+                pass
+        if got < length:
+            self.close_connection = True
+            raise RequestError(400, "incomplete_body", "body incomplete: the connection ended after %d of the %d "
+                               "bytes Content-Length announced" % (got, length))
+        return b"".join(chunks)
+
+    def read_json(self, allowed: Tuple[str, ...], required: Tuple[str, ...]) -> Dict[str, Any]:
+        if self.headers.get("Content-Length") is None:
+            if required:
+                raise RequestError(411, "length_required", "a JSON body with Content-Length is required")
+            return {}
+        ctype, raw = self.read_body()
         if not raw and not required:
             return {}
         if ctype != "application/json":
@@ -219,20 +283,24 @@ class HmiServer:
                  poll_period_s: float = 0.25, picture_period_s: float = 1.0, kpi_period_s: float = 2.0,
                  max_streams: int = 16, stream_lifetime_s: float = 300.0, heartbeat_s: float = 15.0,
                  title: str = "locem_bridge operator", shutdown_poll_s: float = 0.5,
-                 request_timeout_s: float = 30.0) -> None:
+                 request_timeout_s: float = 30.0, body_timeout_s: float = 3.0,
+                 max_streams_per_client: int = 8) -> None:
         self.backend = backend
         self.host = host
         self.port = int(port)
         self.title = title
         self.shutdown_poll_s = float(shutdown_poll_s)   # serve_forever's poll: how fast close() returns
         self.request_timeout_s = float(request_timeout_s)  # a client silent this long is dropped (slow loris)
+        self.body_timeout_s = float(body_timeout_s)        # a POST body must arrive within this (else 400)
         self.hub = StateHub(backend, poll_period_s=poll_period_s, picture_period_s=picture_period_s,
                             kpi_period_s=kpi_period_s)
         self.max_streams = int(max_streams)
+        self.max_streams_per_client = max(1, min(int(max_streams_per_client), self.max_streams))
         self.stream_lifetime_s = float(stream_lifetime_s)
         self.heartbeat_s = float(heartbeat_s)
         self.allowed_hosts = (set(LOOPBACK_HOSTS) | {host}) if _is_loopback(host) else None
         self._streams = 0
+        self._client_streams: Dict[str, int] = {}
         self._streams_lock = threading.Lock()
         self._httpd: Optional[_Server] = None
         self._thread: Optional[threading.Thread] = None
@@ -359,11 +427,19 @@ class HmiServer:
         h._json(200, {"ok": True, "started": iri, "result": result})
 
     def _stop(self, h: _Handler) -> None:
-        h.read_json((), ())
+        # the emergency path: whatever the body holds (or fails to hold), the robot is stopped
+        ignored: List[str] = []
+        try:
+            _ctype, raw = h.read_body()
+            body = json.loads(raw.decode("utf-8")) if raw.strip() else {}
+            if isinstance(body, dict):
+                ignored = sorted(str(k) for k in body)
+        except (RequestError, UnicodeDecodeError, ValueError):
+            h.close_connection = True                 # the rest of the body (if any) is not read
         self.backend.stop()
         self.hub.note("STOP pressed", "warning")
         self.hub.refresh_now()
-        h._json(200, {"ok": True})
+        h._json(200, {"ok": True, "ignored": ignored} if ignored else {"ok": True})
 
     def _reply(self, h: _Handler, prompt_id: str) -> None:
         body = h.read_json(("answer",), ("answer",))
@@ -387,10 +463,16 @@ class HmiServer:
         if h.command == "HEAD":
             h._send(200, b"", "text/event-stream; charset=utf-8")
             return
+        client = str(h.client_address[0])
         with self._streams_lock:
             if self._streams >= self.max_streams:
                 raise RequestError(503, "too_many_streams", "at most %d event streams at once" % self.max_streams)
+            if self._client_streams.get(client, 0) >= self.max_streams_per_client:
+                raise RequestError(503, "too_many_streams", "at most %d event streams at once per client (%s holds "
+                                   "%d); close another tab of this page" % (self.max_streams_per_client, client,
+                                                                            self._client_streams[client]))
             self._streams += 1
+            self._client_streams[client] = self._client_streams.get(client, 0) + 1
         try:
             h.send_response(200)
             h.send_header("Content-Type", "text/event-stream; charset=utf-8")
@@ -414,6 +496,11 @@ class HmiServer:
         finally:
             with self._streams_lock:
                 self._streams -= 1
+                left = self._client_streams.get(client, 1) - 1
+                if left > 0:
+                    self._client_streams[client] = left
+                else:
+                    self._client_streams.pop(client, None)
 
 
 def _host_name(host: str) -> str:
