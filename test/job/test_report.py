@@ -5,7 +5,8 @@ import os
 
 import pytest
 
-from locem_bridge.job.report import REQUIRED_OUTCOME_KEYS, ProcessRecord, ReportError, RunRecord, write_report
+from locem_bridge.job.report import (ENDED_REASONS, REQUIRED_OUTCOME_KEYS, JobEnd, ProcessRecord, ReportError,
+                                     RunRecord, write_report)
 
 
 def outcome(manual=("w1_j2",)):
@@ -75,3 +76,49 @@ def test_area_sections_left_for_manual_work_are_listed(tmp_path):
     folder = write_report(record(tmp_path), str(tmp_path / "results2"))
     assert json.loads(open(os.path.join(folder, "report.json")).read())["outcome"]["areas_manual"] == []
     assert "| area sections left for manual work | none |" in open(os.path.join(folder, "report.md")).read()
+
+
+def test_a_complete_job_says_it_ended_normally(tmp_path):
+    folder = write_report(record(tmp_path), str(tmp_path / "results"))
+    report = json.loads(open(os.path.join(folder, "report.json")).read())
+    assert report["ended"] == {"reason": "completed", "early": False, "what": ENDED_REASONS["completed"],
+                               "detail": "", "not_run": [], "unread": []}
+    assert report["outcome"]["measured"] is True
+
+
+def test_a_job_cut_short_by_a_shutdown_still_gets_its_report(tmp_path):
+    """The launch shut down during spraying: the simulation no longer answers, PEMKRE neither; the report says
+    why the job ended, what never ran and what could not be read, with the outcome collected before."""
+    ended = JobEnd("shutdown", "the launch shut down (signal-2) while spraying was running", not_run=["sanding"],
+                   unread=["final outcome and pictures (sim/save_outcome): no answer within 2.0 s; the outcome "
+                           "shown was read 4 s before the end", "KPI table (pemkre/query): no answer within 2.0 s"])
+    rec = record(tmp_path, processes=[ProcessRecord("taping", "urn:p:taping", "succeeded", 61.2),
+                                      ProcessRecord("spraying", "urn:p:spraying", "stopped", 12.0, "launch shut down")],
+                 pictures=[], kpis=[], ended=ended)
+    folder = write_report(rec, str(tmp_path / "results"))
+    report = json.loads(open(os.path.join(folder, "report.json")).read())
+    assert report["ended"]["reason"] == "shutdown" and report["ended"]["early"] is True
+    assert report["ended"]["not_run"] == ["sanding"] and len(report["ended"]["unread"]) == 2
+    assert report["outcome"]["joints_taped"] == 2                     # what was collected is kept
+    md = open(os.path.join(folder, "report.md")).read()
+    assert "**Ended: shutdown** (early)" in md and "while spraying was running" in md
+    assert "Not run: sanding" in md and "Could not be read: KPI table (pemkre/query)" in md
+
+
+def test_nothing_measured_is_reported_not_refused(tmp_path):
+    """Neither the simulation nor anyone else ever answered: still a report, saying the outcome is unmeasured."""
+    rec = record(tmp_path, processes=[], outcome={}, pictures=[], kpis=[],
+                 ended=JobEnd("hicem_unreachable", "hicem/start_process: unable to connect", ["taping", "spraying"],
+                              ["outcome (sim/outcome): no answer within 2.0 s"]))
+    folder = write_report(rec, str(tmp_path / "results"))
+    report = json.loads(open(os.path.join(folder, "report.json")).read())
+    o = report["outcome"]
+    assert o["measured"] is False and (o["joints_total"], o["tape_coverage"], o["spray_coverage"]) == (0, 0.0, 0.0)
+    assert report["ended"]["reason"] == "hicem_unreachable" and report["ended"]["not_run"] == ["taping", "spraying"]
+    assert "could not be measured" in open(os.path.join(folder, "report.md")).read()
+
+
+def test_an_unknown_end_reason_is_refused(tmp_path):
+    with pytest.raises(ReportError, match="ended.reason 'crashed' is not one of completed, process_failed"):
+        write_report(record(tmp_path, ended=JobEnd("crashed")), str(tmp_path / "results"))
+    assert not (tmp_path / "results").exists()

@@ -11,6 +11,12 @@ manual taping are reported as ``joints_manual`` and excluded); ``spray_coverage`
 covered fractions of all wall area. ``outcome.areas_manual`` lists the parts of areas HICEM left for manual work
 (a section the arm could not reach: ``{work, area, section, along, height}``, metres along the area and above the
 floor); the processes still succeed. ``results/latest`` is a relative symlink to the newest run.
+
+``ended`` says how the job ended: ``{"reason", "early", "detail", "not_run", "unread"}`` where ``reason`` is one
+of :data:`ENDED_REASONS`, ``early`` is true when steps of the job never ran, ``not_run`` names them and
+``unread`` lists what the job node could not read for the report (the simulation's final measurement, the KPI
+table, ...: a report written while the launch shuts down uses what it collected before). An empty ``outcome``
+(the simulation never answered) is reported as not measured (``outcome.measured`` false), not refused.
 """
 
 import datetime
@@ -20,6 +26,15 @@ import shutil
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional
 
+ENDED_REASONS = {
+    "completed": "every process ran and succeeded",
+    "process_failed": "a process of the job failed",
+    "operator_stop": "the operator pressed STOP",
+    "process_timeout": "a process did not end within the job's process timeout",
+    "shutdown": "the launch shut down (SIGINT/SIGTERM) before the job was done",
+    "hicem_unreachable": "HICEM could not be reached",
+    "pemkre_unreachable": "PEMKRE could not be reached",
+}
 REQUIRED_OUTCOME_KEYS = ("joints_total", "joints_taped", "tape_coverage", "spray_coverage", "sand_coverage",
                          "operator_interventions", "collisions")
 
@@ -51,6 +66,24 @@ class RunRecord:
     pictures: List[str] = field(default_factory=list)
     started: Optional[datetime.datetime] = None
     manual_areas: List[Dict[str, Any]] = field(default_factory=list)
+    ended: Optional["JobEnd"] = None
+
+
+@dataclass
+class JobEnd:
+    """How and why the job ended: ``reason`` from :data:`ENDED_REASONS`, what ``detail`` the job node knows,
+    the steps that never ran and what could not be read for the report."""
+
+    reason: str
+    detail: str = ""
+    not_run: List[str] = field(default_factory=list)
+    unread: List[str] = field(default_factory=list)
+
+    def as_dict(self) -> Dict[str, Any]:
+        if self.reason not in ENDED_REASONS:
+            raise ReportError("ended.reason %r is not one of %s" % (self.reason, ", ".join(ENDED_REASONS)))
+        return {"reason": self.reason, "early": bool(self.not_run), "what": ENDED_REASONS[self.reason],
+                "detail": self.detail, "not_run": list(self.not_run), "unread": list(self.unread)}
 
 
 def run_name(now: Optional[datetime.datetime] = None) -> str:
@@ -60,7 +93,8 @@ def run_name(now: Optional[datetime.datetime] = None) -> str:
 
 def build_report(record: RunRecord, run: str) -> Dict[str, Any]:
     """The ``report.json`` document (pure function; raises :class:`ReportError` for unusable input)."""
-    joints = record.outcome.get("joints")
+    measured = bool(record.outcome)
+    joints = record.outcome.get("joints") if measured else {}
     if not isinstance(joints, dict):
         raise ReportError("outcome.joints must map joint id -> {coverage, taped, manual}")
     robot_joints = {jid: j for jid, j in joints.items() if not j.get("manual")}
@@ -81,6 +115,7 @@ def build_report(record: RunRecord, run: str) -> Dict[str, Any]:
         "areas_manual": [dict(m) for m in record.manual_areas],
         "joints": joints,
         "walls": walls,
+        "measured": measured,
     }
     for key in ("tape_coverage", "spray_coverage", "sand_coverage"):
         if not 0.0 <= outcome[key] <= 1.0:
@@ -96,12 +131,22 @@ def build_report(record: RunRecord, run: str) -> Dict[str, Any]:
         "kpis": record.kpis,
         "timing": {k: round(v, 3) for k, v in record.timing.items()},
         "pictures": [os.path.basename(p) for p in record.pictures],
+        "ended": (record.ended or JobEnd("completed")).as_dict(),
     }
 
 
 def render_markdown(report: Dict[str, Any]) -> str:
     o = report["outcome"]
     lines = ["# Run %s" % report["run"], ""]
+    ended = report.get("ended") or {}
+    if ended:
+        lines += ["**Ended: %s**%s -- %s%s" % (ended["reason"], " (early)" if ended.get("early") else "",
+                                              ended.get("what", ""),
+                                              (": " + ended["detail"]) if ended.get("detail") else ""), ""]
+        if ended.get("not_run"):
+            lines += ["Not run: " + ", ".join(ended["not_run"]), ""]
+        for item in ended.get("unread") or []:
+            lines += ["Could not be read: " + item, ""]
     if report.get("settings"):
         lines += ["Settings: " + ", ".join("%s=%s" % kv for kv in sorted(report["settings"].items())), ""]
     lines += ["## Processes", "", "| process | status | duration |", "| --- | --- | --- |"]
@@ -118,6 +163,8 @@ def render_markdown(report: Dict[str, Any]) -> str:
                       m["height"][1]) for m in o.get("areas_manual", [])) or "none"),
               "| operator interventions | %d |" % o["operator_interventions"],
               "| collisions | %d |" % o["collisions"]]
+    if not o.get("measured", True):
+        lines += ["", "The worksite's outcome could not be measured: the numbers above are not measurements."]
     if report.get("timing"):
         lines += ["", "## Time", "", "| part | seconds |", "| --- | --- |"]
         lines += ["| %s | %.2f |" % kv for kv in report["timing"].items()]

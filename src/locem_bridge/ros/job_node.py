@@ -8,21 +8,28 @@ default 120; see :class:`ProcessSequencer`: the job goes on with the next proces
 by itself). Services used: ``hicem/start_process``, ``sim/outcome``,
 ``sim/scan``, ``sim/save_outcome``, and ``pemkre/query`` for the KPI table when present. Exits when the job is
 done (0 when every process ended, 1 otherwise), so a launch file can mark it ``required``.
+
+A report is always written, also when the job ends early (the launch shuts down, a process times out, HICEM or
+PEMKRE cannot be reached): ``ended`` in report.json says why (see :mod:`locem_bridge.job.report`). The node
+does not need the other nodes alive for it: the worksite's outcome is read at every process boundary and every
+``OUTCOME_PERIOD_S`` while a process runs, every call at the end gets ``END_CALL_TIMEOUT_S``, and what could not
+be read is named in the report (roslaunch allows a node 15 s after SIGINT).
 """
 
 import json
 import os
 import re
 import tempfile
+import threading
 import time
-from typing import Any, Dict, List
+from typing import Any, Callable, Dict, List, Optional
 
 import rospkg
 import rospy
 import yaml
 
 from locem_bridge.config_errors import ConfigError
-from locem_bridge.job.report import RunRecord, write_report
+from locem_bridge.job.report import JobEnd, RunRecord, write_report
 from locem_bridge.job.tracker import TERMINAL_PHASES, JobStep, JobTracker
 from locem_bridge.msg import HicemPrompt, HicemState
 from locem_bridge.srv import HicemStartProcess, JsonCall, PemkreQuery
@@ -83,12 +90,23 @@ class ProcessSequencer:
     A respawned HICEM resumes its interrupted process by itself: the job just keeps waiting for its end.
     """
 
-    def __init__(self, tracker: JobTracker, timeout: float, peer_wait: float, reruns: int = 2) -> None:
+    def __init__(self, tracker: JobTracker, timeout: float, peer_wait: float, reruns: int = 2,
+                 while_waiting: Callable[[], None] = lambda: None,
+                 shutdown_reason: Callable[[], str] = lambda: "ROS shutdown") -> None:
         self.tracker = tracker
         self.timeout = timeout
         self.peer_wait = peer_wait
         self.reruns = reruns
         self.last_state: Dict[str, str] = {}
+        self.while_waiting = while_waiting          # called about every 0.1 s while a process runs
+        self.shutdown_reason = shutdown_reason
+        self.ended: Optional[JobEnd] = None         # why the job must end here, when run() says so
+
+    def _shut_down(self, step: JobStep) -> bool:
+        self.tracker.end(status="interrupted", detail="launch shut down")
+        self.ended = JobEnd("shutdown", "the launch shut down (%s) while %s was running" % (
+            self.shutdown_reason(), step.name))
+        return False
 
     def on_state(self, msg: Any) -> None:
         self.last_state = {"process": msg.process, "phase": msg.phase}
@@ -113,7 +131,7 @@ class ProcessSequencer:
                 if time.monotonic() >= deadline:
                     return False, "HICEM's start_process failed for %.0f s: %s" % (self.peer_wait, text)
                 print("[job] HICEM away (%s); waiting for it" % text, flush=True)
-                rospy.sleep(0.5)
+                time.sleep(0.5)
         return False, "the launch is shutting down"
 
     def run(self, index: int, step: JobStep) -> bool:
@@ -122,14 +140,21 @@ class ProcessSequencer:
             self.tracker.begin(index)
             ok, message = self._start(step)
             if not ok:
+                if rospy.is_shutdown():
+                    return self._shut_down(step)
                 self.tracker.end(status="failed", detail="not started: %s" % message)
+                self.ended = JobEnd("hicem_unreachable" if message.startswith("HICEM's start_process") else
+                                    "process_failed", "%s not started: %s" % (step.name, message))
                 return False
             deadline = time.monotonic() + self.timeout
             while self.tracker.finished is None and not rospy.is_shutdown() and time.monotonic() < deadline:
-                rospy.sleep(0.1)
+                time.sleep(0.1)
+                self.while_waiting()
             if self.tracker.finished is None:
-                self.tracker.end(status="timeout" if not rospy.is_shutdown() else "stopped",
-                                 detail="no end state within %.0f s" % self.timeout)
+                if rospy.is_shutdown():
+                    return self._shut_down(step)
+                self.tracker.end(status="timeout", detail="no end state within %.0f s" % self.timeout)
+                self.ended = JobEnd("process_timeout", "%s did not end within %.0f s" % (step.name, self.timeout))
                 return False
             final = self.tracker.finished
             if final.get("phase") == "failed" and _PEER_AWAY.search(final.get("detail", "")) and \
@@ -145,7 +170,12 @@ class ProcessSequencer:
                 self.tracker.records.pop()
                 continue
             # the operator pressed STOP: the job ends here; a failed process (a task of its own failed): go on
-            return self.tracker.end().status != "stopped"
+            record = self.tracker.end()
+            if record.status == "stopped":
+                self.ended = JobEnd("operator_stop", "%s stopped%s" % (step.name, (": " + record.detail)
+                                                                       if record.detail else ""))
+                return False
+            return True
         return False
 
 
@@ -156,9 +186,76 @@ def _json_call(name: str, **args: Any) -> Dict[str, Any]:
     return json.loads(reply.result)
 
 
+OUTCOME_PERIOD_S = 10.0     # the worksite's outcome is read this often while a process runs
+END_CALL_TIMEOUT_S = 2.0    # each call made to write the report (the launch may be shutting down)
+
+
+class CallFailed(Exception):
+    """A ROS call made for the report failed or did not answer in time (message: what and why)."""
+
+
+def timed(fn: Callable[[], Any], timeout: float, what: str) -> Any:
+    """``fn()`` in a helper thread; :class:`CallFailed` naming ``what`` if it raises or outlives ``timeout``."""
+    box: Dict[str, Any] = {}
+
+    def run() -> None:
+        try:
+            box["value"] = fn()
+        except Exception as err:  # noqa: BLE001 - reported below
+            box["error"] = err
+
+    worker = threading.Thread(target=run, name="job-call", daemon=True)
+    worker.start()
+    worker.join(timeout)
+    if worker.is_alive():
+        raise CallFailed("%s: no answer within %.1f s" % (what, timeout))
+    if "error" in box:
+        raise CallFailed("%s: %s" % (what, box["error"]))
+    return box.get("value")
+
+
+class OutcomeCache:
+    """The latest worksite outcome the job could read, and when (read in the background, never blocking)."""
+
+    def __init__(self) -> None:
+        self.outcome: Dict[str, Any] = {}
+        self.at = 0.0
+        self._busy = threading.Lock()
+
+    def refresh_every(self, period_s: float) -> Callable[[], None]:
+        """A callable that refreshes the outcome when ``period_s`` passed since its last refresh."""
+        due = {"at": time.monotonic() + period_s}
+
+        def tick() -> None:
+            if time.monotonic() >= due["at"]:
+                due["at"] = time.monotonic() + period_s
+                self.refresh()
+        return tick
+
+    def refresh(self, wait: bool = False) -> None:
+        if not self._busy.acquire(blocking=False):
+            return
+        worker = threading.Thread(target=self._read, name="job-outcome", daemon=True)
+        worker.start()
+        if wait:
+            worker.join(END_CALL_TIMEOUT_S)
+
+    def _read(self) -> None:
+        try:
+            outcome = timed(lambda: _json_call("sim/outcome"), END_CALL_TIMEOUT_S * 2, "sim/outcome")
+            if isinstance(outcome.get("joints"), dict):
+                self.outcome, self.at = outcome, time.monotonic()
+        except CallFailed:
+            pass
+        finally:
+            self._busy.release()
+
+
 @config_guard("job")
 def main() -> None:
     rospy.init_node("job")
+    shutdown: Dict[str, str] = {}
+    rospy.core.add_preshutdown_hook(lambda reason: shutdown.setdefault("reason", str(reason)))
     share = rospkg.RosPack().get_path("locem_bridge")
     steps = load_steps(rospy.get_param("~job", os.path.join(share, "config", "jobs", "plasterboard.yaml")),
                        rospy.get_param("~validate_lines", ""))
@@ -168,38 +265,67 @@ def main() -> None:
     for service in ("hicem/start_process", "sim/outcome", "sim/scan", "sim/save_outcome"):
         rospy.wait_for_service(service, timeout=120)
     scan = _json_call("sim/scan")
-    totals = {"joints": len(_json_call("sim/outcome").get("joints", {})), "areas": len(scan.get("areas", []))}
+    outcomes = OutcomeCache()
+    outcomes.outcome, outcomes.at = _json_call("sim/outcome"), time.monotonic()
+    totals = {"joints": len(outcomes.outcome.get("joints", {})), "areas": len(scan.get("areas", []))}
     tracker = JobTracker(steps, totals, say=lambda line: print(line, flush=True))
-    sequencer = ProcessSequencer(tracker, timeout, float(rospy.get_param("~peer_wait", 120.0)))
+    sequencer = ProcessSequencer(tracker, timeout, float(rospy.get_param("~peer_wait", 120.0)),
+                                 while_waiting=outcomes.refresh_every(OUTCOME_PERIOD_S),
+                                 shutdown_reason=lambda: shutdown.get("reason", "ROS shutdown"))
     rospy.Subscriber("hicem/state", HicemState, sequencer.on_state)
     rospy.Subscriber("hicem/state", HicemState, lambda m: tracker.on_state(
         {"process": m.process, "phase": m.phase, "action_type": m.action_type, "task": m.task, "detail": m.detail}))
     rospy.Subscriber("hicem/prompts", HicemPrompt, lambda m: tracker.on_prompt(
         {"event": m.event, "kind": m.kind, "text": m.text, "answer": m.answer}))
     started = time.time()
-    rospy.sleep(0.5)  # let the latched state arrive before the first start
+    time.sleep(0.5)  # let the latched state arrive before the first start
     for index, step in enumerate(steps):
+        if rospy.is_shutdown():
+            sequencer.ended = JobEnd("shutdown", "the launch shut down (%s) before %s started" % (
+                shutdown.get("reason", "ROS shutdown"), step.name))
+            break
         if not sequencer.run(index, step):
             break
+        outcomes.refresh()
+    ended = sequencer.ended
+    if ended is None:
+        failed = [r for r in tracker.records if r.status != "succeeded"]
+        ended = JobEnd("process_failed", "; ".join("%s %s%s" % (r.name, r.status, (": " + r.detail) if r.detail
+                                                                 else "") for r in failed)) if failed else \
+            JobEnd("completed")
+    ended.not_run = [s.name for s in steps[len(tracker.records):]]
+    if ended.reason == "process_failed":
+        try:   # a process that failed because PEMKRE was gone is not the process's own failure
+            timed(lambda: rospy.wait_for_service("pemkre/query", timeout=END_CALL_TIMEOUT_S), END_CALL_TIMEOUT_S + 0.5,
+                  "pemkre/query")
+        except CallFailed:
+            ended.reason = "pemkre_unreachable"
     pictures_dir = tempfile.mkdtemp(prefix="locem_job_")
     try:
-        outcome = _json_call("sim/save_outcome", folder=pictures_dir)
-    except (rospy.ServiceException, rospy.ROSException, RuntimeError) as exc:   # the launch is shutting down
-        print("[job] no outcome from the simulation (%s): report without pictures" % exc, flush=True)
-        outcome = {}
+        outcome = timed(lambda: _json_call("sim/save_outcome", folder=pictures_dir), END_CALL_TIMEOUT_S,
+                        "sim/save_outcome")
+    except CallFailed as exc:   # the launch is shutting down: use what was collected
+        outcome = outcomes.outcome
+        age = time.monotonic() - outcomes.at
+        ended.unread.append("final outcome and wall pictures (%s); the outcome shown was read %.0f s before the "
+                            "end" % (exc, age) if outcome else "the worksite's outcome (%s)" % exc)
+        print("[job] no final outcome from the simulation (%s): report with the outcome read %.0f s earlier, no "
+              "pictures" % (exc, age), flush=True)
     kpis: List[Dict[str, Any]] = []
     try:
-        rospy.wait_for_service("pemkre/query", timeout=2.0)
-        kpis = kpi_rows(rospy.ServiceProxy("pemkre/query", PemkreQuery)("kpi_by_task_type", [], []))
-    except rospy.ROSException:
-        pass
+        kpis = kpi_rows(timed(lambda: rospy.ServiceProxy("pemkre/query", PemkreQuery)("kpi_by_task_type", [], []),
+                              END_CALL_TIMEOUT_S, "pemkre/query kpi_by_task_type"))
+    except CallFailed as exc:
+        ended.unread.append("KPI table (%s)" % exc)
     settings.setdefault("interventions_by_kind", tracker.interventions)
     record = RunRecord(processes=tracker.records, outcome=outcome, operator_interventions=tracker.total_interventions,
                        collisions=int(outcome.get("collisions", 0)), settings=settings, kpis=kpis,
                        timing={"wall_clock_s": time.time() - started},
                        pictures=[os.path.join(pictures_dir, p) for p in outcome.get("pictures", [])],
-                       manual_areas=tracker.manual_areas)
+                       manual_areas=tracker.manual_areas, ended=ended)
     folder = write_report(record, results_dir)
+    print("[job] ended: %s%s%s" % (ended.reason, " (early)" if ended.as_dict()["early"] else "",
+                                   (": " + ended.detail) if ended.detail else ""), flush=True)
     print("[job] report: %s" % os.path.join(folder, "report.md"), flush=True)
     ok = all(r.status == "succeeded" for r in tracker.records) and len(tracker.records) == len(steps)
     rospy.signal_shutdown("job done")

@@ -18,6 +18,7 @@ import os
 import re
 import subprocess
 import sys
+import threading
 import time
 from typing import Any, Dict, List, Optional
 
@@ -101,6 +102,27 @@ def summarise(report_md: str) -> List[str]:
     return lines
 
 
+def _follow(proc: "subprocess.Popen[str]", verbose: bool, found: Dict[str, str], stop: threading.Event) -> None:
+    """Echo the launch's progress lines (all of its output with ``verbose``), note the report's path and a node's
+    configuration error line; ``stop`` is set at such a line and when the output ends."""
+    assert proc.stdout is not None
+    for raw in proc.stdout:
+        line = re.sub(r"\x1b\[[0-9;]*m", "", raw.rstrip())
+        ended_normally = "report" in found and "REQUIRED process" in line   # the job node ends the launch
+        if NODE_CONFIG_ERROR.match(line) and "config_error" not in found:
+            found["config_error"] = line          # a node refused its configuration: it will not get better
+            print(line, flush=True)
+            stop.set()
+            continue
+        if verbose or PROGRESS.match(line) or (("REQUIRED process" in line or "ERROR" in line)
+                                               and not ended_normally):
+            print(line, flush=True)
+        match = re.match(r"^\[job\] report: (.+)$", line)
+        if match:
+            found["report"] = match.group(1).strip()
+    stop.set()
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--results-dir", default="results", help="folder receiving one subfolder per run")
@@ -129,35 +151,32 @@ def main(argv: Optional[List[str]] = None) -> int:
     print("[main] operator page: http://127.0.0.1:%d/" % args.hmi_port, flush=True)
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1,
                             start_new_session=True)
-    report = config_error = ""
+    found: Dict[str, str] = {}
+    stop = threading.Event()
+    reader = threading.Thread(target=_follow, args=(proc, args.verbose, found, stop), name="main-output",
+                              daemon=True)
+    reader.start()
     try:
-        assert proc.stdout is not None
-        for raw in proc.stdout:
-            line = re.sub(r"\x1b\[[0-9;]*m", "", raw.rstrip())
-            ended_normally = bool(report) and "REQUIRED process" in line   # the job node ends the launch
-            if NODE_CONFIG_ERROR.match(line):   # a node refused its configuration: it will not get better
-                config_error = line
-                print(line, flush=True)
-                break
-            if args.verbose or PROGRESS.match(line) or (("REQUIRED process" in line or "ERROR" in line)
-                                                        and not ended_normally):
-                print(line, flush=True)
-            found = re.match(r"^\[job\] report: (.+)$", line)
-            if found:
-                report = found.group(1).strip()
-            if time.monotonic() - started > args.timeout:
-                print("[main] no end after %.0f s: stopping" % args.timeout, flush=True)
-                break
+        # until the launch ends, a node refuses its configuration (it will not get better) or the time is up
+        if not stop.wait(max(0.0, args.timeout - (time.monotonic() - started))):
+            print("[main] no end after %.0f s: stopping" % args.timeout, flush=True)
     except KeyboardInterrupt:
-        print("\n[main] interrupted: stopping", flush=True)
+        print("\n[main] interrupted: stopping (the job writes its report)", flush=True)
     finally:
+        if stop.is_set() and "config_error" not in found:
+            try:
+                proc.wait(10)               # the output ended: roslaunch is on its way out
+            except subprocess.TimeoutExpired:
+                pass
         if proc.poll() is None:
-            os.killpg(proc.pid, 2)          # SIGINT: roslaunch stops every node
+            os.killpg(proc.pid, 2)          # SIGINT: roslaunch stops every node; the job node writes its report
             try:
                 proc.wait(30)
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, 9)
                 proc.wait()
+        reader.join(5.0)
+    report, config_error = found.get("report", ""), found.get("config_error", "")
     elapsed = time.monotonic() - started
     if config_error:
         print("[main] stopped after %.0f s: a node refused its configuration (above)" % elapsed, flush=True)
@@ -170,7 +189,14 @@ def main(argv: Optional[List[str]] = None) -> int:
     with open(os.path.join(os.path.dirname(report), "report.json"), encoding="utf-8") as handle:
         data = json.load(handle)
     statuses = [p.get("status") for p in data.get("processes", [])]
-    ok = bool(statuses) and all(s == "succeeded" for s in statuses)
+    ok = bool(statuses) and all(s == "succeeded" for s in statuses) and not data.get("ended", {}).get("early")
+    ended = data.get("ended") or {}
+    if ended and ended.get("reason") != "completed":
+        print("[main] ended%s: %s -- %s%s" % (" early" if ended.get("early") else "", ended.get("reason"),
+                                             ended.get("what", ""), (": " + ended["detail"]) if ended.get("detail")
+                                             else ""), flush=True)
+        for item in ended.get("unread") or []:
+            print("[main] could not be read: %s" % item, flush=True)
     print("[main] %s in %.0f s wall clock; report: %s" % ("job done" if ok else "job NOT completed", elapsed, report),
           flush=True)
     return 0 if ok else 1
