@@ -91,3 +91,45 @@ def test_processes_from_the_shipped_ontologies(tmp_path):
     with pytest.raises(ValueError) as info:
         processes_from_ontologies([str(bad)])
     assert "broken.ttl" in str(info.value)
+
+
+def test_progress_follows_the_running_process(engine):
+    """Taping, spraying then sanding on the real PEMKRE engine, the states HICEM publishes for each action fed to
+    the WorkFollower in order, the progress read from the real feature_status query the way the ROS backend
+    does: joints while taping, areas sprayed while spraying, areas sanded while sanding -- never the joints
+    again once the areas are worked on."""
+    from locem_bridge.hmi.hicem_view import WorkFollower
+    from locem_bridge.hmi.pemkre_view import work_progress
+
+    engine.update_world(scan_result(walls=2, joints_per_wall=3, areas_per_wall=2))
+    follower = WorkFollower()
+    shown = []
+    for process in (PLB.TapingProcess, PLB.SprayingProcess, PLB.SandingProcess):
+        engine.start_process(str(process), {})
+        for _ in range(60):
+            a = engine.next_action()
+            if a.status != "action":
+                break
+            state = {"process": str(process), "phase": "running", "action_type": a.action_type, "task": a.task}
+            engine.set_task_status(a.task, "in_progress")
+            work = follower.update(state)
+            rows = rows_from_result(json.dumps(engine.query("feature_status").to_sparql_json()))
+            shown.append((str(process), a.action_type, work_progress(rows, work) if work else None))
+            engine.set_task_status(a.task, "succeeded", "valid" if a.action_type == "VALIDATE_TAPE_LINE" else "")
+        follower.update({"process": str(process), "phase": "ended"})
+        rows = rows_from_result(json.dumps(engine.query("feature_status").to_sparql_json()))
+        shown.append((str(process), "END", work_progress(rows, follower.work) if follower.work else None))
+
+    def texts(process, action=None):
+        return [p["text"] for proc, act, p in shown if proc == str(process) and p and act in (action, "END")
+                or (proc == str(process) and p and action is None)]
+
+    assert texts(PLB.TapingProcess, "TAPE_LINE") == ["joints taped or done by hand: %d of 6" % n
+                                                      for n in range(6)] + ["joints taped or done by hand: 6 of 6"]
+    assert texts(PLB.SprayingProcess, "SPRAY_AREA") == ["areas sprayed: %d of 4" % n for n in range(5)]
+    assert texts(PLB.SandingProcess, "SAND_AREA") == ["areas sanded: %d of 4" % n for n in range(5)]
+    # before its first work action a process shows no progress (not the previous process's count)
+    for process in (PLB.SprayingProcess, PLB.SandingProcess):
+        first = [p for proc, act, p in shown if proc == str(process)]
+        assert first[0] is None, shown
+    assert not [p for proc, _a, p in shown if proc != str(PLB.TapingProcess) and p and "joints" in p["text"]]

@@ -7,9 +7,31 @@ functions turn them into the HMI snapshot of :mod:`locem_bridge.hmi.backend`. No
 """
 import os
 import re
-from typing import Any, Dict, Optional
+from typing import Any, Dict, Mapping, Optional
 
 _FEATURE = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+# the work an action type does, for the progress bar (see locem_bridge.hmi.pemkre_view.work_progress)
+WORK_OF_ACTION = {"VALIDATE_TAPE_LINE": "taping", "TAPE_LINE": "taping", "MANUAL_TAPING": "taping",
+                  "SPRAY_AREA": "spraying", "SAND_AREA": "sanding"}
+
+
+class WorkFollower:
+    """Which work the running process does, from HICEM's state messages fed in order: the work of the last
+    work action (:data:`WORK_OF_ACTION`) seen in this process; None after a new process starts until its first
+    work action (tool change, scan, going home ... do not say)."""
+
+    def __init__(self) -> None:
+        self.process = ""
+        self.work: Optional[str] = None
+
+    def update(self, state: Mapping[str, Any]) -> Optional[str]:
+        process = str(state.get("process", "") or "")
+        if process != self.process:
+            self.process, self.work = process, None
+        work = WORK_OF_ACTION.get(str(state.get("action_type", "") or ""))
+        if work is not None and process:
+            self.work = work
+        return self.work
 
 
 def local_name(iri: str) -> str:

@@ -6,6 +6,8 @@
   (what ``QueryResult.to_sparql_json`` produces; typed literals become numbers/booleans), a plain list of row
   objects, or ``{"rows": [...]}``; JSON text or already decoded.
 - :func:`taping_progress` summarizes the ``feature_counts`` query (joint lines per taping status).
+- :func:`work_progress` summarizes the ``feature_status`` query for the work the running process does: joints
+  while taping, areas while spraying or sanding (see :func:`locem_bridge.hmi.hicem_view.WorkFollower`).
 """
 import json
 from typing import Any, Dict, Iterable, List, Optional, Union
@@ -18,6 +20,10 @@ _INTS = {XSD + t for t in ("integer", "int", "long", "short", "byte", "nonNegati
 _FLOATS = {XSD + t for t in ("decimal", "double", "float")}
 DONE_TAPING_STATES = ("processed", "processedManually")
 KPI_QUERIES = (("processes", "kpi_by_process"), ("task_types", "kpi_by_task_type"))
+# work -> (status property's local name, what is counted, what done means)
+WORK_STATUS = {"taping": ("tapingStatus", "joints", "taped or done by hand"),
+               "spraying": ("sprayingStatus", "areas", "sprayed"),
+               "sanding": ("sandingStatus", "areas", "sanded")}
 
 
 def _value(binding: Dict[str, Any]) -> Any:
@@ -76,6 +82,24 @@ def taping_progress(rows: Iterable[Dict[str, Any]]) -> Optional[Dict[str, Any]]:
     if total == 0:
         return None
     return {"done": done, "total": total, "text": "joints taped or done by hand: %d of %d" % (done, total)}
+
+
+def _local(iri: Any) -> str:
+    return str(iri or "").rsplit("#", 1)[-1].rsplit("/", 1)[-1]
+
+
+def work_progress(rows: Iterable[Dict[str, Any]], work: str) -> Optional[Dict[str, Any]]:
+    """``{"done", "total", "text"}`` of ``work`` (a key of :data:`WORK_STATUS`) from ``feature_status`` rows
+    (``feature``, ``property``, ``state``); None if no feature of that work is known yet."""
+    prop, unit, done_means = WORK_STATUS[work]
+    states: Dict[str, str] = {}
+    for row in rows:
+        if _local(row.get("property")) == prop:
+            states[str(row.get("feature", ""))] = _local(row.get("state"))
+    if not states:
+        return None
+    done = sum(1 for st in states.values() if st in DONE_TAPING_STATES)
+    return {"done": done, "total": len(states), "text": "%s %s: %d of %d" % (unit, done_means, done, len(states))}
 
 
 def processes_from_ontologies(paths: Iterable[str]) -> List[Dict[str, str]]:

@@ -10,8 +10,9 @@ interfaces (names relative to the node's namespace unless absolute):
 - ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) -> health, with HICEM's own liveness and its
   ``waiting_for_health`` phase;
 - ``<pemkre>/query`` (``locem_bridge/PemkreQuery``, SPARQL results JSON) -> KPIs (``kpi_by_process``,
-  ``kpi_by_task_type`` for the running specific process) and progress (``feature_counts``). When PEMKRE is not
-  up the page says so and the rest keeps working.
+  ``kpi_by_task_type`` for the running specific process) and progress (``feature_status``: joints while the
+  running process tapes, areas while it sprays or sands; see ``WorkFollower``). When PEMKRE is not up the page
+  says so and the rest keeps working.
 - wall pictures: every ``<wall_id>.png`` in ``~pictures_dir``, and, when the simulated worksite runs, its
   pictures refreshed every ``~sim_picture_period`` s through ``<sim>/save_outcome`` into a private folder;
 - the simulated operator's hands (:mod:`locem_bridge.hmi.sim_hands`): before an answer is sent, the simulator
@@ -19,7 +20,9 @@ interfaces (names relative to the node's namespace unless absolute):
   for a joint taped by hand) run through ``locem_bridge/JsonCall``; if one fails the answer is not sent and the
   operator sees why. ``~sim_hands``: ``auto`` (default: when ``<sim>/mount_tool`` exists), ``true``, ``false``.
 
-Parameters: ``~mode`` (``web``: serve the page; ``auto``: automatic operator only; ``both``), ``~host``
+Parameters: ``~mode`` (``auto``: the automatic operator answers the prompts and the page is served to watch the
+job, a port that cannot be bound is logged and the automatic operator carries on; ``web``: the page only, the
+person answers; ``both``: the page and the automatic operator, a port that cannot be bound is fatal), ``~host``
 (default 127.0.0.1), ``~port`` (default 8088), ``~hicem_ns`` (``hicem``), ``~pemkre_ns`` (``pemkre``),
 ``~processes`` (list of ``{iri, name, description}``; default: every ``proc:AbstractProcess`` of
 ``~ontologies``, default the package's ``ontologies/*.ttl``), ``~process_options`` (dict, e.g.
@@ -59,8 +62,9 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 
 from locem_bridge.hmi import (DEFAULT_CONFIG, AutoOperator, AutoOperatorConfig, BackendRefused,  # noqa: E402
                               BackendUnavailable, HmiError, HmiServer, snapshot_from_hicem, wall_pictures_in)
+from locem_bridge.hmi.hicem_view import WorkFollower  # noqa: E402
 from locem_bridge.hmi.pemkre_view import (KPI_QUERIES, processes_from_ontologies, rows_from_result,  # noqa: E402
-                                          taping_progress)
+                                          work_progress)
 from locem_bridge.hmi.sim_hands import HandsError, hand_actions  # noqa: E402
 from locem_bridge.msg import HicemState  # noqa: E402
 from locem_bridge.srv import (HicemOperatorReply, HicemStartProcess, HicemStop, JsonCall,  # noqa: E402
@@ -117,6 +121,7 @@ class RosHmiBackend:
         self._alive = False
         self._progress: Optional[Dict[str, Any]] = None
         self._progress_at = 0.0
+        self._follower = WorkFollower()             # which work the running process does (fed every state)
         self._query = rospy.ServiceProxy(self.pemkre + "/query", PemkreQuery)
         self.sim = rospy.resolve_name(sim_ns).rstrip("/")
         if str(sim_hands).lower() not in ("auto", "true", "false"):
@@ -153,6 +158,7 @@ class RosHmiBackend:
         with self._lock:
             self._state = state
             self._prompts = [p for p in prompts if isinstance(p, dict)]
+            self._follower.update(state)
 
     def _on_diagnostics(self, msg: Any) -> None:
         now = time.monotonic()
@@ -280,12 +286,16 @@ class RosHmiBackend:
     def snapshot(self) -> Dict[str, Any]:
         with self._lock:
             state = dict(self._state) if self._state is not None else None
+            work = self._follower.work
         now = time.monotonic()
-        if state is not None and state.get("phase") not in ("", "idle") and \
-                now - self._progress_at >= self.progress_period_s:
+        if work is None:
+            self._progress = None
+        elif (self._progress is None or self._progress.get("work") != work
+              or now - self._progress_at >= self.progress_period_s):
             self._progress_at = now
             try:
-                self._progress = taping_progress(self.query("feature_counts"))
+                progress = work_progress(self.query("feature_status"), work)
+                self._progress = dict(progress, work=work) if progress else None
             except HmiError:
                 pass                                # progress is optional; KPIs report PEMKRE's absence
         return snapshot_from_hicem(state, progress=self._progress, health=self._health(state))
@@ -399,9 +409,14 @@ class OperatorHmiNode:
             self.auto = AutoOperator(self.backend, auto_config_from_params(_param("auto_operator", {}),
                                                                            _list_param(_param("reject_lines", ""))))
             self.auto.start()
-        if mode in ("web", "both"):
+        try:
             self.server = HmiServer(self.backend, str(_param("host", "127.0.0.1")), port).start()
             rospy.loginfo("operator_hmi: serving the operator page on %s", self.server.url)
+        except HmiError as err:
+            if mode != "auto":
+                raise
+            rospy.logerr("operator_hmi: %s; the automatic operator answers without a page", err)
+        if self.server is not None:
             if self.auto is not None:
                 hub = self.server.hub
                 self.auto.add_listener(lambda r: hub.note("automatic operator answered %s: %s (%s)" % (
