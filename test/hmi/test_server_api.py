@@ -482,7 +482,8 @@ def test_stop_is_carried_out_whatever_its_body_holds(server, double):
     assert r.status == 200 and r.json == {"ok": True, "ignored": ["force", "reason"]}
     assert request(server.url, "POST", "/api/stop", raw=b"{broken",
                    headers={"Content-Type": "application/json"}).status == 200
-    assert request(server.url, "POST", "/api/stop", raw=b"stop now", headers={"Content-Type": "text/plain"}).status == 200
+    assert request(server.url, "POST", "/api/stop", raw=b"stop now",
+                   headers={"Content-Type": "text/plain"}).status == 200
     assert request(server.url, "POST", "/api/stop", raw=b"x" * (65 * 1024),
                    headers={"Content-Type": "application/json"}).status == 200
     assert double.calls == [("stop",)] * 4

@@ -122,3 +122,10 @@ def test_an_unknown_end_reason_is_refused(tmp_path):
     with pytest.raises(ReportError, match="ended.reason 'crashed' is not one of completed, process_failed"):
         write_report(record(tmp_path, ended=JobEnd("crashed")), str(tmp_path / "results"))
     assert not (tmp_path / "results").exists()
+
+
+def test_early_means_the_job_did_not_run_to_its_end():
+    assert JobEnd("shutdown", "while sanding was running").as_dict()["early"] is True    # last step cut short
+    assert JobEnd("process_timeout").as_dict()["early"] is True
+    assert JobEnd("process_failed", "spraying failed").as_dict()["early"] is False        # the job went on to its end
+    assert JobEnd("process_failed", "taping not started", not_run=["spraying"]).as_dict()["early"] is True

@@ -52,14 +52,17 @@ Errors are ``{"error": {"status": int, "code": str, "message": str}}`` with: 400
 ``bad_body``, ``missing_body``, ``missing_field``, ``unknown_field`` (naming the fields), ``answer_not_allowed``,
 ``incomplete_body`` (fewer bytes than ``Content-Length`` within a few seconds); 403
 ``forbidden_host`` (loopback server asked for another Host), ``forbidden_origin`` (a request from a page served
-elsewhere: another ``Origin``, or ``Sec-Fetch-Site`` cross-site/same-site on ``/api``); 404 ``not_found`` (unknown endpoint; the message lists the endpoints), ``unknown_process``,
-``unknown_wall``, ``picture_not_ready``; 405 ``method_not_allowed``; 409
+elsewhere: another ``Origin``, or ``Sec-Fetch-Site`` cross-site/same-site on ``/api``); 404 ``not_found``
+(unknown endpoint; the message lists the endpoints), ``unknown_process``, ``unknown_wall``,
+``picture_not_ready``; 405 ``method_not_allowed``; 409
 ``prompt_not_open`` (answered, withdrawn or never asked; the message lists the open prompts), ``refused`` (the
 backend declined, with its reason); 411/413/415 for body framing, size and type; 502 ``backend_error`` /
-``bad_picture``; 503 ``backend_unavailable``, ``too_many_streams`` (in all, or per client address). The server keeps serving after any of them.
+``bad_picture``; 503 ``backend_unavailable``, ``too_many_streams`` (in all, or per client address). The server
+keeps serving after any of them.
 
-Run it against the robot with ``rosrun locem_bridge operator_hmi`` (default http://127.0.0.1:8088/; ``_mode:=auto``
-for the automatic operator alone, ``_mode:=both`` for both; see ``locem_bridge.ros.operator_hmi``).
+Run it against the robot with ``rosrun locem_bridge operator_hmi`` (default http://127.0.0.1:8088/, ``_mode:=web``:
+the person answers; ``_mode:=auto``: the automatic operator answers and the page shows the job; ``_mode:=both``:
+either answers; see ``locem_bridge.ros.operator_hmi``).
 """
 from .auto_operator import (DEFAULT_CONFIG, AutoOperator, AutoOperatorConfig, AutoOperatorPolicy,  # noqa: F401
                             PromptRule)

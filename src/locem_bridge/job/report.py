@@ -13,7 +13,8 @@ covered fractions of all wall area. ``outcome.areas_manual`` lists the parts of 
 floor); the processes still succeed. ``results/latest`` is a relative symlink to the newest run.
 
 ``ended`` says how the job ended: ``{"reason", "early", "detail", "not_run", "unread"}`` where ``reason`` is one
-of :data:`ENDED_REASONS`, ``early`` is true when steps of the job never ran, ``not_run`` names them and
+of :data:`ENDED_REASONS`, ``early`` is true when the job did not run to its end (a reason of
+:data:`EARLY_REASONS`, or steps that never ran), ``not_run`` names those steps and
 ``unread`` lists what the job node could not read for the report (the simulation's final measurement, the KPI
 table, ...: a report written while the launch shuts down uses what it collected before). An empty ``outcome``
 (the simulation never answered) is reported as not measured (``outcome.measured`` false), not refused.
@@ -35,6 +36,7 @@ ENDED_REASONS = {
     "hicem_unreachable": "HICEM could not be reached",
     "pemkre_unreachable": "PEMKRE could not be reached",
 }
+EARLY_REASONS = ("operator_stop", "process_timeout", "shutdown", "hicem_unreachable", "pemkre_unreachable")
 REQUIRED_OUTCOME_KEYS = ("joints_total", "joints_taped", "tape_coverage", "spray_coverage", "sand_coverage",
                          "operator_interventions", "collisions")
 
@@ -82,8 +84,8 @@ class JobEnd:
     def as_dict(self) -> Dict[str, Any]:
         if self.reason not in ENDED_REASONS:
             raise ReportError("ended.reason %r is not one of %s" % (self.reason, ", ".join(ENDED_REASONS)))
-        return {"reason": self.reason, "early": bool(self.not_run), "what": ENDED_REASONS[self.reason],
-                "detail": self.detail, "not_run": list(self.not_run), "unread": list(self.unread)}
+        return {"reason": self.reason, "early": bool(self.not_run) or self.reason in EARLY_REASONS,
+                "what": ENDED_REASONS[self.reason], "detail": self.detail, "not_run": list(self.not_run), "unread": list(self.unread)}
 
 
 def run_name(now: Optional[datetime.datetime] = None) -> str:
