@@ -103,7 +103,7 @@ def test_the_printed_page_shows_the_job_and_a_cut_short_job_still_reports(browse
         data = json.load(handle)
     ended = data["ended"]
     assert ended["reason"] == "shutdown" and ended["early"] is True and ended["not_run"] == ["sanding"], ended
-    assert "while spraying was running" in ended["detail"], ended
+    assert "(SIGINT) while spraying was running" in ended["detail"], ended
     assert [(p["name"], p["status"]) for p in data["processes"]] == [("taping", "succeeded"),
                                                                     ("spraying", "interrupted")]
     assert data["outcome"]["measured"] is True and data["outcome"]["walls"], data["outcome"]

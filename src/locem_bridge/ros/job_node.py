@@ -19,6 +19,7 @@ be read is named in the report (roslaunch allows a node 15 s after SIGINT).
 import json
 import os
 import re
+import signal
 import tempfile
 import threading
 import time
@@ -179,6 +180,17 @@ class ProcessSequencer:
         return False
 
 
+def signal_name(reason: str) -> str:
+    """rospy's shutdown reason, with ``signal-2`` spelled ``SIGINT`` (``signal-15``: ``SIGTERM``)."""
+    found = re.match(r"signal-(\d+)\Z", reason)
+    if found:
+        try:
+            return signal.Signals(int(found.group(1))).name
+        except ValueError:
+            pass
+    return reason
+
+
 def _json_call(name: str, **args: Any) -> Dict[str, Any]:
     reply = rospy.ServiceProxy(name, JsonCall)(json.dumps(args))
     if not reply.success:
@@ -255,7 +267,7 @@ class OutcomeCache:
 def main() -> None:
     rospy.init_node("job")
     shutdown: Dict[str, str] = {}
-    rospy.core.add_preshutdown_hook(lambda reason: shutdown.setdefault("reason", str(reason)))
+    rospy.core.add_preshutdown_hook(lambda reason: shutdown.setdefault("reason", signal_name(str(reason))))
     share = rospkg.RosPack().get_path("locem_bridge")
     steps = load_steps(rospy.get_param("~job", os.path.join(share, "config", "jobs", "plasterboard.yaml")),
                        rospy.get_param("~validate_lines", ""))
