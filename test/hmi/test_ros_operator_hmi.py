@@ -137,15 +137,15 @@ def test_kpis_from_the_real_pemkre_node(ros, tmp_path):
     assert "kpis()" not in doc["backend_error"]
 
 
-def test_headless_automatic_operator(ros, tmp_path):
+def _auto_operator_node(ros, tmp_path, port, name="operator_hmi"):
     log = str(tmp_path / "hicem_calls.jsonl")
     ros.spawn([sys.executable, os.path.join(HERE, "fake_hicem_ros_node.py"), "_log:=%s" % log], "fake_hicem")
     ros.wait_for_service("/hicem/operator_reply", 30)
-    port = free_port()
     node = ros.spawn(["rosrun", "locem_bridge", "operator_hmi", "_mode:=auto", "_port:=%d" % port,
                       "_auto_operator:={kinds: {validate_line: {answer: valid, delay_s: 0.0, "
-                      "per_feature: {invalid: [wall_1_joint_1]}}}}"], "operator_hmi")
-    wait_for(lambda: "mode auto" in open(str(tmp_path / "logs" / "operator_hmi.log")).read() or node.poll() is not None,
+                      "per_feature: {invalid: [wall_1_joint_1]}}}}"], name)
+    node_log = str(tmp_path / "logs" / ("%s.log" % name))
+    wait_for(lambda: (os.path.exists(node_log) and "mode auto" in open(node_log).read()) or node.poll() is not None,
              60, "operator_hmi to start")
     assert node.poll() is None
     done = subprocess.run(["rosservice", "call", "/hicem/start_process", "{process: '%s', options: ''}" % TAPING],
@@ -153,9 +153,35 @@ def test_headless_automatic_operator(ros, tmp_path):
     assert "success: True" in done.stdout, done.stdout + done.stderr
     wait_for(lambda: len(answers(log)) >= 4, 30, "the automatic operator's four answers")
     assert answers(log) == ["done", "invalid", "done", "valid"]
-    assert not serving("http://127.0.0.1:%d/" % port)                    # no page in auto mode
-    text = open(str(tmp_path / "logs" / "operator_hmi.log")).read()
-    assert "per_feature rule for wall_1_joint_1" in text
+    return node, node_log
+
+
+def test_automatic_operator_answers_and_the_page_shows_the_job(ros, tmp_path):
+    port = free_port()
+    node, node_log = _auto_operator_node(ros, tmp_path, port)
+    url = "http://127.0.0.1:%d/" % port
+    assert serving(url)                                                   # the page is served in auto mode too
+    doc = wait_state(url, lambda d: len([e for e in d["events"] if "automatic operator answered" in e["text"]]) >= 4,
+                     timeout=10)
+    assert doc["snapshot"]["process"] == TAPING
+    assert any("automatic operator answered validate_line: invalid" in e["text"] for e in doc["events"])
+    assert "per_feature rule for wall_1_joint_1" in open(node_log).read()
+
+
+def test_automatic_operator_carries_on_when_the_page_port_is_taken(ros, tmp_path):
+    import socket
+    taken = socket.socket()
+    taken.bind(("127.0.0.1", 0))
+    taken.listen(1)
+    try:
+        port = taken.getsockname()[1]
+        node, node_log = _auto_operator_node(ros, tmp_path, port)        # still answers every prompt
+        assert node.poll() is None
+        text = open(node_log).read()
+        assert "cannot serve the operator HMI on 127.0.0.1 port %d" % port in text
+        assert "the automatic operator answers without a page" in text
+    finally:
+        taken.close()
 
 
 @pytest.mark.parametrize("param, message", [
