@@ -170,6 +170,9 @@ def main() -> None:
                                  site_namespace=rospy.get_param("~site_namespace", "") or None,
                                  log_namespace=rospy.get_param("~log_namespace", "") or None,
                                  reasoning_max_seconds=float(rospy.get_param("~reasoning_max_seconds", 5.0)))
+        except ConfigError as exc:          # a process-model error names no file: name the folder it came from
+            store.close()
+            raise exc.in_file(onto_dir)
         except Exception:
             store.close()
             raise
