@@ -83,6 +83,19 @@ def test_the_bridges_load_robot_files_through_the_one_validation_the_simulator_u
         load_robot_config(ROBOT_YAML, {"scanner": {"backend": "lidar"}})
     robot = load_robot_config(ROBOT_YAML)
     assert os.path.isabs(robot["base"]["eds"]) and os.path.isfile(robot["base"]["eds"])   # resolved at load
+    # optional keys the bridges read are known keys (a new one goes into sim.config.ROBOT_KEYS with its check)
+    robot = load_robot_config(ROBOT_YAML, {"compressor": {"watchdog_timeout": 1.0, "timeout": 0.3},
+                                           "arm": {"deadline": {"scale": 2.0, "margin": 3.0}},
+                                           "base": {"deadline": {"scale": 2.0}, "control_rate": 40.0,
+                                                    "drives": {"master_node_id": 100, "stop_deceleration": 150.0}}})
+    assert robot["compressor"]["watchdog_timeout"] == 1.0 and robot["arm"]["deadline"]["scale"] == 2.0
+    with pytest.raises(BridgeConfigError, match=r"robot.compressor.watchdog_timeout: 0.0 is out of range"):
+        load_robot_config(ROBOT_YAML, {"compressor": {"watchdog_timeout": 0.0}})
+    # the ranges a bridge applies when it is built are checked at load too (main.sh's pre-flight sees them)
+    with pytest.raises(BridgeConfigError, match=r"robot.base.control_rate: 2.0 is out of range \(allowed: >= 5.0\)"):
+        load_robot_config(ROBOT_YAML, {"base": {"control_rate": 2}})
+    with pytest.raises(BridgeConfigError, match=r"robot.arm.controller.rtde_frequency: 1000.0 is out of range"):
+        load_robot_config(ROBOT_YAML, {"arm": {"controller": {"rtde_frequency": 1000}}})
 
 
 def test_motion_deadline_settings_are_checked_and_default_to_the_documented_values():

@@ -36,6 +36,7 @@ def load_robot_config(path: str, overrides: Optional[Mapping[str, Any]] = None) 
         raise BridgeConfigError(error.problem, file=error.file, key=error.key, allowed=error.allowed or None)
     robot = data["robot"]
     robot["_dir"] = os.path.dirname(os.path.abspath(path))
+    robot["_path"] = os.path.abspath(path)
     return robot
 
 

@@ -18,6 +18,8 @@ arm is.
 
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
+from locem_bridge.config_errors import ConfigError
+
 from .backends import backend_class
 from .config import need, resolve_path
 
@@ -52,6 +54,16 @@ class Robot:
 def build_robot(robot_cfg: Mapping[str, Any], devices: Sequence[str] = ALL_DEVICES, site: Any = None,
                 initial_pose: Optional[Tuple[float, float, float]] = None,
                 named_base_poses: Optional[Mapping[str, Sequence[float]]] = None) -> Robot:
+    """Every configured backend and command set; a configuration problem a backend finds names the robot file."""
+    try:
+        return _build_robot(robot_cfg, devices, site, initial_pose, named_base_poses)
+    except ConfigError as error:
+        raise error.in_file(str(robot_cfg.get("_path", "")))
+
+
+def _build_robot(robot_cfg: Mapping[str, Any], devices: Sequence[str], site: Any,
+                 initial_pose: Optional[Tuple[float, float, float]],
+                 named_base_poses: Optional[Mapping[str, Sequence[float]]]) -> Robot:
     from .commands_arm import ArmCommands
     from .commands_base import BaseCommands
     from .commands_compressor import CompressorCommands

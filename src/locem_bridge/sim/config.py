@@ -320,7 +320,12 @@ def validate_robot(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict
         wheel[key] = get(wheel, key, "robot.base.wheel", float, lo=0.005, hi=5.0)
     lim = _mapping(base, "limits", "robot.base", K["robot.base.limits"])
     for key in ("max_wheel_speed", "max_linear_velocity", "max_angular_velocity"):
-        lim[key] = get(lim, key, "robot.base.limits", float, lo=0.0)
+        lim[key] = get(lim, key, "robot.base.limits", float, lo=0.1 if key == "max_wheel_speed" else 0.01)
+    for key, dflt in (("linear_acceleration", 0.6), ("angular_acceleration", 1.2)):
+        lim[key] = get(lim, key, "robot.base.limits", float, default=dflt, lo=0.01)
+    # the ranges the base bridge applies (bridges/cia402_base.py), checked here so a file is refused at load
+    base["control_rate"] = get(base, "control_rate", "robot.base", float, default=50.0, lo=5.0, hi=1000.0)
+    base["localisation_window"] = get(base, "localisation_window", "robot.base", int, default=10, lo=1, hi=1000)
     poses = get(base, "named_poses", "robot.base", dict, default={})
     for name in list(poses):
         poses[name] = vec(poses, name, "robot.base.named_poses", 3)
@@ -334,7 +339,7 @@ def validate_robot(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict
     can["bitrate"] = get(can, "bitrate", p + ".can", int, default=1000000, lo=10000, hi=1000000)
     if "port" in can:
         can["port"] = get(can, "port", p + ".can", int, lo=1, hi=65535)
-    drv["heartbeat_ms"] = get(drv, "heartbeat_ms", p, int, lo=0, hi=65535)
+    drv["heartbeat_ms"] = get(drv, "heartbeat_ms", p, int, lo=1, hi=65535)    # the bridge watches it
     drv["consumer_timeout_factor"] = get(drv, "consumer_timeout_factor", p, float, default=1.5, lo=1.0, hi=10.0)
     # the drives stop by themselves when the master's heartbeat is silent this long (bridges/cia402_base.py)
     drv["master_node_id"] = get(drv, "master_node_id", p, int, default=127, lo=1, hi=127)
@@ -342,7 +347,8 @@ def validate_robot(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict
     drv["tpdo_period_ms"] = get(drv, "tpdo_period_ms", p, int, lo=1, hi=65535)
     drv["velocity_units_per_rad_s"] = get(drv, "velocity_units_per_rad_s", p, float, lo=1e-6)
     drv["counts_per_rad"] = get(drv, "counts_per_rad", p, float, lo=1e-6)
-    drv["profile_acceleration"] = get(drv, "profile_acceleration", p, float, lo=1e-3)
+    drv["profile_acceleration"] = get(drv, "profile_acceleration", p, float, lo=0.1)
+    drv["stop_deceleration"] = get(drv, "stop_deceleration", p, float, default=200.0, lo=1.0)
     wheels = get(drv, "wheels", p, list)
     if len(wheels) != 4:
         raise SimConfigError("must list 4 wheels, found %d" % len(wheels), key=p + ".wheels",
@@ -390,6 +396,7 @@ def validate_robot(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict
     get(ctl, "host", cp, str)
     # RTDE watchdog the arm bridge sets (Hz; 0 = none): the arm stops when LOCEM's polls stop (bridges/ur_arm.py)
     ctl["watchdog_frequency"] = get(ctl, "watchdog_frequency", cp, float, default=1.0, lo=0.0, hi=100.0)
+    ctl["rtde_frequency"] = get(ctl, "rtde_frequency", cp, float, default=500.0, lo=1.0, hi=500.0)
     for key, port in sorted(UR_RTDE_PORTS.items()):
         ctl[key] = get(ctl, key, cp, int, default=port, lo=1, hi=65535)
         if backend == "ur_rtde" and ctl[key] != port:
@@ -427,6 +434,7 @@ def validate_robot(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict
     comp["device_id"] = get(comp, "device_id", cp, int, default=1, lo=0, hi=247)
     # the device's communication watchdog, s: valve closed, motor off when LOCEM's polls stop (modbus_compressor)
     comp["watchdog_timeout"] = get(comp, "watchdog_timeout", cp, float, default=0.5, lo=0.05, hi=60.0)
+    comp["timeout"] = get(comp, "timeout", cp, float, default=0.5, lo=0.01)
     comp["pressure_range"] = vec(comp, "pressure_range", cp, 2)
     comp["max_setpoint"] = get(comp, "max_setpoint", cp, float, lo=0.1, hi=600.0)
     csim = _mapping(comp, "sim", cp, K["robot.compressor.sim"], default={})
