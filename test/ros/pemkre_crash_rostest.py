@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
 """rostest: SIGKILL the PEMKRE node mid-run; roslaunch respawns it; the run continues where it stopped. And
 HICEM's PEMKRE client (the real one, ros/hicem_pemkre.py) with a call in flight when PEMKRE is killed: the call
-is sent again after the respawn, completes within its deadline, and the report is applied once."""
+is sent again after the respawn, completes within its deadline, and the report is applied once. And HICEM's
+LOCEM client (ros/hicem_locem.py) across a kill -9 of LOCEM: a command sent while LOCEM is away runs once on the
+respawned LOCEM; the command that was running when LOCEM died ends ABORTED and is not sent again."""
 import json
 import os
 import signal
@@ -13,6 +15,8 @@ import xmlrpc.client
 import rosgraph
 import rospy
 import rostest
+from locem_bridge.msg import Status
+from locem_bridge.ros.hicem_locem import RosLocemClient
 from locem_bridge.ros.hicem_pemkre import RosPemkreClient
 from locem_bridge.srv import (PemkreNextAction, PemkreQuery, PemkreSetTaskStatus, PemkreStartProcess,
                               PemkreUpdateWorld)
@@ -38,18 +42,18 @@ def proxies():
             rospy.ServiceProxy("/pemkre/update_world", PemkreUpdateWorld))
 
 
-def node_pid():
-    uri = rosgraph.Master("/pemkre_crash_test").lookupNode("/pemkre")
+def node_pid(node="/pemkre"):
+    uri = rosgraph.Master("/pemkre_crash_test").lookupNode(node)
     code, _, pid = xmlrpc.client.ServerProxy(uri).getPid("/pemkre_crash_test")
     assert code == 1
     return pid
 
 
-def wait_new_pid(old, timeout=60.0):
+def wait_new_pid(old, timeout=60.0, node="/pemkre"):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         try:
-            pid = node_pid()
+            pid = node_pid(node)
             if pid != old:
                 return pid
         except Exception:
@@ -62,6 +66,47 @@ class PemkreCrashTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
         rospy.init_node("pemkre_crash_test", anonymous=True)
+
+    def test_y_locem_commands_across_kill_dash_nine_of_locem(self):
+        events = []
+        sub = rospy.Subscriber("/locem/status", Status, lambda m: events.append((time.monotonic(), m.command,
+                                                                                m.state, m.code)), queue_size=500)
+        client = RosLocemClient("/locem", wait_s=60.0)
+        try:
+            long = client.send("WAIT 30")
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline and not any(c == "WAIT 30" and st == "running" for _t, c, st, _c in events):
+                time.sleep(0.02)
+            self.assertFalse(long.done())
+            pid = node_pid("/locem")
+            os.kill(pid, signal.SIGKILL)
+            t_kill = time.monotonic()
+            deadline = time.monotonic() + 10
+            while client.server_ready() and time.monotonic() < deadline:      # the client sees LOCEM gone
+                time.sleep(0.01)
+            self.assertFalse(client.server_ready(), "the action client still sees the killed LOCEM")
+            held = client.send("WAIT 0.2")      # LOCEM away: held, sent when it is back
+            self.assertFalse(held.done())
+            deadline = time.monotonic() + 10
+            while not long.done() and time.monotonic() < deadline:
+                time.sleep(0.02)
+            self.assertTrue(long.done(), "the goal LOCEM was running when it died never ended")
+            lost = long.reply()
+            self.assertEqual(lost.code, "ABORTED", lost)
+            self.assertIn("went away while running 'WAIT 30'", lost.message)
+            new_pid = wait_new_pid(pid, node="/locem")
+            self.assertNotEqual(new_pid, pid)
+            deadline = time.monotonic() + 60
+            while not held.done() and time.monotonic() < deadline:
+                time.sleep(0.02)
+            reply = held.reply()
+            self.assertIsNotNone(reply, "the held command never ran")
+            self.assertTrue(reply.success, reply)
+            after = [(c, st) for t, c, st, _c in events if t > t_kill]
+            self.assertEqual([st for c, st in after if c == "WAIT 0.2"], ["running", "succeeded"])   # once
+            self.assertNotIn("WAIT 30", [c for c, _st in after])                                   # not resent
+        finally:
+            sub.unregister()
 
     def test_z_hicem_client_call_in_flight_outlives_kill_dash_nine(self):
         """PEMKRE frozen (SIGSTOP) so the client's call is provably in flight, then SIGKILL: the call fails

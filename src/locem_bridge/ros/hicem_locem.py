@@ -2,7 +2,8 @@
 
 - :class:`RosLocemClient`: one ``actionlib.ActionClient`` on ``<locem>/command_action``; every ``send`` is a goal
   of its own (several may run at once, e.g. under a Parallel node); ``cancel`` cancels that goal, which LOCEM
-  turns into a device stop. A command sent while LOCEM is away (restarting) waits for it, within a deadline.
+  turns into a device stop. A command sent while LOCEM is away (restarting) waits for it, within a deadline; a
+  running command whose LOCEM went away ends ``ABORTED`` and is not sent again.
 - :class:`LocemHealthFeed`: polls ``STATUS`` through the ``<locem>/command`` service every ``period`` seconds —
   an answer is LOCEM's heartbeat, each backend's ``health`` entry becomes module ``locem/<backend>`` — and
   forwards ``diagnostics`` (``diagnostic_msgs/DiagnosticArray``) and ``<locem>/status`` (any message is a sign of life) to the HDH.
@@ -22,6 +23,8 @@ from locem_bridge.msg import CommandAction, CommandGoal, Status
 from locem_bridge.srv import Command
 
 _OK_LINKS = ("up", "ok", "connected", "ready", "simulated")
+#: how long the action server of a running goal may be gone before the goal counts as lost (s)
+LOST_GRACE_S = 0.5
 
 
 class _Goal(CommandHandle):
@@ -33,7 +36,8 @@ class _Goal(CommandHandle):
         self.command = command
         self._lock = threading.Lock()
         self._gh: Any = None
-        self._unsent: Optional[LocemReply] = None      # the reply of a command that never left HICEM
+        self._unsent: Optional[LocemReply] = None      # the reply of a command that never left HICEM / was lost
+        self._lost_at: Optional[float] = None
         self._deadline = time.monotonic() + wait_s
         self._wait_s = wait_s
         self._try_send()
@@ -54,7 +58,26 @@ class _Goal(CommandHandle):
             self._try_send()
             if self._unsent is not None:
                 return True
-            return self._gh is not None and self._gh.get_comm_state() == actionlib.CommState.DONE
+            if self._gh is None:
+                return False
+            if self._gh.get_comm_state() == actionlib.CommState.DONE:
+                return True
+            self._check_server()
+            return self._unsent is not None
+
+    def _check_server(self) -> None:
+        """A sent goal whose server went away (LOCEM died) will never get its result: after ``LOST_GRACE_S`` it
+        ends ABORTED. It is not sent again: LOCEM commands are not idempotent."""
+        if self._client.server_ready():
+            self._lost_at = None
+            return
+        now = time.monotonic()
+        if self._lost_at is None:
+            self._lost_at = now
+        elif now - self._lost_at >= LOST_GRACE_S:
+            self._unsent = LocemReply(False, "ABORTED", "LOCEM action server %s went away while running %r; not "
+                                      "sent again (LOCEM commands are not idempotent)" % (self._client.name,
+                                                                                         self.command))
 
     def reply(self) -> Optional[LocemReply]:
         if not self.done():
@@ -74,6 +97,8 @@ class _Goal(CommandHandle):
 
     def cancel(self) -> None:
         with self._lock:
+            if self._unsent is not None:
+                return
             if self._gh is None:
                 if self._unsent is None:
                     self._unsent = LocemReply(False, "ABORTED", "cancelled before LOCEM was there to take %r"

@@ -16,8 +16,9 @@ again with backoff (``backoff_s`` doubling up to ``max_backoff_s``) until ``dead
 for PEMKRE and calls again, see :mod:`locem_bridge.hicem.controller`). A call is sent again after it may have
 reached PEMKRE only when it is idempotent: ``next_action`` (PEMKRE answers the same task until it is reported)
 and ``update_world`` (a merge) are; a status report and a process start are made so by a request id
-(``request_id``, docs/contracts.md): the same id for every attempt of one call, so PEMKRE applies it once even
-when it applied it and died before answering. A status report's id is derived from the task and the status (a
+(``request_id``, docs/contracts.md): the same id for every attempt of one call (for a start, also when the
+controller makes it again after this client gave up), so PEMKRE applies it once even when it applied it and died
+before answering. A status report's id is derived from the task and the status (a
 task takes each status once), so a report HICEM repeats after its own restart is applied once too.
 """
 import json
