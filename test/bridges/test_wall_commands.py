@@ -143,3 +143,44 @@ def test_stop_is_not_delayed_by_a_silent_compressor(wall, core):
     assert took < 0.2 * 4, "base still %.3f s sim after STOP" % took   # time scale 4: 200 ms wall
     assert execution.wait(2.0).code.value == "ABORTED"
     rig.server.restore_link()
+
+
+def test_a_restarted_locem_restores_the_mounted_tool_and_its_tcp(wall, core):
+    """MOUNT_TOOL tells the listener (the LOCEM node keeps it in ~active_tool); the wall commands of a fresh
+    LOCEM restore it: a tool command is not refused, and WALL_READY sets the tool's TCP before its straight
+    retract even when the controller's was reset."""
+    from locem_bridge.bridges.commands_wall import WallCommands
+    from locem_bridge.bridges.errors import BadRequest
+    rig, built = wall
+    old = next(c for c in built.command_sets if isinstance(c, WallCommands))
+    kept = []
+    old.tool_listener = kept.append
+    rig.world.mount_tool("spray_gun")
+    assert run(core, "MOUNT_TOOL spray_gun").success
+    assert kept == ["spray_gun"]
+    fresh = WallCommands(rig.robot, arm=built.get("arm"), base=built.get("base"), compressor=built.get("compressor"),
+                         scanner=built.get("scanner"))
+    with pytest.raises(BadRequest):
+        fresh.restore_tool("paint_roller")
+    assert fresh.active_tool is None
+    fresh.restore_tool("spray_gun")
+    assert fresh.health()["active_tool"] == "spray_gun"
+    built.get("arm").set_tcp([0.0] * 6)                      # as a restarted control script has it
+    fresh._need_tool("spray_gun")                            # not refused NOT_READY
+    built.get("arm").set_tcp([0.0] * 6)
+    fresh._retract(_Waiter())
+    assert rig.standin.get_tcp_offset()[2] == pytest.approx(rig.robot["tools"]["spray_gun"]["tcp"][2])
+
+
+class _Waiter:
+    def sleep(self, seconds):
+        time.sleep(seconds)
+
+    def check(self):
+        pass
+
+    def on_cancel(self, callback):
+        pass
+
+    def report(self, progress, text=""):
+        pass

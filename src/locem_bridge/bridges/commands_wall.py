@@ -274,6 +274,8 @@ class WallCommands:
         self.mount = arm_base_in_footprint(mount.get("xyz", [0.0, 0.0, 0.0]), mount.get("rpy", [0.0, 0.0, 0.0]))
         self.arm, self.base, self.compressor, self.scanner = arm, base, compressor, scanner
         self.active_tool: Optional[str] = None
+        #: called with the tool after every MOUNT_TOOL (the LOCEM node keeps it for a respawned LOCEM)
+        self.tool_listener: Optional[Callable[[str], None]] = None
         arm_cfg = robot_cfg.get("arm", {})
         self.home_via: Optional[str] = arm_cfg.get("home_via") or None
         flange = arm_cfg.get("wall_ready_flange")
@@ -293,6 +295,15 @@ class WallCommands:
     def health(self) -> Dict[str, Any]:
         return {"link": "up", "device": "ok", "last_error": "", "active_tool": self.active_tool or ""}
 
+    def restore_tool(self, tool: str) -> None:
+        """What a previous LOCEM had mounted (it died; the tool is still on the arm): the active tool again, its
+        TCP offset and payload set on the controller before the next motion. Raises BadRequest for a tool not in
+        robot.tools."""
+        if tool not in self.tools:
+            raise BadRequest("tool %s is not in robot.tools (%s)" % (tool, ", ".join(sorted(self.tools))),
+                             argument="tool")
+        self.active_tool = tool
+
     # -- helpers -----------------------------------------------------------------------------------------
     def _need(self, what: str) -> Any:
         dev = getattr(self, what)
@@ -304,10 +315,16 @@ class WallCommands:
         if self.active_tool != tool:
             raise NotReady("the %s is needed but the active tool is %s; mount it and send MOUNT_TOOL %s"
                            % (tool, self.active_tool or "none", tool))
-        # the TCP offset and payload live in the controller's running program: a restarted control script
-        # (ur_rtde uploads it again for every path move, and after a stop or a reconnect) starts with the
-        # installation's, so every wall command sets the active tool's again before it moves
-        cfg = self.tools[tool]
+        self._apply_tool()
+
+    def _apply_tool(self) -> None:
+        """The active tool's TCP offset and payload on the controller. They live in the controller's running
+        program: a restarted control script (ur_rtde uploads it again for every path move, and after a stop or
+        a reconnect) starts with the installation's, so every wall command sets the active tool's again before
+        it moves."""
+        if self.active_tool is None:
+            return
+        cfg = self.tools[self.active_tool]
         arm = self._need("arm")
         arm.set_tcp([float(v) for v in cfg["tcp"]])
         arm.set_payload(float(cfg["mass"]), [float(v) for v in cfg["cog"]])
@@ -353,7 +370,10 @@ class WallCommands:
         """From a wall pose (tool pointing forward): one straight move to the TCP point of 'wall_ready' (its
         flange point ``robot.arm.wall_ready_flange`` plus the active tool's length), tool still facing forward,
         so the joint move to 'wall_ready' that may follow is short and away from the wall."""
-        if self.ready_flange is None or not self._facing_forward():
+        if self.ready_flange is None:
+            return
+        self._apply_tool()                       # the TCP the straight move below is computed for
+        if not self._facing_forward():
             return
         length = float(self.tools.get(self.active_tool or "", {}).get("tcp", [0.0, 0.0, 0.0])[2])
         point = [self.ready_flange[0] + length, self.ready_flange[1], self.ready_flange[2]]
@@ -393,6 +413,8 @@ class WallCommands:
         arm.set_tcp([float(v) for v in cfg["tcp"]])
         arm.set_payload(float(cfg["mass"]), [float(v) for v in cfg["cog"]])
         self.active_tool = tool
+        if self.tool_listener is not None:
+            self.tool_listener(tool)
         return {"tool": tool, "tcp": cfg["tcp"], "mass": cfg["mass"]}
 
     def apply_tape_start(self, ctx: Any, x0: float, y0: float, z0: float, x1: float, y1: float, z1: float,

@@ -205,6 +205,16 @@ def _action_result(response: Optional[Response]) -> CommandResult:
 
 
 @config_guard("locem")
+def _keep_tool(wall: Any) -> None:
+    """The mounted tool outlives a LOCEM restart: kept in the private parameter ``~active_tool`` (the master
+    outlives a respawned node) and restored from it at start."""
+    last = str(rospy.get_param("~active_tool", "") or "")
+    if last:
+        wall.restore_tool(last)
+        rospy.logwarn("LOCEM restarted with the %s mounted (from ~active_tool)", last)
+    wall.tool_listener = lambda tool: rospy.set_param("~active_tool", tool)
+
+
 def main() -> None:
     """Entry point of ``rosrun locem_bridge locem_node``.
 
@@ -241,6 +251,8 @@ def main() -> None:
                             named_base_poses=rospy.get_param("~named_poses", {}) or {})
         for command_set in robot.command_sets:
             core.install(command_set)
+            if hasattr(command_set, "restore_tool"):
+                _keep_tool(command_set)
         robot.start()
         devices = LocemDevices(robot, core.dispatcher.health,
                                localisation_topic=str(rospy.get_param("~localisation_topic", "") or ""))
