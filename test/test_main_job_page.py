@@ -7,7 +7,8 @@ operator) on config/sites/no_joints.yaml (one wall: taping has nothing to do, sp
 process and its progress in areas. Then it presses Ctrl-C (SIGINT to the driver, which stops the launch as it
 does for a person) and checks that the job still wrote its report, saying it ended early because the launch shut
 down, with sanding not run, and that the driver printed that. Needs the environment of tools/test.sh and, as every
-whole-job run, the machine's heavy lock (``flock /tmp/locem-heavy.lock``). About 1.5 minutes.
+whole-job run (it binds the simulated devices' fixed addresses), the machine's heavy lock
+(``flock /tmp/locem-heavy.lock``); it lives outside the unit-test folders for that reason. About 20 s.
 """
 import json
 import os
@@ -22,9 +23,10 @@ import time
 
 import pytest
 
-from test_browser import CHROMIUM, ON_UBUNTU, browser  # noqa: F401 - the chromium fixture
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(REPO, "test", "hmi"))          # the browser fixture of the HMI tests
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from test_browser import CHROMIUM, ON_UBUNTU, browser  # noqa: E402,F401 - the chromium fixture
 READY = os.environ.get("LOCEM_REPO") == REPO and shutil.which("roslaunch") is not None
 pytestmark = [pytest.mark.slow, pytest.mark.ros,
               pytest.mark.skipif(not READY, reason="needs the environment of tools/test.sh (setup done, ROS sourced)"),
