@@ -35,8 +35,10 @@ ENDED_REASONS = {
     "shutdown": "the launch shut down (SIGINT/SIGTERM) before the job was done",
     "hicem_unreachable": "HICEM could not be reached",
     "pemkre_unreachable": "PEMKRE could not be reached",
+    "worksite_unreachable": "the worksite (its measurement and scan services) could not be reached",
 }
-EARLY_REASONS = ("operator_stop", "process_timeout", "shutdown", "hicem_unreachable", "pemkre_unreachable")
+EARLY_REASONS = ("operator_stop", "process_timeout", "shutdown", "hicem_unreachable", "pemkre_unreachable",
+                 "worksite_unreachable")
 REQUIRED_OUTCOME_KEYS = ("joints_total", "joints_taped", "tape_coverage", "spray_coverage", "sand_coverage",
                          "operator_interventions", "collisions")
 

@@ -274,11 +274,22 @@ def main() -> None:
     results_dir = rospy.get_param("~results_dir", "") or os.environ.get("LOCEM_RESULTS") or os.path.abspath("results")
     timeout = float(rospy.get_param("~process_timeout", 900.0))
     settings = json.loads(rospy.get_param("~settings", "{}") or "{}")
-    for service in ("hicem/start_process", "sim/outcome", "sim/scan", "sim/save_outcome"):
-        rospy.wait_for_service(service, timeout=120)
-    scan = _json_call("sim/scan")
     outcomes = OutcomeCache()
-    outcomes.outcome, outcomes.at = _json_call("sim/outcome"), time.monotonic()
+    scan: Dict[str, Any] = {}
+    not_started: Optional[JobEnd] = None       # the job could not begin: still a report saying why
+    service = ""
+    try:
+        for service in ("hicem/start_process", "sim/outcome", "sim/scan", "sim/save_outcome"):
+            rospy.wait_for_service(service, timeout=120)
+        service = "sim/scan"
+        scan = _json_call(service)
+        service = "sim/outcome"
+        outcomes.outcome, outcomes.at = _json_call(service), time.monotonic()
+    except (rospy.ROSException, rospy.ServiceException, RuntimeError) as exc:
+        not_started = (JobEnd("shutdown", "the launch shut down (%s) before the job started" % shutdown.get(
+            "reason", "ROS shutdown")) if rospy.is_shutdown() else
+            JobEnd("hicem_unreachable" if service.startswith("hicem") else "worksite_unreachable",
+                   "%s: %s" % (service, exc)))
     totals = {"joints": len(outcomes.outcome.get("joints", {})), "areas": len(scan.get("areas", []))}
     tracker = JobTracker(steps, totals, say=lambda line: print(line, flush=True))
     sequencer = ProcessSequencer(tracker, timeout, float(rospy.get_param("~peer_wait", 120.0)),
@@ -291,7 +302,8 @@ def main() -> None:
         {"event": m.event, "kind": m.kind, "text": m.text, "answer": m.answer}))
     started = time.time()
     time.sleep(0.5)  # let the latched state arrive before the first start
-    for index, step in enumerate(steps):
+    sequencer.ended = not_started
+    for index, step in enumerate(steps if not_started is None else []):
         if rospy.is_shutdown():
             sequencer.ended = JobEnd("shutdown", "the launch shut down (%s) before %s started" % (
                 shutdown.get("reason", "ROS shutdown"), step.name))
