@@ -10,7 +10,7 @@ Each layer keeps its own error family (``SimConfigError`` is a ``SimError``, ``B
 ``BridgeError``, ...) and also derives from :class:`ConfigError`, so a node catches every configuration problem in
 one ``except ConfigError`` at start-up and prints :meth:`ConfigError.one_line` instead of a traceback.
 """
-from typing import Any, Optional, Sequence, Union
+from typing import Any, Sequence, Union
 
 Allowed = Union[None, str, int, float, Sequence[Any]]
 
@@ -57,13 +57,3 @@ class ConfigError(Exception):
 
     def __str__(self) -> str:
         return self.one_line()
-
-
-def describe(error: BaseException, file: Optional[str] = None) -> str:
-    """The one-line form of any error met while loading ``file`` (a :class:`ConfigError` prints itself)."""
-    if isinstance(error, ConfigError):
-        if file:
-            error.in_file(file)
-        return error.one_line()
-    text = " ".join(str(error).split()) or type(error).__name__
-    return "%s: %s" % (file, text) if file else text
