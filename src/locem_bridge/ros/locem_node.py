@@ -204,7 +204,6 @@ def _action_result(response: Optional[Response]) -> CommandResult:
     return CommandResult(response.success, response.code.value, response.message, response.result_json)
 
 
-@config_guard("locem")
 def _keep_tool(wall: Any) -> None:
     """The mounted tool outlives a LOCEM restart: kept in the private parameter ``~active_tool`` (the master
     outlives a respawned node) and restored from it at start."""
@@ -215,6 +214,7 @@ def _keep_tool(wall: Any) -> None:
     wall.tool_listener = lambda tool: rospy.set_param("~active_tool", tool)
 
 
+@config_guard("locem")
 def main() -> None:
     """Entry point of ``rosrun locem_bridge locem_node``.
 
