@@ -264,3 +264,16 @@ def test_roslaunch_respawning_a_node_on_a_bad_file_ends_with_the_give_up_line(tm
     assert lines[:2] == [expected, expected], lines
     assert lines[2] == expected + " (giving up after 3 failures; fix the file and restart the launch)", lines
     assert len(lines) == 3, lines
+
+
+
+@pytest.mark.parametrize("module", ["locem_node", "pemkre_node", "hicem_node", "sim_node", "operator_hmi", "job_node"])
+def test_every_node_main_is_guarded(module):
+    """A merge once moved the decorator onto a neighbouring function: each node's entry point keeps it."""
+    import ast
+    with open(os.path.join(REPO, "src", "locem_bridge", "ros", module + ".py"), encoding="utf-8") as handle:
+        tree = ast.parse(handle.read())
+    mains = [n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == "main"]
+    guarded = [n for n in tree.body if isinstance(n, ast.FunctionDef) and any(
+        isinstance(d, ast.Call) and getattr(d.func, "id", "") == "config_guard" for d in n.decorator_list)]
+    assert len(mains) == 1 and guarded == mains
