@@ -24,6 +24,13 @@ SITE = os.path.join(REPO, "config", "sites", "default.yaml")
 ROS = pytest.importorskip("rospy", reason="the ROS workspace is not sourced (run through tools/test.sh)")
 
 
+def _own_group_dying_with_us():
+    """preexec_fn: a process group of its own that gets SIGTERM if this pytest dies (no master left behind)."""
+    import ctypes
+    os.setsid()
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)      # PR_SET_PDEATHSIG
+
+
 def _dump(path, data):
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return str(path)
@@ -150,7 +157,7 @@ def master():
     env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % port, ROS_IP="127.0.0.1")
     env.pop("ROS_HOSTNAME", None)
     proc = subprocess.Popen(["rosmaster", "--core", "-p", str(port)], env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, start_new_session=True)
+                            stderr=subprocess.DEVNULL, preexec_fn=_own_group_dying_with_us)
     deadline = time.monotonic() + 20.0
     import socket
     while time.monotonic() < deadline:
@@ -243,7 +250,7 @@ def test_roslaunch_respawning_a_node_on_a_bad_file_ends_with_the_give_up_line(tm
     env["ROS_MASTER_URI"] = "http://127.0.0.1:%d" % port
     proc = subprocess.Popen(["roslaunch", "-p", str(port), "locem_bridge", "hicem.launch", "respawn:=true",
                              "params_file:=" + params, "output:=log"], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, universal_newlines=True, start_new_session=True)
+                            stderr=subprocess.STDOUT, universal_newlines=True, preexec_fn=_own_group_dying_with_us)
     lines, started = [], time.monotonic()
     try:
         for raw in proc.stdout:
