@@ -353,3 +353,16 @@ def test_before_its_first_connection_every_arm_command_is_not_ready_with_the_rea
             assert r.code.value == "NOT_READY" and "not connected yet" in r.message, (text, r.code, r.message)
     finally:
         arm.close()
+
+
+def test_watchdog_kicks_never_overwrite_force_mode_before_the_controller_saw_it(rig):
+    """forceMode is a realtime command (answered at once, read by the script's next cycle); the state poll's
+    watchdog kick writes command 0 into the same register and must not replace it before that cycle."""
+    standin, arm = rig
+    for _ in range(5):
+        arm.force_mode_start(arm.tcp_pose(), 10.0, 0.02)
+        for _ in range(3):
+            arm._poll()                                  # what the 50 Hz supervisor and wait_for_contact do
+        assert wait_until(lambda: standin.get_force_mode() is not None, timeout=1.0), "force mode never started"
+        arm.force_mode_stop()
+        assert wait_until(lambda: standin.get_force_mode() is None, timeout=2.0)

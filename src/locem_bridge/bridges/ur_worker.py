@@ -23,6 +23,7 @@ kicks, whether or not this worker lives on.
 import argparse
 import json
 import sys
+import time
 from typing import Any, Callable, Dict, List
 
 
@@ -41,6 +42,7 @@ def _connect(host: str, frequency: float) -> Dict[str, Any]:
 
 
 STOP_DECEL_J = 10.0          # rad/s^2, the safe-state stopJ at connect
+REALTIME_GUARD_S = 0.2       # no watchdog kick this long after a realtime command (see kicked_state)
 
 
 def _arm_watchdog(c: Any, frequency: float) -> None:
@@ -51,10 +53,18 @@ def _arm_watchdog(c: Any, frequency: float) -> None:
 def _ops(h: Dict[str, Any], watchdog: float = 0.0) -> Dict[str, Callable[..., Any]]:
     r, c, io, dash = h["r"], h["c"], h["io"], h["dash"]
 
+    realtime_sent = [0.0]            # time.monotonic() of the last realtime command (forceMode)
+
     def kicked_state() -> Dict[str, Any]:
-        if watchdog > 0.0:
+        # a kick writes command 0 into the command register: right after a realtime command (answered at once,
+        # read by the script's next cycle) it could overwrite that command before the controller saw it
+        if watchdog > 0.0 and time.monotonic() - realtime_sent[0] > REALTIME_GUARD_S:
             c.kickWatchdog()
         return state()
+
+    def realtime(result: Any) -> Any:
+        realtime_sent[0] = time.monotonic()
+        return result
 
     def rearmed(result: Any) -> Any:
         if c.isProgramRunning():            # a refused path halts the script: the next re-upload re-arms
@@ -90,9 +100,9 @@ def _ops(h: Dict[str, Any], watchdog: float = 0.0) -> Dict[str, Callable[..., An
         "movePath": lambda path: rearmed(bool(c.moveL([[float(v) for v in row] for row in path], True))),
         "stopJ": lambda a: c.stopJ(float(a), False),
         "stopL": lambda a: c.stopL(float(a), False),
-        "forceMode": lambda frame, sel, wrench, typ, limits: bool(c.forceMode(
+        "forceMode": lambda frame, sel, wrench, typ, limits: realtime(bool(c.forceMode(
             [float(v) for v in frame], [int(v) for v in sel], [float(v) for v in wrench], int(typ),
-            [float(v) for v in limits])),
+            [float(v) for v in limits]))),
         "forceModeStop": lambda: bool(c.forceModeStop()),
         "zeroFt": lambda: bool(c.zeroFtSensor()),
         "setTcp": lambda p: bool(c.setTcp(list(p))),
