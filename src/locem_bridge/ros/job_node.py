@@ -3,10 +3,11 @@
 Parameters (private): ``job`` (YAML with ``steps: [{name, process, options}]``, default
 ``config/jobs/plasterboard.yaml``), ``validate_lines`` (overrides the taping option; empty = the file's),
 ``results_dir`` (default ``$LOCEM_RESULTS`` or ``./results``), ``process_timeout`` (s per process),
-``settings`` (JSON copied into the report), ``peer_wait`` (s to wait for HICEM or PEMKRE when they are away,
-default 120; see :class:`ProcessSequencer`: the job goes on with the next process only when a process failed
-by itself). Services used: ``hicem/start_process``, ``sim/outcome``,
-``sim/scan``, ``sim/save_outcome``, and ``pemkre/query`` for the KPI table when present. Exits when the job is
+``settings`` (JSON copied into the report; ``devices`` is added: the device addresses LOCEM was given, i.e. the
+robot file's with ``locem/robot_overrides`` merged), ``run`` (run folder name; default the start time),
+``peer_wait`` (s to wait for HICEM or PEMKRE when they are away, default 120; see :class:`ProcessSequencer`: the
+job goes on with the next process only when a process failed by itself). Services used: ``hicem/start_process``,
+``sim/outcome``, ``sim/scan``, ``sim/save_outcome``, and ``pemkre/query`` for the KPI table when present. Exits when the job is
 done (0 when every process ended, 1 otherwise), so a launch file can mark it ``required``.
 
 A report is always written, also when the job ends early (the launch shuts down, a process times out, HICEM or
@@ -263,6 +264,16 @@ class OutcomeCache:
             self._busy.release()
 
 
+def device_addresses(robot_path: str) -> Dict[str, Any]:
+    """The device addresses this run's LOCEM uses (robot file + LOCEM's ``robot_overrides``), for the report."""
+    from locem_bridge.bridges.config import load_robot_config
+    from locem_bridge.job.runs import addresses_of
+    try:
+        return addresses_of(load_robot_config(robot_path, rospy.get_param("locem/robot_overrides", {}) or {})).as_dict()
+    except Exception as exc:  # the report is written anyway; it says why the addresses are missing
+        return {"error": str(exc).splitlines()[0] if str(exc) else type(exc).__name__}
+
+
 @config_guard("job")
 def main() -> None:
     rospy.init_node("job")
@@ -274,6 +285,8 @@ def main() -> None:
     results_dir = rospy.get_param("~results_dir", "") or os.environ.get("LOCEM_RESULTS") or os.path.abspath("results")
     timeout = float(rospy.get_param("~process_timeout", 900.0))
     settings = json.loads(rospy.get_param("~settings", "{}") or "{}")
+    if settings.get("robot"):       # read now, while the master is surely there
+        settings.setdefault("devices", device_addresses(str(settings["robot"])))
     outcomes = OutcomeCache()
     scan: Dict[str, Any] = {}
     not_started: Optional[JobEnd] = None       # the job could not begin: still a report saying why
@@ -347,7 +360,7 @@ def main() -> None:
                        timing={"wall_clock_s": time.time() - started},
                        pictures=[os.path.join(pictures_dir, p) for p in outcome.get("pictures", [])],
                        manual_areas=tracker.manual_areas, ended=ended)
-    folder = write_report(record, results_dir)
+    folder = write_report(record, results_dir, run=rospy.get_param("~run", "") or None)
     print("[job] ended: %s%s%s" % (ended.reason, " (early)" if ended.as_dict()["early"] else "",
                                    (": " + ended.detail) if ended.detail else ""), flush=True)
     print("[job] report: %s" % os.path.join(folder, "report.md"), flush=True)

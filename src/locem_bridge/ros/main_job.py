@@ -9,6 +9,10 @@ outcome table. Exit status 0 when taping, spraying and sanding all succeeded, 1 
     python -m locem_bridge.ros.main_job --validate-lines --reject wall_1_joint_2
     python -m locem_bridge.ros.main_job --launch-arg gui:=true
 
+Each run takes its own device addresses (loopback address, Modbus port, CAN channel; see
+:mod:`locem_bridge.job.runs`), so two runs on one machine never reach each other's devices; when none are left it
+refuses at once with one line naming what is taken and by which run (exit status 2).
+
 Node output other than the job's goes to the ROS log folder (``--verbose`` shows it).
 """
 
@@ -22,13 +26,16 @@ import threading
 import time
 from typing import Any, Dict, List, Optional
 
+from locem_bridge.job.report import run_name
+from locem_bridge.job.runs import RunEntry, RunRegistry, RunsError, addresses_of
+
 from .processes import free_port
 from .startup import LINE as NODE_CONFIG_ERROR
 
 PROGRESS = re.compile(r"^\[(\d+/\d+ [^\]]+|job)\]")
 
 
-def launch_command(args: argparse.Namespace, port: int) -> List[str]:
+def launch_command(args: argparse.Namespace, port: int, entry: Optional[RunEntry] = None) -> List[str]:
     cmd = ["roslaunch", "-p", str(port), "locem_bridge", "plasterboard.launch",
            "results_dir:=%s" % os.path.abspath(args.results_dir), "time_scale:=%g" % args.time_scale,
            "validate_lines:=%s" % ("true" if args.validate_lines else "false"),
@@ -36,7 +43,35 @@ def launch_command(args: argparse.Namespace, port: int) -> List[str]:
            "output:=%s" % ("screen" if args.verbose else "log")]
     if args.site:
         cmd.append("site:=%s" % os.path.abspath(args.site))
+    if entry is not None:       # this run's own device addresses and run folder name
+        cmd += ["robot_overrides:=%s" % json.dumps(entry.addresses.overrides(), sort_keys=True), "run:=%s" % entry.run]
     return cmd + list(args.launch_arg)
+
+
+def robot_file(launch_args: List[str]) -> str:
+    """The robot YAML the launch will read (``--launch-arg robot:=FILE`` or the package default)."""
+    for arg in reversed(launch_args):
+        if arg.startswith("robot:="):
+            return os.path.abspath(arg[len("robot:="):])
+    from locem_bridge.sim.config import default_robot_path
+    return default_robot_path()
+
+
+def claim_addresses(args: argparse.Namespace, ports: List[int]) -> RunEntry:
+    """This run's slot in the machine's run registry: its own device addresses (raises NoFreeAddresses or
+    RunsError with a one-line reason)."""
+    import yaml
+    path = robot_file(list(args.launch_arg))
+    try:
+        with open(path, encoding="utf-8") as handle:
+            robot = (yaml.safe_load(handle) or {}).get("robot")
+    except (OSError, yaml.YAMLError, AttributeError) as exc:
+        raise RunsError("%s: cannot read the device addresses: %s" % (path, str(exc).splitlines()[0]))
+    if not isinstance(robot, dict):
+        raise RunsError("%s: robot: missing (a mapping with the device sections)" % path)
+    results = os.path.abspath(args.results_dir)
+    return RunRegistry().claim(run_name(), addresses_of(robot), max_slots=args.max_runs, ports=ports,
+                               taken_names=lambda name: os.path.lexists(os.path.join(results, name)))
 
 
 def _package_dir() -> str:
@@ -114,8 +149,8 @@ def _follow(proc: "subprocess.Popen[str]", verbose: bool, found: Dict[str, str],
             print(line, flush=True)
             stop.set()
             continue
-        if verbose or PROGRESS.match(line) or (("REQUIRED process" in line or "ERROR" in line)
-                                               and not ended_normally):
+        if verbose or PROGRESS.match(line) or (("REQUIRED process" in line or "ERROR" in line
+                                                or "cannot start" in line) and not ended_normally):
             print(line, flush=True)
         match = re.match(r"^\[job\] report: (.+)$", line)
         if match:
@@ -136,18 +171,36 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--timeout", type=float, default=900.0, help="wall seconds before the run is abandoned")
     parser.add_argument("--launch-arg", action="append", default=[], help="extra roslaunch arg name:=value")
     parser.add_argument("--verbose", action="store_true", help="show every node's output")
+    parser.add_argument("--max-runs", type=int, default=8, help="runs at once on this machine, each on its own "
+                        "device addresses (default 8)")
     args = parser.parse_args(argv)
     started = time.monotonic()
     problem = preflight(args)
     if problem:
         print("[main] configuration error: %s" % problem, flush=True)
         return 2
-    args.hmi_port = args.hmi_port or free_port()
-    port = args.port or free_port()
+    registry = RunRegistry()
+    used = set(registry.used_ports())
+    args.hmi_port = args.hmi_port or free_port(avoid=used)
+    port = args.port or free_port(avoid=used | {args.hmi_port})
+    try:
+        entry = claim_addresses(args, [port, args.hmi_port])
+    except RunsError as exc:            # NoFreeAddresses included
+        print("[main] cannot start: %s" % exc, flush=True)
+        return 2
+    try:
+        return run(args, port, entry, started)
+    finally:
+        registry.release(entry.run)
+
+
+def run(args: argparse.Namespace, port: int, entry: RunEntry, started: float) -> int:
+    """Run the launch on this run's addresses to its report; the exit status of :func:`main`."""
     env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % port, ROS_IP="127.0.0.1")
     env.pop("ROS_HOSTNAME", None)
-    cmd = launch_command(args, port)
+    cmd = launch_command(args, port, entry)
     print("[main] %s" % " ".join(cmd), flush=True)
+    print("[main] run %s: devices %s" % (entry.run, entry.addresses.describe()), flush=True)
     print("[main] operator page: http://127.0.0.1:%d/" % args.hmi_port, flush=True)
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1,
                             start_new_session=True)

@@ -30,11 +30,13 @@ for tests and for the HMI; nothing in the control path reads it.
 import json
 import math
 import random
+import sys
 from typing import Any, Callable, Dict
 
 import rospy
 from geometry_msgs.msg import Pose2D
 
+from locem_bridge.config_errors import ConfigError
 from locem_bridge.sim.config import default_robot_path, default_site_path, load_robot, load_site
 from locem_bridge.sim.errors import SimError
 from locem_bridge.sim.worksite import Worksite
@@ -131,14 +133,24 @@ def _serve(name: str, operation: Callable[[Dict[str, Any]], Dict[str, Any]]) -> 
 
 @config_guard("sim")
 def main() -> None:
-    """Entry point of ``rosrun locem_bridge sim_worksite``."""
+    """Entry point of ``rosrun locem_bridge sim_worksite``. A worksite that cannot start (a stand-in's address
+    taken, a bad file) ends the node with one line naming what and where, not a traceback."""
     rospy.init_node("sim")
     overrides = {key: rospy.get_param("~" + key) for key in ("host", "modbus_port", "can_interface", "can_channel",
                                                             "can_port", "time_scale", "gui")
-                 if rospy.has_param("~" + key)}
+                 if rospy.has_param("~" + key) and rospy.get_param("~" + key) != ""}
     worksite = Worksite(load_site(rospy.get_param("~site", default_site_path())),
-                        load_robot(rospy.get_param("~robot", default_robot_path())), **overrides)
-    endpoints = worksite.start()
+                        load_robot(rospy.get_param("~robot", default_robot_path()),
+                                   rospy.get_param("~robot_overrides", {}) or {}), **overrides)
+    try:
+        endpoints = worksite.start()
+    except ConfigError:
+        raise                    # config_guard's one line
+    except (SimError, OSError) as exc:
+        line = "sim_worksite: cannot start: %s" % " ".join(str(exc).split())
+        print(line, file=sys.stderr, flush=True)
+        rospy.signal_shutdown(line)
+        raise SystemExit(1)
     node = SimNode(worksite)
     node.start()
     rospy.on_shutdown(node.shutdown)

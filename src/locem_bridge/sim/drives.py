@@ -724,7 +724,9 @@ def open_bus(can_cfg: Dict[str, Any]) -> can.BusABC:
     try:
         bus = can.Bus(**kwargs)
     except Exception as exc:
-        raise DeviceStandInError("cannot open CAN bus %r: %s" % (kwargs, exc))
+        where = "%s %s%s" % (interface, can_cfg["channel"], (":%s" % kwargs["port"]) if "port" in kwargs else "")
+        raise DeviceStandInError("CAN bus %s cannot be opened: %s" % (where, str(exc).splitlines()[0] if str(exc)
+                                                                       else type(exc).__name__))
     return SelfEchoFilterBus(bus) if interface == "udp_multicast" else bus
 
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import re
+import socket
 import threading
 from typing import Any, Dict, List, Optional, Tuple
 
@@ -46,6 +47,18 @@ def parse_version(text: str) -> Tuple[int, int, int]:
     while len(parts) < 3:
         parts.append(0)
     return parts[0], parts[1], parts[2]
+
+
+def bind_problem(host: str, port: int) -> str:
+    """Why ``host:port`` cannot be bound now (e.g. ``Address already in use``), "" when it can: the adapters'
+    own bind errors are vague (pymodbus 3.16: "Could not start listen, please check address")."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            return str(exc.strerror or exc)
+    return ""
 
 
 class CompressorServerBase:
@@ -159,8 +172,9 @@ class CompressorServerBase:
         if not started.wait(timeout) or box:
             self._thread.join(1.0)
             self._thread = None
-            raise DeviceStandInError("compressor Modbus server could not listen on %s:%d: %s"
-                                     % (self.host, self.port, box[0] if box else "timeout"))
+            raise DeviceStandInError("compressor Modbus stand-in cannot listen on %s:%d: %s"
+                                     % (self.host, self.port, bind_problem(self.host, self.port)
+                                        or (box[0] if box else "timeout")))
         log.info("compressor Modbus TCP stand-in listening on %s:%d (device id %d, pymodbus %s line)", self.host,
                  self.port, self.device_id, self.pymodbus_line)
 

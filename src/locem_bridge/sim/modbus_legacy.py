@@ -190,7 +190,7 @@ class LegacyCompressorServer(CompressorServerBase):
         server = ModbusTcpServer(_ServerContext(self), address=(self.host, self.port),
                                  response_manipulator=self._answer)
         if not await server.listen():       # pymodbus 3.6 logs the OSError and returns False
-            raise DeviceStandInError("address %s:%d cannot be bound (in use or not local)" % (self.host, self.port))
+            raise DeviceStandInError("cannot be bound (in use or not local)")
         return server
 
     async def _shutdown(self, server: Any) -> None:

@@ -81,7 +81,8 @@ class Worksite:
 
     # -- lifecycle ---------------------------------------------------------------------------------------------
     def start(self) -> Dict[str, Any]:
-        """Start everything; returns :meth:`endpoints`. On failure everything started so far is stopped."""
+        """Start everything; returns :meth:`endpoints`. On failure everything started so far is stopped; a
+        stand-in that cannot bind raises :class:`DeviceStandInError` naming the address and port."""
         if self.world is not None:
             raise SimStateError("worksite already started")
         robot = self.robot_cfg["robot"]
@@ -102,7 +103,7 @@ class Worksite:
             q0 = arm_cfg["named_poses"].get(self.arm_pose or "home", [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
             if self.with_ur:
                 self.ur = self._make_ur(arm_cfg, q0, sim["time_scale"])
-                self.ur.start()
+                self._start_ur()
                 self.arm = UrArmSource(self.ur)
             else:
                 self.arm = KinematicArm(q0)
@@ -132,6 +133,13 @@ class Worksite:
             ports.update(self.ur_ports)
         urdf, _ = resolve_arm_urdf(arm_cfg)
         return UrControllerStandIn(address=ctl["host"], time_scale=time_scale, model=urdf, q0=q0, ports=ports)
+
+    def _start_ur(self) -> None:
+        from .ur import UrStandInError
+        try:
+            self.ur.start()
+        except UrStandInError as exc:        # e.g. a port taken: one line naming address and port
+            raise DeviceStandInError(str(exc)) from exc
 
     def _protective_stop(self, event: Dict[str, Any]) -> None:
         if event["part"].startswith("arm"):

@@ -76,7 +76,7 @@ class UrControllerStandIn:
         return self._thread is not None
 
     def start(self) -> "UrControllerStandIn":
-        """Bind the ports and start serving. Raises OSError when a port on this address is taken."""
+        """Bind the ports and start serving. Raises ListenError (address, port, reason) when a port is taken."""
         if self._thread is not None:
             return self
         net = NetLoop(self.address, self.ports, self.control_rate, self.controller_version,

@@ -20,3 +20,7 @@ class KinematicsError(UrStandInError):
 
 class ScriptRuntimeError(UrStandInError):
     """The emulated control script hit a runtime error (the real controller halts the program: runtime STOPPED)."""
+
+
+class ListenError(UrStandInError):
+    """A port of the stand-in cannot be bound; the message names the address, the port and why (one line)."""

@@ -1,7 +1,7 @@
 """The three TCP servers of the stand-in (dashboard 29999, script 30003, RTDE 30004) on one selector thread.
 
 Lifecycle: :class:`NetLoop` is created by the controller with the listening addresses, ``start()`` binds and starts
-its I/O thread, ``close()`` closes every socket and joins the thread. Incoming bytes of every connection are handled
+its I/O thread (a port it cannot bind raises :class:`~.errors.ListenError` naming address, port and reason), ``close()`` closes every socket and joins the thread. Incoming bytes of every connection are handled
 on the I/O thread; RTDE data packages are streamed from the controller's control thread through
 :meth:`RtdeConnection.send`, which queues into a per-connection buffer flushed without blocking (a client that stops
 reading for more than ``SLOW_CLIENT_BYTES`` of backlog is dropped, as a real controller drops a stalled client).
@@ -14,6 +14,7 @@ import struct
 import threading
 from typing import Callable, Dict, List, Optional, Set, Tuple
 
+from .errors import ListenError
 from .rtde_vars import InputRecipe, OutputRecipe
 
 LOG = logging.getLogger("locem_bridge.sim.ur")
@@ -364,6 +365,7 @@ class NetLoop:
         self._stop.clear()
         self._sel = selectors.DefaultSelector()
         kinds = {"dashboard": DashboardConnection, "script": ScriptConnection, "rtde": RtdeConnection}
+        name, port = "", 0
         try:
             for name, port in self.ports.items():
                 ls = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -373,9 +375,10 @@ class NetLoop:
                 ls.listen(8)
                 ls.setblocking(False)
                 self._sel.register(ls, selectors.EVENT_READ)
-        except OSError:
+        except OSError as exc:
             self._close_sockets()
-            raise
+            raise ListenError("UR controller stand-in cannot listen on %s:%d (%s port): %s"
+                              % (self.address, port, name, exc.strerror or exc)) from exc
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
         self._sel.register(self._wake_r, selectors.EVENT_READ)
