@@ -5,7 +5,7 @@ import time
 
 import pytest
 
-from locem_bridge.sim.ur import ConfigurationError, UrControllerStandIn
+from locem_bridge.sim.ur import ConfigurationError, ListenError, UrControllerStandIn
 
 rtde_control = pytest.importorskip("rtde_control")
 rtde_receive = pytest.importorskip("rtde_receive")
@@ -222,8 +222,11 @@ def test_bad_configuration_names_the_problem(kwargs, message):
 
 def test_address_in_use_is_reported_and_restart_works(inproc):
     other = UrControllerStandIn(inproc.address)
-    with pytest.raises(OSError):
+    with pytest.raises(ListenError) as caught:     # one line naming address, port and why (also an OSError)
         other.start()
+    assert str(caught.value) == ("UR controller stand-in cannot listen on %s:29999 (dashboard port): Address already "
+                                 "in use" % inproc.address)
+    assert isinstance(caught.value, OSError)
     inproc.stop()
     inproc.start()                               # same object, restarted on the same address
     s = socket.create_connection((inproc.address, 29999), timeout=2.0)

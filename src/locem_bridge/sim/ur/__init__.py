@@ -72,8 +72,8 @@ realtime state package, URScript other than the ur_rtde control script is accept
 """
 from .arm import ArmSnapshot
 from .controller import UrControllerStandIn
-from .errors import ConfigurationError, KinematicsError, ScriptRuntimeError, UrStandInError
+from .errors import ConfigurationError, KinematicsError, ListenError, ScriptRuntimeError, UrStandInError
 from .kinematics import ArmKinematics, e_series_urdf_xml
 
 __all__ = ["UrControllerStandIn", "ArmSnapshot", "ArmKinematics", "e_series_urdf_xml", "UrStandInError",
-           "ConfigurationError", "KinematicsError", "ScriptRuntimeError"]
+           "ConfigurationError", "KinematicsError", "ListenError", "ScriptRuntimeError"]

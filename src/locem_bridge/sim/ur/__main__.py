@@ -12,6 +12,7 @@ import threading
 from typing import List, Optional
 
 from .controller import DEFAULT_Q, UrControllerStandIn
+from .errors import UrStandInError
 from .process import serve_stdio
 
 
@@ -37,6 +38,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         if args.stdio:
             print(json.dumps({"ready": False, "error": "%s: %s" % (type(exc).__name__, exc)}), flush=True)
             return 1
+        if isinstance(exc, UrStandInError):     # a port taken, a bad argument: one line, no traceback
+            print("UR stand-in: cannot start: %s" % exc, file=sys.stderr, flush=True)
+            return 2
         raise
     if args.stdio:
         print(json.dumps({"ready": True}), flush=True)

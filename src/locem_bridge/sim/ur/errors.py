@@ -22,5 +22,6 @@ class ScriptRuntimeError(UrStandInError):
     """The emulated control script hit a runtime error (the real controller halts the program: runtime STOPPED)."""
 
 
-class ListenError(UrStandInError):
-    """A port of the stand-in cannot be bound; the message names the address, the port and why (one line)."""
+class ListenError(UrStandInError, OSError):
+    """A port of the stand-in cannot be bound; the message names the address, the port and why (one line).
+    Also an OSError, as the socket error it replaces."""
