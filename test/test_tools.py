@@ -6,6 +6,7 @@ says whether the job was completed.
 Both need the environment ``tools/test.sh`` prepares (setup done, workspace sourced); under plain pytest without it
 they are skipped with that reason.
 """
+import glob
 import json
 import os
 import shutil
@@ -78,8 +79,8 @@ def _report_json(out):
 def test_two_main_jobs_at_once_each_on_its_own_devices(tmp_path):
     """Two ``python -m locem_bridge.ros.main_job`` started together on one machine (a one-joint, one-area site at
     time scale 5): both finish with every process succeeded and the outcome goals met, on different device
-    addresses, into different run folders, and no task of either failed (a base GOTO that timed out, as when one
-    run's CAN master drove the other's drives, fails its task) - or the second refuses at once with its reason."""
+    addresses, into different run folders, and every base GOTO of both succeeded (one timed out where it stood when
+    one run's CAN master reached the other's drives) - or the second refuses at once with its reason."""
     jobs = []
     for name in ("a", "b"):
         home = tmp_path / name
@@ -112,13 +113,18 @@ def test_two_main_jobs_at_once_each_on_its_own_devices(tmp_path):
             [("taping", "succeeded"), ("spraying", "succeeded"), ("sanding", "succeeded")], report["processes"]
         assert o["joints_total"] == o["joints_taped"] == 1 and o["tape_coverage"] >= 0.99, o
         assert o["spray_coverage"] >= 0.98 and o["sand_coverage"] >= 0.98 and o["collisions"] == 0, o
-        tasks = {r["actionType"]: r for r in report["kpis"]}
-        assert {"TAPE_LINE", "SPRAY_AREA", "SAND_AREA", "GO_HOME"} <= set(tasks), sorted(tasks)
-        assert [(r["actionType"], r["failed"]) for r in report["kpis"] if int(r["failed"]) != 0] == [], report["kpis"]
+        done_tasks = {r["actionType"] for r in report["kpis"] if int(r["succeeded"]) >= 1}
+        assert {"TAPE_LINE", "SPRAY_AREA", "SAND_AREA", "GO_HOME"} <= done_tasks, report["kpis"]
         dev = report["settings"]["devices"]
         assert "[main] run %s: devices UR %s, Modbus %s, CAN %s" % (os.path.basename(os.path.dirname(path)),
                                                                    dev["ur"], dev["modbus"], dev["can"]) in out
         devices.append(dev)
+    # every base GOTO succeeded: HICEM logs each LOCEM command that failed, in each run's own ROS log folder
+    logs = glob.glob(str(tmp_path / "*" / "log" / "*-*" / "hicem*.log"))
+    assert len({os.path.dirname(log) for log in logs}) == len(finished), logs
+    failed_gotos = [line.strip() for log in logs for line in open(log, encoding="utf-8", errors="replace")
+                    if "failed: LOCEM" in line and "for 'GOTO" in line]
+    assert failed_gotos == [], failed_gotos[:5]
     if len(finished) == 2:
         assert len(set(reports)) == 2, reports                 # two run folders, neither overwrote the other
         first, second = devices
