@@ -24,6 +24,7 @@ which run in the caller's thread. A waiting handler sleeps on its execution's ev
 :meth:`CommandContext.sleep`), so it costs nothing until a cancel, ``STOP``, pause or its time wakes it.
 """
 
+import functools
 import heapq
 import itertools
 import logging
@@ -32,6 +33,7 @@ import time
 import traceback
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
+from .codes import Code
 from .errors import Aborted, Busy, CommandTimeout, LocemError
 from .execution import CommandContext, CommandEvent, ExecState, Execution, Listener
 from .grammar import parse
@@ -42,6 +44,8 @@ _log = logging.getLogger(__name__)
 
 HealthSource = Callable[[], Dict[str, Any]]
 
+BIND_CACHE_SIZE = 256
+"""Accepted command strings whose parse and binding are remembered (see :meth:`Dispatcher.bind`)."""
 DEFAULT_MAX_RUNNING = 64
 """Commands that may run at once in their own thread (the ROS node's ``~max_running`` parameter)."""
 
@@ -69,6 +73,7 @@ class Dispatcher:
         self._health: Dict[str, HealthSource] = {}
         self._watch: List[Tuple[float, int, Execution]] = []
         self._watch_cv = threading.Condition()
+        self._bind_cached = functools.lru_cache(maxsize=BIND_CACHE_SIZE)(self._bind_uncached)
         self._closed = False
         self._watchdog = threading.Thread(target=self._watch_deadlines, name="locem-watchdog", daemon=True)
         self._watchdog.start()
@@ -88,7 +93,16 @@ class Dispatcher:
 
     # -- entry points -------------------------------------------------------------------------------------
     def bind(self, text: object, interface: Optional[Interface] = None) -> BoundCommand:
-        """Parse and check ``text`` without running it; raises the typed :class:`LocemError`."""
+        """Parse and check ``text`` without running it; raises the typed :class:`LocemError`.
+
+        Accepted strings are remembered (the last :data:`BIND_CACHE_SIZE`, per registry version): a client that
+        sends the same command again (STATUS, a poll) skips the parse. Refused ones are checked every time.
+        """
+        if type(text) is not str:
+            return self.registry.bind_arguments(parse(text), interface)
+        return self._bind_cached(text, interface, self.registry.version)
+
+    def _bind_uncached(self, text: str, interface: Optional[Interface], version: int) -> BoundCommand:
         return self.registry.bind_arguments(parse(text), interface)
 
     def submit(self, text: object, interface: Interface,
@@ -123,10 +137,25 @@ class Dispatcher:
         return execution
 
     def execute(self, text: object, interface: Interface = Interface.SERVICE) -> Response:
-        """Run a command to its end and return the response; never raises."""
+        """Run a command to its end and return the response; never raises.
+
+        A read-only inline query that occupies no resource (``HELP``, ``STATUS``, a device read) is answered
+        right here: it changes nothing, publishes nothing, cannot be cancelled, so it needs no admission.
+        """
+        try:
+            bound = self._bind_cached(text, interface, self.registry.version) if type(text) is str else \
+                self.bind(text, interface)
+        except LocemError as error:
+            self._emit(self._rejection(text, interface, error))
+            return Response.from_error(error)
+        spec = bound.spec
+        if spec.query and spec.inline and not bound.claims:
+            handler = self.registry.handler(spec.name)
+            if handler is not None:  # else submit() answers NOT_READY and publishes it
+                return self._call(Execution(next(self._ids), bound, interface, self.grace), handler)
         try:
             execution = self.submit(text, interface)
-        except LocemError as error:
+        except LocemError as error:  # already published by submit()
             return Response.from_error(error)
         response = execution.wait()
         assert response is not None  # wait() without timeout returns only once answered
@@ -236,28 +265,33 @@ class Dispatcher:
 
     def _run(self, execution: Execution, handler: Callable[..., Any]) -> None:
         try:
-            result = handler(CommandContext(execution), **dict(execution.bound.values))
-            if result is not None and not isinstance(result, dict):
-                raise TypeError("handler returned %s, expected a dict or None" % type(result).__name__)
-            result = dict(result or {})
-            message = result.pop("message", None)
-            response = Response.ok(message if isinstance(message, str) else "%s done" % execution.bound.name, result)
-        except LocemError as error:
-            pending = execution._cancel_error
-            if pending is not None and isinstance(error, (Aborted, CommandTimeout)):
-                response = Response.from_error(pending)  # the reason it was asked to stop
-            else:
-                response = Response.from_error(error)
-        except Exception as error:  # a bug in a handler: report it, keep serving
-            _log.error("handler of %s raised:\n%s", execution.bound.name, traceback.format_exc())
-            response = Response.from_error(LocemError("%s failed inside LOCEM: %s: %s"
-                                                      % (execution.bound.name, type(error).__name__, error)))
+            response = self._call(execution, handler)
         finally:
             execution._handler_returned = True
         # resources first, answer second: whoever sees the answer (a service reply, the final status event, a
         # procedure queue) may send the next command on the same resource at once and must not get BUSY
         self._release(execution)
         execution._finish(response)
+
+    def _call(self, execution: Execution, handler: Callable[..., Any]) -> Response:
+        """Run the handler; every way it can end becomes a response (a bug in it too)."""
+        try:
+            result = handler(CommandContext(execution), **dict(execution.bound.values))
+            if result is not None and not isinstance(result, dict):
+                raise TypeError("handler returned %s, expected a dict or None" % type(result).__name__)
+            result = dict(result or {})  # the handler's dict stays its own
+            message = result.pop("message", None)
+            return Response(Code.OK, message if isinstance(message, str) else "%s done" % execution.bound.name,
+                            result)
+        except LocemError as error:
+            pending = execution._cancel_error
+            if pending is not None and isinstance(error, (Aborted, CommandTimeout)):
+                return Response.from_error(pending)  # the reason it was asked to stop
+            return Response.from_error(error)
+        except Exception as error:  # a bug in a handler: report it, keep serving
+            _log.error("handler of %s raised:\n%s", execution.bound.name, traceback.format_exc())
+            return Response.from_error(LocemError("%s failed inside LOCEM: %s: %s"
+                                                  % (execution.bound.name, type(error).__name__, error)))
 
     def _release(self, execution: Execution) -> None:
         with self._lock:

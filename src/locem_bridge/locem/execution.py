@@ -137,29 +137,33 @@ class CommandContext:
 class Execution:
     """A caller's handle on one submitted command. Thread-safe."""
 
+    # the state a command starts in; an instance gets its own value on its first change (a quick query never
+    # changes most of them, and is answered sooner for not setting them one by one)
+    state = ExecState.RUNNING
+    progress = 0.0
+    feedback_text = ""
+    response: Optional[Response] = None
+    stuck = False
+    _paused = False
+    _pause_started = 0.0
+    _cancel_error: Optional[LocemError] = None
+    _wake_event: Optional[threading.Event] = None  # made on first use: quick queries never sleep
+    _answered = False
+    _done_event: Optional[threading.Event] = None  # made by the first wait() that has to block
+    _handler_returned = False  # set by the dispatcher once the handler has returned (or never started)
+
     def __init__(self, exec_id: int, bound: BoundCommand, interface: Interface, grace: float) -> None:
         self.id = exec_id
         self.bound = bound
         self.interface = interface
-        self.state = ExecState.RUNNING
-        self.progress = 0.0
-        self.feedback_text = ""
-        self.response: Optional[Response] = None
         self.started = time.monotonic()
-        self.stuck = False
         self._grace = grace
         self._deadline = self.started + bound.timeout
-        self._paused = False
-        self._pause_started = 0.0
-        self._cancel_error: Optional[LocemError] = None
         self._cancel_callbacks: List[Callable[[], None]] = []
         self._pause_callbacks: List[Any] = []
         self._listeners: List[Listener] = []
         self._feedback_listeners: List[Listener] = []
         self._lock = threading.RLock()
-        self._wake_event: Optional[threading.Event] = None  # made on first use: quick queries never sleep
-        self._done = threading.Event()
-        self._handler_returned = False  # set by the dispatcher once the handler has returned (or never started)
 
     @property
     def _wake(self) -> threading.Event:
@@ -179,7 +183,7 @@ class Execution:
 
     @property
     def done(self) -> bool:
-        return self._done.is_set()
+        return self._answered
 
     @property
     def deadline(self) -> float:
@@ -191,7 +195,13 @@ class Execution:
 
     def wait(self, timeout: Optional[float] = None) -> Optional[Response]:
         """The response once answered (``None`` if ``timeout`` passed first)."""
-        self._done.wait(timeout)
+        if not self._answered:
+            with self._lock:
+                if not self._answered and self._done_event is None:
+                    self._done_event = threading.Event()
+                event = self._done_event
+            if event is not None:
+                event.wait(timeout)
         return self.response
 
     def add_listener(self, listener: Listener, feedback: bool = True) -> None:
@@ -282,7 +292,9 @@ class Execution:
                 self.state = ExecState.CANCELED
             else:
                 self.state = ExecState.FAILED
-            self._done.set()
+            self._answered = True
+            if self._done_event is not None:
+                self._done_event.set()
         if self._listeners:  # a read-only query nobody follows has no one to tell
             self._emit(self._event())
         return True

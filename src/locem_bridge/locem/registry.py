@@ -296,6 +296,8 @@ class CommandRegistry:
     def __init__(self, specs: Iterable[CommandSpec] = ()) -> None:
         self._specs: Dict[str, CommandSpec] = {}
         self._handlers: Dict[str, Handler] = {}
+        self.version = 0
+        """Changes with every declaration, so whoever remembers bindings knows when to forget them."""
         for spec in specs:
             self.declare(spec)
 
@@ -303,6 +305,7 @@ class CommandRegistry:
         if spec.name in self._specs and self._specs[spec.name] != spec:
             raise ValueError("command %s is declared twice with different specs" % spec.name)
         self._specs[spec.name] = spec
+        self.version += 1
 
     def bind(self, name: str, handler: Handler) -> None:
         if name not in self._specs:

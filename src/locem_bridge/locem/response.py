@@ -22,7 +22,7 @@ class Response:
 
     @property
     def result_json(self) -> str:
-        return json.dumps(self.result, sort_keys=True, separators=(",", ":"), default=_jsonable)
+        return _ENCODER.encode(self.result)
 
     @classmethod
     def ok(cls, message: str = "done", result: Dict[str, Any] = None) -> "Response":
@@ -43,3 +43,7 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, (set, frozenset, tuple)):
         return sorted(value) if isinstance(value, (set, frozenset)) else list(value)
     return str(value)
+
+
+_ENCODER = json.JSONEncoder(sort_keys=True, separators=(",", ":"), default=_jsonable)
+"""One encoder for every response (``json.dumps`` with options builds a new one per call)."""

@@ -57,6 +57,8 @@ from locem_bridge.srv import (
 from locem_bridge.ros.startup import config_guard
 
 
+_CODE_TEXT = {code: code.value for code in Code}  # Enum.value is a slow property; the service path is hot
+
 STATUS_QUEUE_SIZE = 10000
 """Default ``~status_queue_size``: events queued per ``~status`` subscriber before rospy drops the oldest."""
 
@@ -100,7 +102,7 @@ class LocemNode:
     # -- service ------------------------------------------------------------------------------------------
     def _on_command(self, request: Any) -> CommandResponse:
         response = self.core.dispatcher.execute(request.command, Interface.SERVICE)
-        return CommandResponse(response.success, response.code.value, response.message, response.result_json)
+        return CommandResponse(response.success, _CODE_TEXT[response.code], response.message, response.result_json)
 
     # -- subscriber ---------------------------------------------------------------------------------------
     def _on_command_in(self, message: Any) -> None:
