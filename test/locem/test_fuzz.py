@@ -4,6 +4,7 @@ Nothing but the typed LOCEM errors may escape, every answer carries a known code
 ever sees arguments that satisfy its declaration (finite, in range, right type).
 """
 import math
+import time
 import threading
 
 from hypothesis import HealthCheck, given, settings
@@ -103,3 +104,35 @@ def test_10000_generated_strings_never_escape_and_never_reach_a_device_invalid()
     assert len(set(EXAMPLES)) > 5000, len(set(EXAMPLES))
     # ... and a strategy that never produced a valid PROBE would make it pass vacuously: some reached the device
     assert len(CALLS) > 20, len(CALLS)
+
+
+ADDED = []
+
+
+@settings(max_examples=2000, deadline=None, derandomize=True, database=None,
+          suppress_health_check=list(HealthCheck))
+@given(ANY_TEXT)
+def generated_strings_through_the_procedure_interface(text):
+    if text.strip().upper().startswith(("WAIT", "STOP")):
+        text = "STATUS"  # a valid WAIT would hold the queue, STOP would cancel it
+    before = len(CORE.procedures.list())
+    try:
+        snapshot = CORE.procedures.add(text)
+    except LocemError as error:  # refused: a known code, a message, and nothing queued
+        assert error.code in set(Code) and error.message
+        assert len(CORE.procedures.list()) == before
+        return
+    ADDED.append(snapshot.id)
+
+
+def test_2000_generated_strings_through_the_procedure_interface_are_refused_or_run_valid():
+    del ADDED[:], CALLS[:]
+    generated_strings_through_the_procedure_interface()
+    end = time.monotonic() + 30
+    while time.monotonic() < end and any(CORE.procedures.query_state(i).state.value != "finished" for i in ADDED
+                                         if i in {s.id for s in CORE.procedures.list()}):
+        time.sleep(0.05)
+    kept = {s.id: s for s in CORE.procedures.list()}
+    assert all(kept[i].state.value == "finished" and kept[i].code in {c.value for c in Code} for i in ADDED if i in kept)
+    assert len(ADDED) > 20 and CALLS, "no generated string was a valid command"
+    assert all(valid_for_probe(values) for values in CALLS)  # the device saw only valid arguments
