@@ -18,7 +18,7 @@ import json
 import os
 import threading
 import time
-from typing import Any, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 from locem_bridge.hicem.errors import PemkreError
 from locem_bridge.hicem.interfaces import CommandHandle, LocemClient, LocemReply, PemkreClient
@@ -293,10 +293,12 @@ class AutoOperator:
 class Heartbeats:
     """TEST helper: feeds 'locem' heartbeats to the HEM from a thread until stopped."""
 
-    def __init__(self, health: Any, module: str = "locem", period_s: float = 0.02) -> None:
+    def __init__(self, health: Any, module: str = "locem", period_s: float = 0.02,
+                 alive: Optional[Callable[[], bool]] = None) -> None:
         self.health = health
         self.module = module
         self.period_s = period_s
+        self.alive = alive or (lambda: True)       # no heartbeat while it says False (the module is dead)
         self._stop = threading.Event()
         self.last = time.monotonic()
         self._t = threading.Thread(target=self._run, daemon=True)
@@ -304,6 +306,8 @@ class Heartbeats:
 
     def _run(self) -> None:
         while not self._stop.wait(self.period_s):
+            if not self.alive():
+                continue
             self.health.heartbeat(self.module)
             self.last = time.monotonic()
 

@@ -173,3 +173,17 @@ def test_silent_module_halts_tree_within_bound_of_its_timeout(tmp_path):
         assert s.ctrl.state()["phase"] == "stopped"
     finally:
         s.close()
+
+
+@pytest.mark.parametrize("value", ["RECOVER", [""], [3]])
+def test_ride_through_must_be_a_list_of_action_types(value):
+    import os
+    import yaml
+    from locem_bridge.hicem.config import DEFAULT_PARAMS_FILE, HicemParams
+    from locem_bridge.hicem.errors import ConfigError
+    with open(DEFAULT_PARAMS_FILE, encoding="utf-8") as f:
+        raw = yaml.safe_load(f)
+    assert raw["health"]["ride_through"] == ["RECOVER"] and os.path.isfile(DEFAULT_PARAMS_FILE)
+    raw["health"]["ride_through"] = value
+    with pytest.raises(ConfigError, match="health.ride_through"):
+        HicemParams(raw)

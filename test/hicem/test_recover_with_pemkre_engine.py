@@ -5,6 +5,7 @@ spraying process ends with every area sprayed; the failure stays in the executio
 ends in a protective stop: RECOVER asks the operator, whose reset is sent as RESET_ARM, and the area is sanded
 on from its failed section; an operator who cannot clear the stop fails the process with that answer."""
 import copy
+import time
 
 import pytest
 from rdflib import URIRef
@@ -14,6 +15,7 @@ pemkre = pytest.importorskip("locem_bridge.pemkre")
 from hicem_doubles import SITE, AutoOperator, Heartbeats, LocemDouble  # noqa: E402
 from hicem_rig import params  # noqa: E402
 from locem_bridge.hicem.executive import create_executive  # noqa: E402
+from locem_bridge.hicem.errors import LocemError  # noqa: E402
 from locem_bridge.hicem.interfaces import LocemReply  # noqa: E402
 from locem_bridge.hicem.pemkre_local import EngineClient  # noqa: E402
 from locem_bridge.pemkre import PLB, PPR, compute_kpis  # noqa: E402
@@ -65,7 +67,7 @@ def _run(tmp_path, engine, locem, process=PLB.SprayingProcess, answers=None, **o
     operator = AutoOperator(ex.controller, dict({"mount_tool": "done"}, **(answers or {})))
     ex.operator.add_listener(operator)
     ex.health.heartbeat("locem")
-    beats = Heartbeats(ex.health)
+    beats = Heartbeats(ex.health, alive=getattr(locem, "alive", None))
     try:
         phase = ex.controller.run_process(str(process), {})
         _run.asked = operator.asked
@@ -233,3 +235,54 @@ def test_a_section_out_of_reach_is_manual_work_and_the_process_succeeds(tmp_path
     assert len([c for c in locem.sent if c.startswith("SPRAY_AREA ")]) == 8 and "RECOVER" not in locem.sent
     for a in ("wall_1_area_1", "wall_1_area_2"):
         assert engine.store.value(SITE_NS[a], PPR.sprayingStatus) == PPR.processed
+
+
+class RespawningLocem(LocemDouble):
+    """The double as HICEM sees LOCEM killed during the n-th SPRAY_AREA: the goal ends ABORTED ("went away",
+    HICEM's client), then for ``dead_s`` no heartbeat reaches the HEM and every send finds no action server, then
+    the respawned LOCEM answers again."""
+
+    def __init__(self, kill_at: int, dead_s: float, **kw) -> None:
+        super().__init__(**kw)
+        self.kill_at, self.dead_s, self.sprays, self.dead_until = kill_at, dead_s, 0, 0.0
+
+    def alive(self) -> bool:
+        return time.monotonic() >= self.dead_until
+
+    def send(self, command: str):
+        if not self.alive():
+            self.sent.append("(away) " + command)
+            raise LocemError("LOCEM action server /locem/command_action is not available", "NOT_READY")
+        if command.startswith("SPRAY_AREA "):
+            self.sprays += 1
+            if self.sprays == self.kill_at:
+                self.fail_next["SPRAY_AREA"] = LocemReply(False, "ABORTED", "LOCEM went away while running it")
+                self.dead_until = time.monotonic() + self.dead_s
+        return super().send(command)
+
+
+def test_recover_rides_through_the_health_fault_of_a_locem_that_respawns(tmp_path, engine):
+    """LOCEM killed mid-area: the SPRAY_AREA fails at once (its goal aborted), RECOVER starts while LOCEM is still
+    away and the HEM's crucial 'locem' heartbeat times out (1 s) during it; RECOVER is in health.ride_through, so
+    the fault does not halt it: it waits for LOCEM and its links, and the area is sprayed on."""
+    locem = RespawningLocem(kill_at=6, dead_s=2.5, site=_two_area_site())
+    phase, state, marks = _run(tmp_path, engine, locem)
+    assert phase == "ended", state
+    assert all(m == "sprayed" for m in marks.values()), marks
+    log = [(str(r["actionType"]), str(r["status"]), str(r.get("detail") or ""))
+           for r in engine.query("task_log", {"process": URIRef(engine.current_process())}).rows]
+    assert [x[:2] for x in log] == [("SCAN", "succeeded"), ("GET_TOOL", "succeeded"), ("SPRAY_AREA", "succeeded"),
+                                    ("SPRAY_AREA", "failed"), ("RECOVER", "succeeded"), ("SPRAY_AREA", "succeeded"),
+                                    ("GO_HOME", "succeeded")], log
+    assert any(c.startswith("(away) STATUS") for c in locem.sent)       # RECOVER ran while LOCEM was away
+    assert len([c for c in locem.sent if c.startswith("SPRAY_AREA ")]) == 4 + 2 + 3
+
+
+def test_without_ride_through_the_same_respawn_fails_recover_with_the_health_fault(tmp_path, engine):
+    locem = RespawningLocem(kill_at=6, dead_s=2.5, site=_two_area_site())
+    phase, state, _marks = _run(tmp_path, engine, locem, health__ride_through=[])
+    assert phase == "failed", state
+    log = [(str(r["actionType"]), str(r["status"]), str(r.get("detail") or ""))
+           for r in engine.query("task_log", {"process": URIRef(engine.current_process())}).rows]
+    assert ("RECOVER", "failed") in [x[:2] for x in log]
+    assert any("health fault" in d and "locem silent" in d for a, st, d in log if a == "RECOVER"), log

@@ -81,6 +81,12 @@ class HicemParams:
         self.watchdog_period_s = _get(raw, "health.watchdog_period_s", float)
         self.modules = [_entry(ModuleSpec.from_dict, m, "health.modules[%d]" % i)
                         for i, m in enumerate(_get(raw, "health.modules", list))]
+        health = raw.get("health") if isinstance(raw.get("health"), dict) else {}
+        ride = health.get("ride_through", [])
+        if not isinstance(ride, list) or not all(isinstance(a, str) and a for a in ride):
+            raise ConfigError("must be a list of action types, got %r" % (ride,), key="health.ride_through",
+                              allowed="action types whose trees wait for the devices themselves, e.g. [RECOVER]")
+        self.ride_through: List[str] = list(ride)
         self.persistent_collections = list(_get(raw, "datastore.persistent_collections", list))
         self.prune_rules = [_entry(PruneRule.from_dict, r, "datastore.prune[%d]" % i)
                             for i, r in enumerate(_get(raw, "datastore.prune", list))]

@@ -208,6 +208,10 @@ class HighLevelController:
 
     def _on_fault(self, module: str, reason: str) -> None:
         if self._tree is not None:
+            action = self._state.get("action_type", "")
+            if action in self.params.ride_through:    # e.g. RECOVER: its tree waits for the devices itself
+                self.log.warning("health fault during %s, which rides through it: %s", action, reason)
+                return
             self._abort_reason = "health fault: %s" % reason
             self._wake.set()
 
