@@ -10,7 +10,9 @@ Each layer keeps its own error family (``SimConfigError`` is a ``SimError``, ``B
 ``BridgeError``, ...) and also derives from :class:`ConfigError`, so a node catches every configuration problem in
 one ``except ConfigError`` at start-up and prints :meth:`ConfigError.one_line` instead of a traceback.
 """
-from typing import Any, Sequence, Union
+from typing import Any, Callable, Sequence, Union
+
+import yaml
 
 Allowed = Union[None, str, int, float, Sequence[Any]]
 
@@ -57,3 +59,19 @@ class ConfigError(Exception):
 
     def __str__(self) -> str:
         return self.one_line()
+
+
+def read_yaml(path: str, error: Callable[..., ConfigError] = ConfigError) -> Any:
+    """The parsed YAML document of ``path``; an unreadable file, one that is not UTF-8 or not valid YAML raises
+    ``error`` (a :class:`ConfigError` type) naming the file and, for a syntax error, the line."""
+    try:
+        with open(path, "r", encoding="utf-8") as handle:
+            return yaml.safe_load(handle)
+    except OSError as exc:
+        raise error("cannot be read: %s" % exc.strerror, file=path)
+    except UnicodeDecodeError as exc:
+        raise error("is not UTF-8 text: %s" % exc.reason, file=path)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise error("not valid YAML: %s" % (getattr(exc, "problem", None) or exc), file=path,
+                    key="line %d" % (mark.line + 1) if mark is not None else "")

@@ -8,9 +8,9 @@ import math
 import os
 from typing import Any, Dict, List
 
-import yaml
 
 from .datastore import PruneRule
+from ..config_errors import read_yaml
 from .errors import ConfigError
 from .health import ModuleSpec
 
@@ -105,17 +105,7 @@ class HicemParams:
 
 def load_params(path: str = DEFAULT_PARAMS_FILE) -> HicemParams:
     """Read and check the parameter file; a problem raises :class:`ConfigError` naming the file (one line)."""
-    try:
-        with open(path, "r", encoding="utf-8") as f:
-            raw = yaml.safe_load(f)
-    except OSError as exc:
-        raise ConfigError("cannot be read: %s" % exc.strerror, file=path)
-    except UnicodeDecodeError as exc:
-        raise ConfigError("is not UTF-8 text: %s" % exc.reason, file=path)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise ConfigError("not valid YAML: %s" % (getattr(exc, "problem", None) or exc), file=path,
-                          key="line %d" % (mark.line + 1) if mark is not None else "")
+    raw = read_yaml(path, ConfigError)
     try:
         return HicemParams(raw)
     except ConfigError as exc:

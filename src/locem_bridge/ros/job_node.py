@@ -28,9 +28,8 @@ from typing import Any, Callable, Dict, List, Optional
 
 import rospkg
 import rospy
-import yaml
 
-from locem_bridge.config_errors import ConfigError
+from locem_bridge.config_errors import ConfigError, read_yaml
 from locem_bridge.job.report import JobEnd, RunRecord, write_report
 from locem_bridge.job.tracker import TERMINAL_PHASES, JobStep, JobTracker
 from locem_bridge.msg import HicemPrompt, HicemState
@@ -40,13 +39,7 @@ from locem_bridge.ros.startup import config_guard
 
 def load_steps(path: str, validate_lines: Any) -> List[JobStep]:
     """The job file's steps; a bad file raises :class:`ConfigError` (one line: file, key, problem)."""
-    try:
-        with open(path, encoding="utf-8") as handle:
-            doc = yaml.safe_load(handle) or {}
-    except OSError as exc:
-        raise ConfigError("cannot be read: %s" % exc.strerror, file=path)
-    except yaml.YAMLError as exc:
-        raise ConfigError("not valid YAML: %s" % (getattr(exc, "problem", None) or exc), file=path)
+    doc = read_yaml(path, ConfigError) or {}
     if not isinstance(doc, dict) or not isinstance(doc.get("steps", []), list):
         raise ConfigError("must hold a mapping with a list 'steps'", file=path, key="steps")
     steps = []

@@ -15,8 +15,7 @@ import re
 import sys
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
-import yaml
-
+from ..config_errors import read_yaml
 from .errors import SimConfigError
 
 FEATURE_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
@@ -101,17 +100,7 @@ def default_robot_path() -> str:
 def _load_yaml(path: str) -> Dict[str, Any]:
     if not os.path.isfile(path):
         raise SimConfigError("file does not exist" if not os.path.exists(path) else "is not a file", file=path)
-    try:
-        with open(path, "r", encoding="utf-8") as handle:
-            data = yaml.safe_load(handle)
-    except OSError as exc:
-        raise SimConfigError("cannot be read: %s" % exc.strerror, file=path)
-    except UnicodeDecodeError as exc:
-        raise SimConfigError("is not UTF-8 text: %s" % exc.reason, file=path)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = "line %d" % (mark.line + 1) if mark is not None else ""
-        raise SimConfigError("not valid YAML: %s" % (getattr(exc, "problem", None) or exc), file=path, key=where)
+    data = read_yaml(path, SimConfigError)
     if not isinstance(data, dict):
         raise SimConfigError("must hold a mapping at the top level, found %s" % type(data).__name__, file=path)
     return data
