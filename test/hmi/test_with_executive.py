@@ -39,6 +39,18 @@ def hicem():
         ex.close()
 
 
+def _run_to_its_end(backend, auto, timeout=30.0):
+    """Start PROCESS with the automatic operator answering and wait (bounded) until it is over."""
+    auto.start()
+    try:
+        backend.start_process(PROCESS)
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and backend.snapshot()["phase"] not in ("ended", "failed", "stopped"):
+            time.sleep(0.02)
+    finally:
+        auto.stop()
+
+
 def test_headless_run_with_the_automatic_operator(hicem):
     ex, pemkre, locem, backend = hicem
     cfg = AutoOperatorConfig.from_dict({"poll_period_s": 0.02, "kinds": {
@@ -46,14 +58,7 @@ def test_headless_run_with_the_automatic_operator(hicem):
         "validate_line": {"answer": "valid", "delay_s": 0.0, "per_feature": {"invalid": ["wall_1_joint_2"]}}}},
         base=DEFAULT_CONFIG)
     auto = AutoOperator(backend, cfg)
-    auto.start()
-    try:
-        backend.start_process(PROCESS)
-        end = time.monotonic() + 30
-        while time.monotonic() < end and backend.snapshot()["phase"] not in ("ended", "failed", "stopped"):
-            time.sleep(0.02)
-    finally:
-        auto.stop()
+    _run_to_its_end(backend, auto)
     snap = backend.snapshot()
     assert snap["phase"] == "ended", snap
     assert snap["health"]["status"] == "ok" and "locem" in snap["health"]["detail"]
@@ -110,14 +115,9 @@ def test_the_default_automatic_operator_resets_a_protective_stop_so_a_headless_j
     beats = Heartbeats(ex.health)
     backend = ExecutiveBackend.for_executive(ex, processes=[{"iri": PROCESS, "name": "Taping"}])
     auto = AutoOperator(backend, AutoOperatorConfig.from_dict({"poll_period_s": 0.02}, base=DEFAULT_CONFIG))
-    auto.start()
     try:
-        backend.start_process(PROCESS)
-        end = time.monotonic() + 30
-        while time.monotonic() < end and backend.snapshot()["phase"] not in ("ended", "failed", "stopped"):
-            time.sleep(0.02)
+        _run_to_its_end(backend, auto)
     finally:
-        auto.stop()
         beats.stop()
         ex.close()
     assert backend.snapshot()["phase"] == "ended", backend.snapshot()
