@@ -314,3 +314,15 @@ class Heartbeats:
     def stop(self) -> None:
         self._stop.set()
         self._t.join(2.0)
+
+
+def run_with_heartbeats(ex: Any, process: str, options: Optional[Dict[str, Any]] = None) -> str:
+    """TEST helper: ``ex.controller.run_process`` with LOCEM's heartbeats fed to the HEM meanwhile; closes the
+    executive afterwards (its controller's state stays readable). Returns the final phase."""
+    ex.health.heartbeat("locem")
+    beats = Heartbeats(ex.health)
+    try:
+        return ex.controller.run_process(process, options)
+    finally:
+        beats.stop()
+        ex.close()

@@ -7,7 +7,7 @@ import pytest
 
 pemkre = pytest.importorskip("locem_bridge.pemkre")
 
-from hicem_doubles import AutoOperator, Heartbeats, LocemDouble, SITE  # noqa: E402
+from hicem_doubles import SITE, AutoOperator, LocemDouble, run_with_heartbeats  # noqa: E402
 from hicem_rig import params  # noqa: E402
 from locem_bridge.hicem.executive import create_executive  # noqa: E402
 from locem_bridge.hicem.interfaces import PemkreUnavailableError  # noqa: E402
@@ -65,13 +65,7 @@ def test_the_process_goes_on_across_pemkre_outages_and_reports_apply_once(tmp_pa
     ex.controller.add_state_listener(lambda s: phases.append(s["phase"]))
     op = AutoOperator(ex.controller, {"mount_tool": "done", "validate_line": "valid", "manual_taping": "done"})
     ex.operator.add_listener(op)
-    ex.health.heartbeat("locem")
-    beats = Heartbeats(ex.health)
-    try:
-        phase = ex.controller.run_process(str(pemkre.PLB.TapingProcess), {"validateLines": True})
-    finally:
-        beats.stop()
-        ex.close()
+    phase = run_with_heartbeats(ex, str(pemkre.PLB.TapingProcess), {"validateLines": True})
     assert phase == "ended", ex.controller.state()
     assert len(client.lost) == len(outages)
     assert "waiting_for_pemkre" in phases
@@ -89,13 +83,7 @@ def test_pemkre_away_past_the_wait_fails_the_process_naming_it(tmp_path, engine)
     client = FlakyPemkre(engine, {n: "before" for n in range(2, 400)})
     ex = create_executive(client, LocemDouble(), str(tmp_path / "hdict.sqlite"), params=params())
     ex.controller.pemkre_wait_s = 0.5
-    ex.health.heartbeat("locem")
-    beats = Heartbeats(ex.health)
-    try:
-        phase = ex.controller.run_process(str(pemkre.PLB.TapingProcess), {"validateLines": True})
-    finally:
-        beats.stop()
-        ex.close()
+    phase = run_with_heartbeats(ex, str(pemkre.PLB.TapingProcess), {"validateLines": True})
     assert phase == "failed"
     detail = ex.controller.state()["detail"]
     assert "PEMKRE next_action" in detail and "did not answer within" in detail, detail
