@@ -60,15 +60,13 @@ def robot_file(launch_args: List[str]) -> str:
 def claim_addresses(args: argparse.Namespace, ports: List[int]) -> RunEntry:
     """This run's slot in the machine's run registry: its own device addresses (raises NoFreeAddresses or
     RunsError with a one-line reason)."""
-    import yaml
+    from locem_bridge.config_errors import ConfigError
+    from locem_bridge.sim.config import load_robot
     path = robot_file(list(args.launch_arg))
     try:
-        with open(path, encoding="utf-8") as handle:
-            robot = (yaml.safe_load(handle) or {}).get("robot")
-    except (OSError, yaml.YAMLError, AttributeError) as exc:
-        raise RunsError("%s: cannot read the device addresses: %s" % (path, str(exc).splitlines()[0]))
-    if not isinstance(robot, dict):
-        raise RunsError("%s: robot: missing (a mapping with the device sections)" % path)
+        robot = load_robot(path)["robot"]      # the loader the nodes use (preflight has checked the file)
+    except ConfigError as exc:
+        raise RunsError("cannot read the device addresses: %s" % exc)
     results = os.path.abspath(args.results_dir)
     return RunRegistry().claim(run_name(), addresses_of(robot), max_slots=args.max_runs, ports=ports,
                                taken_names=lambda name: os.path.lexists(os.path.join(results, name)))
