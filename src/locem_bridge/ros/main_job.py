@@ -53,8 +53,7 @@ def robot_file(launch_args: List[str]) -> str:
     for arg in reversed(launch_args):
         if arg.startswith("robot:="):
             return os.path.abspath(arg[len("robot:="):])
-    from locem_bridge.sim.config import default_robot_path
-    return default_robot_path()
+    return os.path.join(_package_dir(), "config", "robots", "rbkairos_ur10e.yaml")    # the launch's default
 
 
 def claim_addresses(args: argparse.Namespace, ports: List[int]) -> RunEntry:
@@ -107,7 +106,7 @@ def preflight(args: argparse.Namespace, robot_overrides: Optional[Dict[str, Any]
             overrides = deep_merge(overrides, extra)
         check_files(site=os.path.abspath(args.site) if args.site else path("site", os.path.join(
                         share, "config", "sites", "default.yaml")),
-                    robot=path("robot", os.path.join(share, "config", "robots", "rbkairos_ur10e.yaml")),
+                    robot=robot_file(list(args.launch_arg)),
                     robot_overrides=overrides,
                     params_file=path("params_file", os.path.join(share, "trees", "hicem_params.yaml")),
                     trees_dir=path("trees_dir", os.path.join(share, "trees")),
