@@ -3,14 +3,14 @@
 :func:`check_files` loads each given file with the same loader its node uses (site and robot YAML through the
 one robot/site validation, the robot file together with the launch's overrides; HICEM parameters; every tree
 XML of the trees folder; every Turtle file of the ontology folder, parsed) and raises the first
-:class:`~locem_bridge.config_errors.ConfigError`, whose ``str`` is the one line ``FILE: KEY: PROBLEM (allowed:
+:class:`~locem_bridge.common.config_errors.ConfigError`, whose ``str`` is the one line ``FILE: KEY: PROBLEM (allowed:
 ...)``. It takes well under a second; the process model's structure (checked when PEMKRE compiles it) is left
 to the PEMKRE node, which fails with the same kind of line.
 """
 import os
 from typing import Any, Mapping, Optional
 
-from .config_errors import ConfigError
+from .common.config_errors import ConfigError
 
 
 def check_files(site: Optional[str] = None, robot: Optional[str] = None,

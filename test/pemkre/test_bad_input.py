@@ -276,7 +276,7 @@ def test_second_process_while_one_runs(engine):
 
 
 def test_a_turtle_syntax_error_is_one_line_naming_file_and_line(tmp_path):
-    from locem_bridge.config_errors import ConfigError
+    from locem_bridge.common.config_errors import ConfigError
     from locem_bridge.pemkre.ontology import load_files
     d = _copy_ontologies(tmp_path)
     bad = d / "process.ttl"

@@ -15,7 +15,7 @@ from locem_bridge.sim.arm_source import KinematicArm
 from locem_bridge.sim.clock import SimClock
 from locem_bridge.sim.config import resolve_relative
 from locem_bridge.sim.drives import DriveSet, open_bus
-from locem_bridge.mecanum import MecanumKinematics
+from locem_bridge.common.mecanum import MecanumKinematics
 from locem_bridge.sim.world import World
 
 

@@ -11,7 +11,7 @@ import yaml
 from locem_bridge.sim.clock import SimClock
 from locem_bridge.sim.config import load_robot, load_site, validate_robot, validate_site
 from locem_bridge.sim.errors import SimConfigError
-from locem_bridge.mecanum import MecanumKinematics
+from locem_bridge.common.mecanum import MecanumKinematics
 from locem_bridge.sim.site import Site
 
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "src")

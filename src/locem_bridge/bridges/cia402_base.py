@@ -47,8 +47,8 @@ from .config import need
 from .errors import BadRequest, DeviceFault, LinkDown, MotionTimeout, NotConnected
 from .geometry import wrap_angle
 from .interfaces import Base, Health, Waiter
-from ..mecanum import MecanumKinematics
-from ..rate import FixedRate
+from ..common.mecanum import MecanumKinematics
+from ..common.rate import FixedRate
 
 log = logging.getLogger(__name__)
 

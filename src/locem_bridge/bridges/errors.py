@@ -19,7 +19,7 @@ class                      LOCEM code          raised when
 
 from typing import Optional
 
-from locem_bridge.config_errors import Allowed, ConfigError, allowed_text
+from locem_bridge.common.config_errors import Allowed, ConfigError, allowed_text
 from locem_bridge.locem.codes import Code
 from locem_bridge.locem.errors import LocemError
 
@@ -51,7 +51,7 @@ class NotConnected(BridgeError):
 
 
 class BridgeConfigError(BridgeError, ConfigError):
-    """Prints as one line ``FILE: KEY: PROBLEM (allowed: ...)`` (:class:`~locem_bridge.config_errors.ConfigError`)."""
+    """Prints as one line ``FILE: KEY: PROBLEM (allowed: ...)`` (:class:`~locem_bridge.common.config_errors.ConfigError`)."""
 
     code = Code.NOT_READY
 

@@ -40,7 +40,7 @@ import threading
 import time
 from typing import Any, Callable, Dict, Mapping, Optional
 
-from ..rate import FixedRate
+from ..common.rate import FixedRate
 from .config import need
 from .errors import DeviceFault, LinkDown, NotConnected
 from .interfaces import Compressor, Health

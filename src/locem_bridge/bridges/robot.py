@@ -18,7 +18,7 @@ arm is.
 
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
-from locem_bridge.config_errors import ConfigError
+from locem_bridge.common.config_errors import ConfigError
 
 from .backends import backend_class
 from .config import need, resolve_path

@@ -12,7 +12,7 @@ class SiteScanner(Scanner):
 
     def __init__(self, scanner_cfg: Mapping[str, Any], site: Any) -> None:
         """``site``: the site YAML path, or its already validated contents (``locem_bridge.sim.config``)."""
-        from locem_bridge.config_errors import ConfigError
+        from locem_bridge.common.config_errors import ConfigError
         from locem_bridge.sim.config import load_site
         from locem_bridge.sim.perception import WallScanner
         from locem_bridge.sim.site import Site

@@ -10,7 +10,7 @@ from typing import Any, Dict, List
 
 
 from .datastore import PruneRule
-from ..config_errors import read_yaml
+from ..common.config_errors import read_yaml
 from .errors import ConfigError
 from .health import ModuleSpec
 

@@ -18,7 +18,7 @@ import re
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
-from ..finish import AREA_FINISHES
+from ..common.finish import AREA_FINISHES
 from .datastore import DataManager
 from .errors import DataStoreError, HicemError, ScanFormatError
 

@@ -6,7 +6,7 @@ where there is a closed set, what is allowed.
 """
 from typing import Optional
 
-from ..config_errors import ConfigError as _ConfigFileError
+from ..common.config_errors import ConfigError as _ConfigFileError
 
 
 class HicemError(Exception):
@@ -18,7 +18,7 @@ class TreeLoadError(HicemError, _ConfigFileError):
 
     Carries ``file``, ``line`` (1-based, 0 when unknown) and ``name`` (the node, port or tree at fault) so an
     integrator can jump straight to the spot in Groot2 or an editor; prints as one line
-    ``FILE: line N <element>: PROBLEM`` (:class:`locem_bridge.config_errors.ConfigError`).
+    ``FILE: line N <element>: PROBLEM`` (:class:`locem_bridge.common.config_errors.ConfigError`).
     """
 
     def __init__(self, message: str, file: str = "<string>", line: int = 0, name: str = "") -> None:

@@ -4,7 +4,7 @@ Every message names the culprit (the IRI, file, query or value) and, where there
 """
 from typing import Optional
 
-from ..config_errors import ConfigError
+from ..common.config_errors import ConfigError
 
 
 class PemkreError(Exception):
@@ -59,7 +59,7 @@ class OntologyError(PemkreError, ConfigError):
     """An ontology file cannot be used (missing, syntax error, inconsistent process model).
 
     Prints as one line ``FILE: line N: PROBLEM`` when the file (``source``) and line are known
-    (:class:`locem_bridge.config_errors.ConfigError`).
+    (:class:`locem_bridge.common.config_errors.ConfigError`).
     """
 
     code = "ONTOLOGY_ERROR"

@@ -19,7 +19,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Union
 from rdflib import Literal, Namespace, URIRef
 from rdflib.namespace import RDF, XSD
 
-from ..finish import AREA_FINISHES, BARE, WORK_DONE
+from ..common.finish import AREA_FINISHES, BARE, WORK_DONE
 from .errors import WorldUpdateError
 from .store import G_WORLD, ChangeSet, TripleStore
 from .terms import FEATURE_ID_RE

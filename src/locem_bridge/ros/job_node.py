@@ -29,7 +29,7 @@ from typing import Any, Callable, Dict, List, Optional
 import rospkg
 import rospy
 
-from locem_bridge.config_errors import ConfigError, read_yaml
+from locem_bridge.common.config_errors import ConfigError, read_yaml
 from locem_bridge.job.report import JobEnd, RunRecord, write_report
 from locem_bridge.job.tracker import TERMINAL_PHASES, JobStep, JobTracker
 from locem_bridge.msg import HicemPrompt, HicemState

@@ -59,7 +59,7 @@ def robot_file(launch_args: List[str]) -> str:
 def claim_addresses(args: argparse.Namespace, ports: List[int]) -> RunEntry:
     """This run's slot in the machine's run registry: its own device addresses (raises NoFreeAddresses or
     RunsError with a one-line reason)."""
-    from locem_bridge.config_errors import ConfigError
+    from locem_bridge.common.config_errors import ConfigError
     from locem_bridge.sim.config import load_robot
     path = robot_file(list(args.launch_arg))
     try:
@@ -84,7 +84,7 @@ def preflight(args: argparse.Namespace, robot_overrides: Optional[Dict[str, Any]
     """Check the files the launch will read (site, robot plus its overrides, HICEM parameters and trees, Turtle
     ontologies, job) with the nodes' own loaders; the one-line error, or None when all load (under a second)."""
     from locem_bridge.config_check import check_files
-    from locem_bridge.config_errors import ConfigError
+    from locem_bridge.common.config_errors import ConfigError
 
     share = _package_dir()
     launch = dict(a.split(":=", 1) for a in args.launch_arg if ":=" in a)

@@ -29,7 +29,7 @@ from typing import Any, Callable, Optional
 
 import rospy
 
-from locem_bridge.config_errors import ConfigError
+from locem_bridge.common.config_errors import ConfigError
 from locem_bridge.pemkre import JournaledStore, OxigraphStore, ProcessEngine
 from locem_bridge.pemkre.engine import load_json
 from locem_bridge.pemkre.errors import PemkreError

@@ -36,7 +36,7 @@ from typing import Any, Callable, Dict
 import rospy
 from geometry_msgs.msg import Pose2D
 
-from locem_bridge.config_errors import ConfigError
+from locem_bridge.common.config_errors import ConfigError
 from locem_bridge.sim.config import default_robot_path, default_site_path, load_robot, load_site
 from locem_bridge.sim.errors import SimError
 from locem_bridge.sim.worksite import Worksite

@@ -1,7 +1,7 @@
 """What every node does with a bad configuration file at start-up: one line, no traceback, and no endless respawn.
 
 Decorate a node's ``main`` with :func:`config_guard`. When loading its files raises a
-:class:`~locem_bridge.config_errors.ConfigError` (robot, site, HICEM parameters, Turtle, tree XML), the node prints
+:class:`~locem_bridge.common.config_errors.ConfigError` (robot, site, HICEM parameters, Turtle, tree XML), the node prints
 one line on stderr (roslaunch shows a node's stderr on its console even with ``output="log"``)::
 
     [locem] configuration error: /path/robot.yaml: robot.compresor: unknown key (allowed: arm, base, ...)
@@ -27,7 +27,7 @@ import threading
 import time
 from typing import Any, Callable, List, Optional, Tuple
 
-from locem_bridge.config_errors import ConfigError
+from locem_bridge.common.config_errors import ConfigError
 
 GIVE_UP_AFTER = 3          # failures in a row, same line, same launch
 EXIT_CONFIG = 2            # exit status of a node refusing its configuration

@@ -12,7 +12,7 @@ Modules (ROS-free; the ROS node ``sim_worksite`` wraps :class:`locem_bridge.sim.
 * :mod:`.modbus_base` shared lifecycle and link faults; :mod:`.modbus_legacy` the pymodbus 3.6 adapter (Python 3.8 / Noetic)
 * :mod:`.drives`        four CiA 402 drives (canopen LocalNode) on a python-can bus, faults
 * :mod:`.heartbeat`     drive heartbeats from a helper process (wall clock, outside the simulator's GIL)
-* :mod:`locem_bridge.mecanum` (shared with the base bridge) mecanum kinematics
+* :mod:`locem_bridge.common.mecanum` (shared with the base bridge) mecanum kinematics
 * :mod:`.arm_source`    where the world gets the arm state (UR stand-in adapter, scripted arm)
 * :mod:`.clock`         sim time with a time scale
 * :mod:`.worksite`      composition of everything; ``python3 -m locem_bridge.sim`` runs it

@@ -15,7 +15,7 @@ import re
 import sys
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
-from ..config_errors import read_yaml
+from ..common.config_errors import read_yaml
 from .errors import SimConfigError
 
 FEATURE_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")

@@ -1,6 +1,6 @@
 """Exception hierarchy of the simulated worksite (one base class, specific subclasses)."""
 
-from ..config_errors import ConfigError
+from ..common.config_errors import ConfigError
 
 
 class SimError(Exception):
@@ -11,7 +11,7 @@ class SimConfigError(SimError, ConfigError):
     """A site or robot configuration file is missing, malformed or out of range.
 
     Prints as one line ``FILE: KEY: PROBLEM (allowed: ...)`` naming the key path (e.g.
-    ``site.walls[1].height``), what was found and what is allowed (:class:`~locem_bridge.config_errors.ConfigError`).
+    ``site.walls[1].height``), what was found and what is allowed (:class:`~locem_bridge.common.config_errors.ConfigError`).
     """
 
 

@@ -22,7 +22,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..finish import BARE, SANDED, SPRAYED
+from ..common.finish import BARE, SANDED, SPRAYED
 from .site import Area, Site, Wall, _r
 
 #: fraction of an area's cells that must be sprayed (sanded) for the scan to report it sprayed (sanded)

@@ -40,8 +40,8 @@ import pybullet as pb
 from .clock import SimClock
 from .config import TOOL_NAMES, find_example_robot_data, resolve_arm_urdf  # noqa: F401 (re-exported)
 from .errors import SimConfigError, SimStateError
-from ..mecanum import MecanumKinematics
-from ..rate import FixedRate
+from ..common.mecanum import MecanumKinematics
+from ..common.rate import FixedRate
 from .outcome import OutcomeRecorder
 from .perception import WallScanner
 from .site import Site

@@ -4,7 +4,7 @@ import time
 
 import pytest
 
-from locem_bridge.rate import FixedRate
+from locem_bridge.common.rate import FixedRate
 
 
 def test_ticks_at_the_period_and_restarts_after_a_stall_instead_of_bursting():

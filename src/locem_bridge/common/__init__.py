@@ -1,0 +1,13 @@
+"""The bottom floor: meanings every layer shares, defined once, importing nothing else of the package.
+
+Modules (each one concept):
+
+* :mod:`.finish`         the ``finish`` vocabulary of a wall area (bare, sprayed, sanded)
+* :mod:`.mecanum`        mecanum base kinematics (the base bridge and the simulated worksite)
+* :mod:`.rate`           a fixed-rate loop timer for device loops
+* :mod:`.config_errors`  one-line configuration errors and the one YAML reader of configuration files
+
+Anything that crosses layers (LOCEM codes, task statuses, the next-action record, health grading, geometry,
+CAN bus opening) belongs here, never copied into a layer. Modules here import only the standard library and
+numpy, never another ``locem_bridge`` package.
+"""
