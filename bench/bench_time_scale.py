@@ -20,7 +20,7 @@ compare the rows of the same run and repeat (``--repeat``).
 
 Variants (``--variants``), measured in the same run: ``before`` = heartbeats from canopen's timer threads inside the
 sim interpreter and cyclic TPDOs sampled per drive at its send time (the behaviour before the change); ``after`` =
-heartbeats from the helper process (``locem_bridge.sim.heartbeat``) and the TPDOs of all drives sampled at one sim
+heartbeats from the helper process (``locem_bridge.sim.can.heartbeat``) and the TPDOs of all drives sampled at one sim
 instant per cycle; ``nosync`` = helper process, per-drive sampling; ``afterfix`` / ``nosyncfix`` = the same with
 ``patch_odometry``: on top of the bridge's own odometry (which now integrates while braking after a fault and along
 the arc of the twist), it skips a cycle whose four wheel positions are not of one TPDO burst (drives synchronised

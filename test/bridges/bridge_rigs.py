@@ -31,8 +31,8 @@ class CompressorRig:
 
     def __init__(self, robot, time_scale=10.0):
         from locem_bridge.sim.clock import SimClock
-        from locem_bridge.sim.compressor import CompressorModel
-        from locem_bridge.sim.modbus_server import CompressorServer
+        from locem_bridge.sim.modbus.compressor import CompressorModel
+        from locem_bridge.sim.modbus.modbus_server import CompressorServer
         self.clock = SimClock(time_scale)
         self.cfg = dict(robot["compressor"])
         self.cfg["port"] = free_port()
@@ -105,7 +105,7 @@ class BaseRig:
         from locem_bridge.sim.arm_source import KinematicArm
         from locem_bridge.sim.clock import SimClock
         from locem_bridge.sim.config import load_site
-        from locem_bridge.sim.drives import DriveSet
+        from locem_bridge.sim.can.drives import DriveSet
         from locem_bridge.sim.world import World
         from locem_bridge.bridges.config import resolve_path
         self.cfg = copy.deepcopy(robot["base"])
@@ -202,10 +202,10 @@ class WorksiteRig:
         import copy
         import uuid
         from locem_bridge.sim.clock import SimClock
-        from locem_bridge.sim.compressor import CompressorModel
+        from locem_bridge.sim.modbus.compressor import CompressorModel
         from locem_bridge.sim.config import load_site
-        from locem_bridge.sim.drives import DriveSet
-        from locem_bridge.sim.modbus_server import CompressorServer
+        from locem_bridge.sim.can.drives import DriveSet
+        from locem_bridge.sim.modbus.modbus_server import CompressorServer
         from locem_bridge.sim.ur.process import StandInProcess
         from locem_bridge.sim.world import World
         from locem_bridge.bridges.config import resolve_path

@@ -12,7 +12,7 @@ import time
 from locem_bridge.bridges.cia402_base import Cia402Base
 from locem_bridge.bridges.config import resolve_path
 from locem_bridge.sim.clock import SimClock
-from locem_bridge.sim.drives import ENABLED, QUICK_STOP, DriveSet
+from locem_bridge.sim.can.drives import ENABLED, QUICK_STOP, DriveSet
 
 from bridge_rigs import free_port, wait_until
 

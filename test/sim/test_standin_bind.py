@@ -9,9 +9,9 @@ import time
 
 import pytest
 
-from locem_bridge.sim.compressor import CompressorModel
+from locem_bridge.sim.modbus.compressor import CompressorModel
 from locem_bridge.sim.errors import DeviceStandInError
-from locem_bridge.sim.modbus_server import CompressorServer
+from locem_bridge.sim.modbus.modbus_server import CompressorServer
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 ENV = dict(os.environ, PYTHONPATH=os.path.join(REPO, "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))

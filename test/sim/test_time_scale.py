@@ -23,7 +23,7 @@ from locem_bridge.common.mecanum import MecanumKinematics
 from locem_bridge.sim.arm_source import KinematicArm
 from locem_bridge.sim.clock import SimClock
 from locem_bridge.sim.config import resolve_relative
-from locem_bridge.sim.drives import DriveSet
+from locem_bridge.sim.can.drives import DriveSet
 from locem_bridge.sim.world import World
 from locem_bridge.sim.worksite import Worksite
 
@@ -132,7 +132,7 @@ def test_heartbeat_loss_at_time_scale_10_stops_the_base_and_it_recovers(fast_sta
 
 HELPER_PARENT = r"""
 import sys, time
-from locem_bridge.sim.heartbeat import HeartbeatProcess
+from locem_bridge.sim.can.heartbeat import HeartbeatProcess
 hp = HeartbeatProcess({"interface": "udp_multicast", "channel": sys.argv[1], "port": int(sys.argv[2])})
 hp.start()
 hp.send_periodic(0x77E, bytes([0x7F]), 0.05)
@@ -176,7 +176,7 @@ def test_drive_heartbeats_stop_when_the_simulator_process_is_killed(free_port_fa
 def test_ctrl_c_to_the_process_group_leaves_the_helper_to_its_parent(free_port_factory):
     """roslaunch's SIGINT (or Ctrl-C) reaches the helper with its parent: it keeps sending until the parent
     closes it, then ends with exit code 0 (no KeyboardInterrupt traceback in the launch output)."""
-    from locem_bridge.sim.heartbeat import HeartbeatProcess
+    from locem_bridge.sim.can.heartbeat import HeartbeatProcess
     group, can_port = _group(), free_port_factory()
     hp = HeartbeatProcess({"interface": "udp_multicast", "channel": group, "port": can_port})
     listener = can.Bus(interface="udp_multicast", channel=group, port=can_port, fd=False)

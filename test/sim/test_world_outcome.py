@@ -7,7 +7,7 @@ import pytest
 
 from locem_bridge.sim.arm_source import KinematicArm
 from locem_bridge.sim.clock import SimClock
-from locem_bridge.sim.compressor import CompressorModel
+from locem_bridge.sim.modbus.compressor import CompressorModel
 from locem_bridge.sim.errors import SimStateError
 from locem_bridge.sim.world import World
 

@@ -30,7 +30,7 @@ Heartbeat producer (the drives' safety net when LOCEM dies): the master sends it
 ``drives.master_node_id``, default 127, every ``heartbeat_ms``) and, while enabling each drive, makes the drive
 consume it (0x1016 sub 1, timeout ``drives.master_timeout_ms``, default :data:`MASTER_TIMEOUT_MS` = 500 ms, five
 heartbeats: a busy machine may delay a few). A drive whose master falls silent for that long stops by itself
-(quick stop, PRE-OPERATIONAL; see :mod:`locem_bridge.sim.drives`). A drive without 0x1016 is enabled anyway, with a
+(quick stop, PRE-OPERATIONAL; see :mod:`locem_bridge.sim.can.drives`). A drive without 0x1016 is enabled anyway, with a
 warning that it will not stop by itself. A fresh master (a respawned LOCEM) commands every wheel to zero before it
 enables the drive, so nothing a previous LOCEM left running moves on.
 

@@ -1,4 +1,4 @@
-"""Spray compressor over Modbus TCP (pymodbus client), register map of ``locem_bridge.sim.compressor``.
+"""Spray compressor over Modbus TCP (pymodbus client), register map of ``locem_bridge.sim.modbus.compressor``.
 
 =================  =======  ======================================================================
 table              address  meaning

@@ -7,11 +7,10 @@ Modules (ROS-free; the ROS node ``sim_worksite`` wraps :class:`locem_bridge.sim.
 * :mod:`.world`         the PyBullet world: room, robot (mecanum base, pedestal, UR arm), tools, collisions
 * :mod:`.outcome`       tape per joint, spray thickness map, sanded map, wall pictures
 * :mod:`.perception`    SCAN stand-in: visible features with configurable noise
-* :mod:`.compressor`    pressure model + Modbus register map (plain Python)
-* :mod:`.modbus_server` compressor Modbus TCP server for the installed pymodbus (3.16 or 3.6), link-drop faults
-* :mod:`.modbus_base` shared lifecycle and link faults; :mod:`.modbus_legacy` the pymodbus 3.6 adapter (Python 3.8 / Noetic)
-* :mod:`.drives`        four CiA 402 drives (canopen LocalNode) on a python-can bus, faults
-* :mod:`.heartbeat`     drive heartbeats from a helper process (wall clock, outside the simulator's GIL)
+* :mod:`.modbus`        compressor stand-in: pressure model + register map (:mod:`.modbus.compressor`), Modbus TCP
+  server for the installed pymodbus (:mod:`.modbus.modbus_server`, 3.16 or 3.6 via :mod:`.modbus.modbus_legacy`)
+* :mod:`.can`           base stand-ins: four CiA 402 drives (:mod:`.can.drives`), their heartbeats from a helper
+  process (:mod:`.can.heartbeat`)
 * :mod:`locem_bridge.common.mecanum` (shared with the base bridge) mecanum kinematics
 * :mod:`.arm_source`    where the world gets the arm state (UR stand-in adapter, scripted arm)
 * :mod:`.clock`         sim time with a time scale

@@ -23,11 +23,11 @@ from typing import Any, Dict, List, Optional
 
 from .arm_source import KinematicArm, UrArmSource
 from .clock import SimClock
-from .compressor import CompressorModel
+from .modbus.compressor import CompressorModel
 from .config import load_robot, load_site, resolve_relative
-from .drives import DriveSet
+from .can.drives import DriveSet
 from .errors import DeviceStandInError, SimConfigError, SimStateError
-from .modbus_server import CompressorServer
+from .modbus.modbus_server import CompressorServer
 from .world import World, resolve_arm_urdf
 
 log = logging.getLogger(__name__)

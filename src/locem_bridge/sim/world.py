@@ -6,7 +6,7 @@ Lifecycle: ``World(site_cfg, robot_cfg, clock, arm=..., drives=..., compressor=.
 lock, so public methods are safe from any thread.
 
 What one step does:
-1. base: wheel angle increments of the CAN drives (:class:`~locem_bridge.sim.drives.DriveSet`) through the
+1. base: wheel angle increments of the CAN drives (:class:`~locem_bridge.sim.can.drives.DriveSet`) through the
    mecanum kinematics move ``base_footprint`` in the map frame (kinematic body, no slip); the increments are
    taken from the drives' exact motion segments every ``BASE_SUBSTEP`` of sim time since the last step, so the
    ground truth does not depend on the time scale or on a late step (one world step at time scale 20 covers

@@ -14,7 +14,7 @@ from canopen.nmt import NmtError
 from locem_bridge.sim.arm_source import KinematicArm
 from locem_bridge.sim.clock import SimClock
 from locem_bridge.sim.config import resolve_relative
-from locem_bridge.sim.drives import DriveSet, open_bus
+from locem_bridge.sim.can.drives import DriveSet, open_bus
 from locem_bridge.common.mecanum import MecanumKinematics
 from locem_bridge.sim.world import World
 
@@ -180,7 +180,7 @@ def test_malformed_frames_are_ignored_logged_and_drives_keep_working(base_rig, c
         _enable(node)
     bad = can.Bus(interface="virtual", channel=cfg["can"]["channel"])
     try:
-        with caplog.at_level(logging.WARNING, logger="locem_bridge.sim.drives"):
+        with caplog.at_level(logging.WARNING, logger="locem_bridge.sim.can.drives"):
             for arb, data in ((0x601, b"\x40\x41"),           # SDO request of 2 bytes
                               (0x000, b"\x01"),               # NMT of 1 byte
                               (0x000, b"\x77\x01"),           # unknown NMT command

@@ -6,8 +6,8 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 
 from locem_bridge.sim.clock import SimClock
-from locem_bridge.sim.compressor import CompressorModel
-from locem_bridge.sim.modbus_server import CompressorServer
+from locem_bridge.sim.modbus.compressor import CompressorModel
+from locem_bridge.sim.modbus.modbus_server import CompressorServer
 
 DEV = 1
 

@@ -32,11 +32,11 @@ import traceback
 from typing import Any, Callable, Dict, List, Optional
 
 DEV = 1
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 LEGACY_VERSION = "3.6.9"
 LEGACY_PACKAGES = ["pymodbus==%s" % LEGACY_VERSION, "numpy", "PyYAML"]
 
-# What the device answers, from the register map of locem_bridge.sim.compressor (identical on both lines).
+# What the device answers, from the register map of locem_bridge.sim.modbus.compressor (identical on both lines).
 EXPECTED_SEMANTICS: List[List[Any]] = [
     ["motor off: pressure", 0.0],
     ["settled: discrete inputs (running, valve, in range, fault)", [True, False, True, False]],
@@ -96,9 +96,9 @@ def run_scenario(host: str, port: int, comp_cfg: Dict[str, Any], log: Callable[[
     import pymodbus
     from pymodbus.client import ModbusTcpClient
 
-    from locem_bridge.sim import modbus_server
+    from locem_bridge.sim.modbus import modbus_server
     from locem_bridge.sim.clock import SimClock
-    from locem_bridge.sim.compressor import CompressorModel
+    from locem_bridge.sim.modbus.compressor import CompressorModel
     from locem_bridge.sim.errors import DeviceStandInError
 
     semantics: List[List[Any]] = []
@@ -343,7 +343,7 @@ def legacy_python(skip: Callable[[str], None]) -> str:
 
 # ------------------------------------------------------------------------------------------------- tests
 def test_pymodbus_316_line_in_process(robot_cfg, port):
-    from locem_bridge.sim import modbus_server
+    from locem_bridge.sim.modbus import modbus_server
 
     assert not modbus_server.LEGACY_API
     assert modbus_server.CompressorServer is modbus_server.Pymodbus316CompressorServer
@@ -375,7 +375,7 @@ def test_legacy_adapter_refuses_the_wrong_pymodbus_line():
     import pytest
 
     with pytest.raises(ImportError, match=r"needs pymodbus 3\.6\.x \(installed: 3\.16"):
-        import locem_bridge.sim.modbus_legacy  # noqa: F401
+        import locem_bridge.sim.modbus.modbus_legacy  # noqa: F401
 
 
 # ----------------------------------------------------------------------------------- script entry point

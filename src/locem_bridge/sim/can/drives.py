@@ -49,7 +49,7 @@ import can
 import canopen
 from canopen.sdo import SdoAbortedError
 
-from .errors import DeviceStandInError
+from ..errors import DeviceStandInError
 from .heartbeat import PROCESS_INTERFACES, HeartbeatProcess
 
 log = logging.getLogger(__name__)

@@ -17,7 +17,7 @@ heartbeat COB-IDs (0x701..0x77F) to it. The helper exits when its stdin closes, 
 Only for buses another process can open: ``udp_multicast`` and ``socketcan``. python-can's ``virtual`` bus lives
 inside one process; with it the heartbeats stay on canopen's in-process timer threads.
 
-Lifecycle: ``HeartbeatProcess(can_cfg)`` -> :meth:`start` (spawns ``python -m locem_bridge.sim.heartbeat``,
+Lifecycle: ``HeartbeatProcess(can_cfg)`` -> :meth:`start` (spawns ``python -m locem_bridge.sim.can.heartbeat``,
 waits until it has opened the bus) -> tasks via :meth:`send_periodic` -> :meth:`close` (stops every heartbeat,
 ends the process; idempotent).
 """
@@ -33,7 +33,7 @@ import threading
 import time
 from typing import Any, Dict, List, Optional
 
-from .errors import DeviceStandInError
+from ..errors import DeviceStandInError
 
 HEARTBEAT_COB_RANGE = (0x701, 0x77F)
 PROCESS_INTERFACES = ("udp_multicast", "socketcan")
@@ -82,7 +82,7 @@ class HeartbeatProcess:
         env = dict(os.environ)
         env["PYTHONPATH"] = pkg_parent + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         cfg = {k: self.can_cfg[k] for k in ("interface", "channel", "port") if k in self.can_cfg}
-        self._proc = subprocess.Popen([sys.executable, "-m", "locem_bridge.sim.heartbeat", json.dumps(cfg)],
+        self._proc = subprocess.Popen([sys.executable, "-m", "locem_bridge.sim.can.heartbeat", json.dumps(cfg)],
                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, text=True, bufsize=1)
         ready, _, _ = select.select([self._proc.stdout], [], [], timeout)
         line = self._proc.stdout.readline() if ready else ""
@@ -194,7 +194,7 @@ def _serve(can_cfg: Dict[str, Any]) -> int:
 def main(argv: Optional[List[str]] = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 1:
-        print("usage: python -m locem_bridge.sim.heartbeat '{\"interface\": ..., \"channel\": ..., \"port\": ...}'",
+        print("usage: python -m locem_bridge.sim.can.heartbeat '{\"interface\": ..., \"channel\": ..., \"port\": ...}'",
               file=sys.stderr)
         return 2
     # Ctrl-C or roslaunch's SIGINT reaches the whole process group: the helper's lifetime is its parent's

@@ -3,8 +3,8 @@
 Protocol-independent on purpose: :class:`CompressorModel` holds the physics and the faults,
 :class:`CompressorRegisterMap` maps Modbus tables/addresses to the model and raises
 :class:`RegisterAccessError` with the Modbus exception code for bad requests. The pymodbus 3.16 server in
-:mod:`locem_bridge.sim.modbus_server` is a thin adapter; the pymodbus 3.6 adapter (the last line for Python 3.8),
-:mod:`locem_bridge.sim.modbus_legacy`, calls the same methods.
+:mod:`locem_bridge.sim.modbus.modbus_server` is a thin adapter; the pymodbus 3.6 adapter (the last line for Python 3.8),
+:mod:`locem_bridge.sim.modbus.modbus_legacy`, calls the same methods.
 
 Register map (PDU addresses, 0-based; device id from ``robot.compressor.device_id``)
 
@@ -57,7 +57,7 @@ import time
 from collections import deque
 from typing import Any, Callable, Deque, Dict, List, Optional, Sequence
 
-from .errors import DeviceStandInError
+from ..errors import DeviceStandInError
 
 FAULT_NONE = 0
 FAULT_OVERPRESSURE = 1

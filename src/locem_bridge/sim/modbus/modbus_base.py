@@ -4,7 +4,7 @@ pymodbus-free on purpose: :class:`CompressorServerBase` owns the asyncio thread,
 link-drop fault modes and the refusal accounting; an adapter subclass (:mod:`.modbus_server` for pymodbus 3.16,
 :mod:`.modbus_legacy` for pymodbus 3.6.x, the last line for Python 3.8 / Noetic) only builds and shuts down its
 pymodbus server and routes every request through the one
-:class:`~locem_bridge.sim.compressor.CompressorRegisterMap`, so both lines answer alike.
+:class:`~locem_bridge.sim.modbus.compressor.CompressorRegisterMap`, so both lines answer alike.
 
 Lifecycle: ``Adapter(model, host, port, device_id)`` -> :meth:`~CompressorServerBase.start` (binds, serves from its
 own asyncio thread; returns once listening, raises :class:`DeviceStandInError` when it cannot bind) ->
@@ -15,7 +15,7 @@ connection (clients get connection errors) and re-opens it after ``duration`` wa
 keeps the connections but answers nothing until the link returns (clients time out; the held requests are
 answered late, when the link returns). ``duration=None`` keeps the link down until
 :meth:`~CompressorServerBase.restore_link`. Requests held or refused by a dropped link never reach the device, so
-its communication watchdog (:class:`~locem_bridge.sim.compressor.CompressorRegisterMap`), checked by the server
+its communication watchdog (:class:`~locem_bridge.sim.modbus.compressor.CompressorRegisterMap`), checked by the server
 thread every ``WATCHDOG_CHECK_PERIOD`` seconds, trips during a drop as it does when the client dies.
 
 :meth:`~CompressorServerBase.state` is what a test reads: the model, the watchdog and the valve / motor history.
@@ -34,9 +34,9 @@ import threading
 from typing import Any, Dict, List, Optional, Tuple
 
 from .compressor import WATCHDOG_CHECK_PERIOD, CompressorModel, CompressorRegisterMap, RegisterAccessError
-from .errors import DeviceStandInError
+from ..errors import DeviceStandInError
 
-log = logging.getLogger("locem_bridge.sim.modbus_server")
+log = logging.getLogger("locem_bridge.sim.modbus.modbus_server")
 
 LINK_MODES = ("close", "silent")
 

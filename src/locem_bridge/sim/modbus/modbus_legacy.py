@@ -1,9 +1,9 @@
 """pymodbus 3.6 adapter of the compressor Modbus TCP stand-in (the last pymodbus line for Python 3.8 / Noetic).
 
-Import :class:`~locem_bridge.sim.modbus_server.CompressorServer` rather than this module: it picks this adapter
+Import :class:`~locem_bridge.sim.modbus.modbus_server.CompressorServer` rather than this module: it picks this adapter
 when pymodbus 3.6.x is installed. Lifecycle, link faults and refusal accounting are those of
-:class:`~locem_bridge.sim.modbus_base.CompressorServerBase`; register semantics are those of
-:class:`~locem_bridge.sim.compressor.CompressorRegisterMap`.
+:class:`~locem_bridge.sim.modbus.modbus_base.CompressorServerBase`; register semantics are those of
+:class:`~locem_bridge.sim.modbus.compressor.CompressorRegisterMap`.
 
 How the 3.6 datastore API is used
 
@@ -26,12 +26,12 @@ from typing import Any, List, Optional, Sequence, Tuple
 import pymodbus
 
 from .compressor import COILS, DISCRETE_INPUTS, CompressorModel, RegisterAccessError
-from .errors import DeviceStandInError
+from ..errors import DeviceStandInError
 from .modbus_base import CompressorServerBase, log, parse_version
 
 if parse_version(getattr(pymodbus, "__version__", "0"))[:2] != (3, 6):
-    raise ImportError("locem_bridge.sim.modbus_legacy needs pymodbus 3.6.x (installed: %s); import "
-                      "locem_bridge.sim.modbus_server.CompressorServer, which picks the adapter for the installed "
+    raise ImportError("locem_bridge.sim.modbus.modbus_legacy needs pymodbus 3.6.x (installed: %s); import "
+                      "locem_bridge.sim.modbus.modbus_server.CompressorServer, which picks the adapter for the installed "
                       "version" % getattr(pymodbus, "__version__", "?"))
 
 from pymodbus.datastore import ModbusBaseSlaveContext, ModbusServerContext  # noqa: E402 (after the version check)

@@ -4,11 +4,11 @@
 
 * :class:`Pymodbus316CompressorServer` (below) with pymodbus >= 3.16 (Python >= 3.10), built on the 3.16
   ``SimDevice`` datastore whose ``action`` callback sees every read and write;
-* :class:`~locem_bridge.sim.modbus_legacy.LegacyCompressorServer` with pymodbus 3.6.x, the last line for
+* :class:`~locem_bridge.sim.modbus.modbus_legacy.LegacyCompressorServer` with pymodbus 3.6.x, the last line for
   Python 3.8 (ROS Noetic on Ubuntu 20.04), built on a custom ``ModbusBaseSlaveContext``.
 
-Both call the same :class:`~locem_bridge.sim.compressor.CompressorRegisterMap` and share lifecycle, link faults
-and refusal accounting (:class:`~locem_bridge.sim.modbus_base.CompressorServerBase`), so a client sees the same
+Both call the same :class:`~locem_bridge.sim.modbus.compressor.CompressorRegisterMap` and share lifecycle, link faults
+and refusal accounting (:class:`~locem_bridge.sim.modbus.modbus_base.CompressorServerBase`), so a client sees the same
 device on both lines: same values, exception 2 for addresses outside the map, exception 3 for set-points out of
 range, exception 4 for any other unit id, same ``close`` / ``silent`` link drops. Other pymodbus versions are
 refused at import with an ImportError naming the supported ranges.
@@ -28,7 +28,7 @@ from typing import Any, List, Optional
 import pymodbus
 
 from .compressor import COILS, DISCRETE_INPUTS, HOLDING_REGISTERS, INPUT_REGISTERS, CompressorModel, RegisterAccessError
-from .errors import DeviceStandInError
+from ..errors import DeviceStandInError
 from .modbus_base import CompressorServerBase, parse_version
 
 #: installed pymodbus version as (major, minor, patch)
@@ -37,7 +37,7 @@ PYMODBUS_VERSION = parse_version(getattr(pymodbus, "__version__", "0"))
 LEGACY_API = (3, 6) <= PYMODBUS_VERSION[:2] < (3, 7)
 
 if not LEGACY_API and PYMODBUS_VERSION[:2] < (3, 16):
-    raise ImportError("locem_bridge.sim.modbus_server: pymodbus %s is not supported; install pymodbus>=3.6.9,<3.7 "
+    raise ImportError("locem_bridge.sim.modbus.modbus_server: pymodbus %s is not supported; install pymodbus>=3.6.9,<3.7 "
                       "(Python 3.8) or pymodbus>=3.16,<3.17 (Python >= 3.10), see requirements.txt"
                       % getattr(pymodbus, "__version__", "?"))
 
@@ -59,7 +59,7 @@ class Pymodbus316CompressorServer(CompressorServerBase):
     def __init__(self, model: CompressorModel, host: str = "127.0.0.1", port: int = 5020, device_id: int = 1) -> None:
         if LEGACY_API:
             raise DeviceStandInError("the pymodbus 3.16 adapter cannot run on the installed pymodbus %s; use "
-                                     "locem_bridge.sim.modbus_server.CompressorServer" % pymodbus.__version__)
+                                     "locem_bridge.sim.modbus.modbus_server.CompressorServer" % pymodbus.__version__)
         super().__init__(model, host, port, device_id)
 
     # -- pymodbus glue -------------------------------------------------------------------------------------
