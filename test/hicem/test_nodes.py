@@ -13,7 +13,7 @@ from locem_bridge.hicem.errors import TreeLoadError
 from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
 from locem_bridge.hicem.interfaces import LocemReply
 from locem_bridge.hicem.node_base import NodeContext
-from locem_bridge.hicem.nodes import format_number, render
+from locem_bridge.hicem.nodes.generic import format_number, render
 from locem_bridge.hicem.operator import OperatorDesk
 from locem_bridge.hicem.xml_loader import TreeLibrary
 

@@ -11,7 +11,7 @@ from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
 from locem_bridge.hicem.interfaces import LocemReply
 from locem_bridge.hicem.node_base import NodeContext
 from locem_bridge.hicem.operator import OperatorDesk
-from locem_bridge.hicem.section_progress import PROGRESS, parse_manual_work
+from locem_bridge.hicem.nodes.area_work import PROGRESS, parse_manual_work
 from locem_bridge.hicem.xml_loader import TreeLibrary
 
 S, F, R = Status.SUCCESS, Status.FAILURE, Status.RUNNING

@@ -10,7 +10,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Mapping, Optional
 
-from locem_bridge.hicem.section_progress import parse_manual_work
+from locem_bridge.hicem.nodes.area_work import parse_manual_work
 
 from .report import ProcessRecord
 

@@ -22,9 +22,9 @@ from typing import Any, Dict, List
 
 from py_trees.common import Status
 
-from .errors import PortError
-from .node_base import Leaf
-from .ports import INT, JSON, STRING, STRING_LIST, input_port, output_port
+from ..errors import PortError
+from ..node_base import Leaf
+from ..ports import INT, JSON, STRING, STRING_LIST, input_port, output_port
 
 PROGRESS = "progress"
 

@@ -20,10 +20,10 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from py_trees.common import Status
 
-from .errors import HicemError, LocemError, PortError
-from .interfaces import check_reply, local_name
-from .node_base import ConditionLeaf, Leaf
-from .ports import TEMPLATE_FIELD, ANY, FLOAT, FLOAT_LIST, INT, JSON, STRING, STRING_LIST, input_port, output_port
+from ..errors import HicemError, LocemError, PortError
+from ..interfaces import check_reply, local_name
+from ..node_base import ConditionLeaf, Leaf
+from ..ports import TEMPLATE_FIELD, ANY, FLOAT, FLOAT_LIST, INT, JSON, STRING, STRING_LIST, input_port, output_port
 
 _FIELD = TEMPLATE_FIELD
 
