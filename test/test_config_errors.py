@@ -95,7 +95,7 @@ def _case_robot_controller_port(tmp_path):
 
 
 def _case_hicem_params(tmp_path):
-    data = yaml.safe_load(open(os.path.join(REPO, "trees", "hicem_params.yaml")))
+    data = yaml.safe_load(open(os.path.join(REPO, "config", "hicem", "plasterboard.yaml")))
     data["hhlc"]["tick_period_s"] = "fast"
     path = _dump(tmp_path / "params.yaml", data)
     return ["--launch-arg", "params_file:=" + path], "%s: hhlc.tick_period_s: must be a finite number, got 'fast'" % path

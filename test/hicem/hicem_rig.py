@@ -4,14 +4,14 @@ import os
 from typing import Any, Dict, Optional
 
 from hicem_doubles import AutoOperator, Heartbeats, LocemDouble, PemkreDouble
-from locem_bridge.hicem.config import HicemParams, load_params
+from locem_bridge.hicem.config import DEFAULT_PARAMS_FILE, HicemParams, load_params
 from locem_bridge.hicem.executive import create_executive
 
 TREES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "trees")
 
 
 def params(**overrides: Any) -> HicemParams:
-    raw = copy.deepcopy(load_params(os.path.join(TREES, "hicem_params.yaml")).raw)
+    raw = copy.deepcopy(load_params(DEFAULT_PARAMS_FILE).raw)
     for path, value in overrides.items():
         cur = raw
         parts = path.split("__")

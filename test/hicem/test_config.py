@@ -3,11 +3,10 @@ import copy
 
 import pytest
 
-from hicem_rig import TREES
-from locem_bridge.hicem.config import HicemParams, flatten, load_params
+from locem_bridge.hicem.config import DEFAULT_PARAMS_FILE, HicemParams, flatten, load_params
 from locem_bridge.hicem.errors import ConfigError
 
-RAW = load_params(TREES + "/hicem_params.yaml").raw
+RAW = load_params(DEFAULT_PARAMS_FILE).raw
 
 
 def test_shipped_parameters_and_blackboard_entries():

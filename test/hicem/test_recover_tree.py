@@ -17,6 +17,7 @@ from py_trees.common import Status
 from hicem_doubles import SITE, LocemDouble
 from hicem_rig import TREES, params
 from locem_bridge.hicem.blackboard import Blackboard
+from locem_bridge.hicem.config import DEFAULT_PARAMS_FILE
 from locem_bridge.hicem.datahandler import DataHandler
 from locem_bridge.hicem.datastore import DataManager
 from locem_bridge.hicem.errors import LocemError, TreeLoadError
@@ -147,7 +148,7 @@ def test_the_tree_file_is_documented_and_takes_its_numbers_from_the_parameters()
     for key in ("links_timeout_s", "ready_timeout_s", "poll_s"):
         assert "{@cfg.recover.%s}" % key in text
         assert params().raw["recover"][key] > 0
-    yaml_text = open(os.path.join(TREES, "hicem_params.yaml"), encoding="utf-8").read()
+    yaml_text = open(DEFAULT_PARAMS_FILE, encoding="utf-8").read()
     assert re.search(r"links_timeout_s: [0-9.]+ +# s,", yaml_text), "links_timeout_s has no unit comment"
 
 

@@ -40,7 +40,7 @@ class JobProtectiveStopTest(unittest.TestCase):
         cls.locem = LocemResults()
         cls.sim = SimCalls()
         areas = cls.sim.call("scan")["areas"]
-        params = os.path.join(rospkg.RosPack().get_path(PKG), "trees", "hicem_params.yaml")
+        params = os.path.join(rospkg.RosPack().get_path(PKG), "config", "hicem", "plasterboard.yaml")
         with open(params, encoding="utf-8") as handle:
             width = float(yaml.safe_load(handle)["sand"]["section_width"])
         cls.sections = sum(max(1, int(math.ceil(a["width"] / width - 1e-9))) for a in areas)

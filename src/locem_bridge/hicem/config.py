@@ -1,4 +1,4 @@
-"""HICEM parameters (``trees/hicem_params.yaml``): loading, checking, and the ``cfg.*`` blackboard entries.
+"""HICEM parameters (``config/hicem/plasterboard.yaml``): loading, checking, and the ``cfg.*`` blackboard entries.
 
 :func:`load_params` reads the YAML file; :class:`HicemParams` checks the keys the executive itself needs
 (raising :class:`ConfigError` with the dotted key path) and flattens every leaf into blackboard entries
@@ -14,9 +14,9 @@ from ..common.config_errors import read_yaml
 from .errors import ConfigError
 from .health import ModuleSpec
 
-DEFAULT_PARAMS_FILE = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(
-    os.path.abspath(__file__))))), "trees", "hicem_params.yaml")
-DEFAULT_TREES_DIR = os.path.dirname(DEFAULT_PARAMS_FILE)
+_PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+DEFAULT_PARAMS_FILE = os.path.join(_PACKAGE_DIR, "config", "hicem", "plasterboard.yaml")
+DEFAULT_TREES_DIR = os.path.join(_PACKAGE_DIR, "trees")
 
 
 def _get(d: Dict[str, Any], path: str, kind: type) -> Any:

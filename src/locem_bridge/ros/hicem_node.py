@@ -10,7 +10,7 @@ Interfaces (relative to the node, ``/hicem/...`` when the node is named ``hicem`
   PEMKRE through ``<pemkre>/*`` services (``~pemkre: ros``) or an engine embedded in this process
   (``~pemkre: embedded``, store at ``~pemkre_store``; for single-process runs and tests).
 
-Parameters: ``~params_file`` (HICEM parameters YAML; default ``trees/hicem_params.yaml`` of the package),
+Parameters: ``~params_file`` (HICEM parameters YAML; default ``config/hicem/plasterboard.yaml`` of the package),
 ``~trees_dir``, ``~hdict_path`` (HDICT SQLite file; default ``$ROS_HOME/hicem_hdict.sqlite``), ``~locem_ns``
 (default ``locem``, resolved in the node's namespace), ``~pemkre``, ``~pemkre_ns``, ``~pemkre_store``,
 ``~status_period`` (s between STATUS polls), ``~pemkre_call_deadline`` (s one PEMKRE call is sent again while
@@ -71,7 +71,7 @@ class HicemNode:
     def __init__(self) -> None:
         share = _share_dir()
         trees_dir = _param("trees_dir", os.path.join(share, "trees"))
-        params_file = _param("params_file", os.path.join(trees_dir, "hicem_params.yaml"))
+        params_file = _param("params_file", os.path.join(share, "config", "hicem", "plasterboard.yaml"))
         hdict = os.path.expanduser(_param("hdict_path", os.path.join(rospkg.get_ros_home(), "hicem_hdict.sqlite")))
         locem_ns = rospy.resolve_name(_param("locem_ns", "locem"))
         # the files first: a bad one fails the node at once (one line), not after waiting for LOCEM and PEMKRE

@@ -108,7 +108,7 @@ def preflight(args: argparse.Namespace, robot_overrides: Optional[Dict[str, Any]
                         share, "config", "sites", "default.yaml")),
                     robot=robot_file(list(args.launch_arg)),
                     robot_overrides=overrides,
-                    params_file=path("params_file", os.path.join(share, "trees", "hicem_params.yaml")),
+                    params_file=path("params_file", os.path.join(share, "config", "hicem", "plasterboard.yaml")),
                     trees_dir=path("trees_dir", os.path.join(share, "trees")),
                     ontology_dir=path("ontology_dir", os.path.join(share, "ontologies")))
         from .job_node import load_steps
