@@ -92,7 +92,7 @@ def stop_site(proc):
 
 def enable_drives(robot, can_port):
     import canopen
-    from locem_bridge.sim.can.drives import open_bus
+    from locem_bridge.common.can_bus import open_bus
     eds = resolve_relative(robot, robot["robot"]["base"]["eds"])
     net = canopen.Network(open_bus({"interface": "udp_multicast", "channel": "239.74.163.2", "port": can_port}))
     net.NOTIFIER_CYCLE = 0.1

@@ -168,3 +168,29 @@ def test_move_path_waypoints_are_checked():
         commands_arm.parse_waypoints("0.5:0.2:0.4:0:3.14:0/x")
     with pytest.raises(BadRequest, match="position out of range"):
         commands_arm.parse_waypoints("5:0.2:0.4:0:3.14:0")
+
+
+def test_the_base_bridge_refuses_a_can_bus_it_cannot_use_with_its_own_errors(robot):
+    """The base bridge opens its bus through locem_bridge.common.can_bus, as the simulated drives do: a bus the
+    robot file may not name is a configuration error (NOT_READY, key and allowed list), a bus that cannot be
+    opened is a link down (HARDWARE_ERROR), and nothing was started."""
+    import copy
+
+    from locem_bridge.bridges.cia402_base import Cia402Base
+    from locem_bridge.bridges.config import resolve_path
+    from locem_bridge.bridges.errors import LinkDown
+
+    eds = resolve_path(robot, robot["base"]["eds"])
+    cfg = copy.deepcopy(robot["base"])
+    cfg["drives"]["can"] = {"interface": "pcan", "channel": "PCAN_USBBUS1", "bitrate": 1000000}
+    base = Cia402Base(cfg, eds)
+    with pytest.raises(BridgeConfigError) as caught:
+        base.start()
+    assert caught.value.code.value == "NOT_READY" and caught.value.key == "robot.base.drives.can.interface"
+    assert "(allowed: virtual, udp_multicast, socketcan)" in str(caught.value) and base.network is None
+    cfg["drives"]["can"] = {"interface": "socketcan", "channel": "nosuchcan7", "bitrate": 1000000}
+    base = Cia402Base(cfg, eds)
+    with pytest.raises(LinkDown) as down:
+        base.start()
+    assert down.value.code.value == "HARDWARE_ERROR" and down.value.device == "base"
+    assert str(down.value).startswith("CAN bus socketcan nosuchcan7 cannot be opened: ") and base.network is None

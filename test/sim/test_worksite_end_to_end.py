@@ -118,7 +118,7 @@ def test_worksite_process_serves_all_devices_and_records_a_taping_pass(worksite_
     # one drive over udp_multicast from this (another) process
     import canopen
     from locem_bridge.sim.config import resolve_relative
-    from locem_bridge.sim.can.drives import open_bus
+    from locem_bridge.common.can_bus import open_bus
     eds = resolve_relative(robot_cfg, robot_cfg["robot"]["base"]["eds"])
     net = canopen.Network(open_bus({"interface": "udp_multicast", "channel": "239.74.163.2",
                                     "port": info["can_port"]}))

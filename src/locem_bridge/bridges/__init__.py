@@ -8,7 +8,8 @@ Layout (one concept per module):
 * :mod:`.backends`    the name -> backend table, imported lazily (no device library is loaded until used);
 * :mod:`.ur_arm` + :mod:`.ur_worker`  ur_rtde in a supervised child process;
 * :mod:`.modbus_compressor`  pymodbus client with polling, retries and the valve-closed-on-return rule;
-* :mod:`.cia402_base` + :mod:`locem_bridge.common.mecanum` + :mod:`.can_bus`  four CiA 402 drives through canopen's ``BaseNode402``;
+* :mod:`.cia402_base` + :mod:`locem_bridge.common.mecanum` + :mod:`locem_bridge.common.can_bus`  four CiA 402 drives
+  through canopen's ``BaseNode402``;
 * :mod:`.sim_scanner`  the SCAN source of the simulated worksite (perception stand-in on the site YAML);
 * :mod:`.geometry`    frames map -> base_footprint -> UR base, rotation vectors, the wall-facing TCP frame;
 * :mod:`.commands_*`  LOCEM declarations (``SPECS``, listed in :mod:`locem_bridge.locem.catalogue`) and the

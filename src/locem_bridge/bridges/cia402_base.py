@@ -44,7 +44,7 @@ import time
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from .config import need
-from .errors import BadRequest, DeviceFault, LinkDown, MotionTimeout, NotConnected
+from .errors import BadRequest, BridgeConfigError, DeviceFault, LinkDown, MotionTimeout, NotConnected
 from .geometry import wrap_angle
 from .interfaces import Base, Health, Waiter
 from ..common.mecanum import MecanumKinematics
@@ -124,8 +124,13 @@ class Cia402Base(Base):
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def _open_bus(self) -> Any:
-        from .can_bus import open_master_bus
-        return open_master_bus(self.can_cfg)
+        from locem_bridge.common.can_bus import CanInterfaceError, CanOpenError, open_bus   # as the sim's drives
+        try:
+            return open_bus(self.can_cfg)
+        except CanInterfaceError as error:
+            raise BridgeConfigError(error.problem, key=error.key, allowed=error.allowed, device="base")
+        except CanOpenError as error:
+            raise LinkDown(str(error), device="base")
 
     def start(self) -> None:
         import canopen

@@ -6,6 +6,7 @@ Modules (each one concept):
 * :mod:`.mecanum`        mecanum base kinematics (the base bridge and the simulated worksite)
 * :mod:`.rate`           a fixed-rate loop timer for device loops
 * :mod:`.config_errors`  one-line configuration errors and the one YAML reader of configuration files
+* :mod:`.can_bus`        opening the base's CAN bus (allowed interfaces, own-echo filter; bridge and simulator)
 
 Anything that crosses layers (LOCEM codes, task statuses, the next-action record, health grading, geometry,
 CAN bus opening) belongs here, never copied into a layer. Modules here import only the standard library and

@@ -15,12 +15,12 @@ import re
 import sys
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
+from ..common.can_bus import CAN_INTERFACES
 from ..common.config_errors import read_yaml
 from .errors import SimConfigError
 
 FEATURE_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 TOOL_NAMES = ("taping_tool", "spray_gun", "sander")
-CAN_INTERFACES = ("virtual", "udp_multicast", "socketcan")
 ARM_BACKENDS = ("ur_rtde",)
 # The ports ur_rtde dials: its RTDEControlInterface / RTDEReceiveInterface / RTDEIOInterface take a host and no
 # port, so a UR controller on other ports cannot be reached by the arm bridge (another robot takes another

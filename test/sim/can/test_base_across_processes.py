@@ -15,7 +15,7 @@ import pytest
 
 from locem_bridge.common.mecanum import MecanumKinematics
 from locem_bridge.sim.config import resolve_relative
-from locem_bridge.sim.can.drives import open_bus
+from locem_bridge.common.can_bus import open_bus
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(HERE))), "src")

@@ -49,8 +49,9 @@ import can
 import canopen
 from canopen.sdo import SdoAbortedError
 
+from ...common.can_bus import SHARED_INTERFACES, CanBusError, open_bus
 from ..errors import DeviceStandInError
-from .heartbeat import PROCESS_INTERFACES, HeartbeatProcess
+from .heartbeat import HeartbeatProcess
 
 log = logging.getLogger(__name__)
 
@@ -655,81 +656,6 @@ def _i32(value: float) -> int:
     return max(-(2 ** 31), min(2 ** 31 - 1, v))
 
 
-class SelfEchoFilterBus(can.BusABC):
-    """Wrap a bus that hands a sender its own frames back (python-can's ``udp_multicast`` does: every socket in
-    the group gets every datagram) and drop those echoes, as a real CAN controller would.
-
-    Each sent frame is expected back once; a received frame equal (id, data, flags) to a pending sent one is
-    dropped and the pending entry consumed. Entries expire after ``window`` seconds (lost echo).
-    Without this, canopen's RemoteNode RPDO maps overwrite their data with the echo of an older command.
-    """
-
-    def __init__(self, inner: can.BusABC, window: float = 1.0) -> None:
-        self._inner = inner
-        self._window = float(window)
-        self._pending: List[Any] = []
-        self._plock = threading.Lock()
-        self.channel_info = "echo-filtered " + str(getattr(inner, "channel_info", ""))
-        super().__init__(channel=getattr(inner, "channel", None))
-
-    @staticmethod
-    def _key(msg: can.Message) -> Any:
-        return (msg.arbitration_id, bytes(msg.data), msg.is_extended_id, msg.is_remote_frame)
-
-    def send(self, msg: can.Message, timeout: Optional[float] = None) -> None:
-        now = time.monotonic()
-        with self._plock:
-            self._pending = [(t, k) for t, k in self._pending if now - t < self._window]
-            self._pending.append((now, self._key(msg)))
-        self._inner.send(msg, timeout)
-
-    def _recv_internal(self, timeout: Optional[float]) -> Any:
-        deadline = None if timeout is None else time.monotonic() + timeout
-        while True:
-            remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
-            msg = self._inner.recv(remaining)
-            if msg is None:
-                return None, False
-            key = self._key(msg)
-            with self._plock:
-                for i, (_, k) in enumerate(self._pending):
-                    if k == key:
-                        del self._pending[i]
-                        break
-                else:
-                    return msg, False
-            if deadline is not None and time.monotonic() >= deadline:
-                return None, False
-
-    def shutdown(self) -> None:
-        super().shutdown()
-        self._inner.shutdown()
-
-
-def open_bus(can_cfg: Dict[str, Any]) -> can.BusABC:
-    """Open the python-can bus named by ``robot.base.drives.can`` (interface, channel, bitrate, optional port).
-
-    ``udp_multicast`` buses are wrapped in :class:`SelfEchoFilterBus`.
-    """
-    interface = can_cfg["interface"]
-    kwargs: Dict[str, Any] = {"interface": interface, "channel": can_cfg["channel"]}
-    if interface == "socketcan":
-        pass
-    elif interface == "udp_multicast":
-        if "port" in can_cfg:
-            kwargs["port"] = int(can_cfg["port"])
-        kwargs["fd"] = False
-    else:
-        kwargs["receive_own_messages"] = False
-    try:
-        bus = can.Bus(**kwargs)
-    except Exception as exc:
-        where = "%s %s%s" % (interface, can_cfg["channel"], (":%s" % kwargs["port"]) if "port" in kwargs else "")
-        raise DeviceStandInError("CAN bus %s cannot be opened: %s" % (where, str(exc).splitlines()[0] if str(exc)
-                                                                       else type(exc).__name__))
-    return SelfEchoFilterBus(bus) if interface == "udp_multicast" else bus
-
-
 class DriveSet:
     """The four wheel drives of the base on one bus, plus the cyclic TPDO thread.
 
@@ -762,10 +688,10 @@ class DriveSet:
         self.period = max(0.001, min(d.tpdo_period_ms for d in self.drives) / 1000.0)
         iface = drives_cfg["can"]["interface"]
         if heartbeat_process is None:
-            heartbeat_process = bus is None and iface in PROCESS_INTERFACES
-        if heartbeat_process and iface not in PROCESS_INTERFACES:
+            heartbeat_process = bus is None and iface in SHARED_INTERFACES
+        if heartbeat_process and iface not in SHARED_INTERFACES:
             raise DeviceStandInError("robot.base.drives.can.interface = %r: heartbeats from a helper process need "
-                                     "a bus other processes can open (%s)" % (iface, ", ".join(PROCESS_INTERFACES)))
+                                     "a bus other processes can open (%s)" % (iface, ", ".join(SHARED_INTERFACES)))
         self.use_heartbeat_process = bool(heartbeat_process)
         self.sync_sampling = True      # cyclic TPDOs of all drives sampled at one sim instant per cycle
         self.heartbeat_process: Optional[HeartbeatProcess] = None
@@ -773,8 +699,11 @@ class DriveSet:
     def start(self) -> None:
         if self.network is not None:
             raise DeviceStandInError("drive set already started")
-        if self._bus is None:
-            self._bus = open_bus(self.cfg["can"])
+        if self._bus is None:              # the base bridge opens its bus the same way
+            try:
+                self._bus = open_bus(self.cfg["can"])
+            except CanBusError as exc:
+                raise DeviceStandInError(str(exc))
         self.network = canopen.Network(self._bus)
         self.network.NOTIFIER_CYCLE = 0.1      # short receive timeout: quick, clean shutdown
         if self.use_heartbeat_process:

@@ -33,10 +33,10 @@ import threading
 import time
 from typing import Any, Dict, List, Optional
 
+from ...common.can_bus import SHARED_INTERFACES, CanBusError, open_bus
 from ..errors import DeviceStandInError
 
 HEARTBEAT_COB_RANGE = (0x701, 0x77F)
-PROCESS_INTERFACES = ("udp_multicast", "socketcan")
 
 
 class RemoteHeartbeatTask:
@@ -64,9 +64,9 @@ class HeartbeatProcess:
     """The helper process and its command pipe (see the module docstring). Thread-safe."""
 
     def __init__(self, can_cfg: Dict[str, Any]) -> None:
-        if can_cfg.get("interface") not in PROCESS_INTERFACES:
+        if can_cfg.get("interface") not in SHARED_INTERFACES:
             raise DeviceStandInError("heartbeat process needs a bus other processes can open (%s), got %r"
-                                     % (", ".join(PROCESS_INTERFACES), can_cfg.get("interface")))
+                                     % (", ".join(SHARED_INTERFACES), can_cfg.get("interface")))
         self.can_cfg = dict(can_cfg)
         self._proc: Optional[subprocess.Popen] = None
         self._lock = threading.Lock()
@@ -139,15 +139,10 @@ class HeartbeatProcess:
 def _serve(can_cfg: Dict[str, Any]) -> int:
     import can
 
-    kwargs: Dict[str, Any] = {"interface": can_cfg["interface"], "channel": can_cfg["channel"]}
-    if can_cfg["interface"] == "udp_multicast":
-        kwargs["fd"] = False
-        if "port" in can_cfg:
-            kwargs["port"] = int(can_cfg["port"])
     try:
-        bus = can.Bus(**kwargs)
-    except Exception as exc:
-        print("error: cannot open CAN bus %s: %s" % (kwargs, exc), flush=True)
+        bus = open_bus(can_cfg)                # the drives' own bus, opened the same way
+    except CanBusError as exc:
+        print("error: %s" % exc, flush=True)
         return 2
     tasks: Dict[int, List[Any]] = {}           # cob -> [message, period, next due]
     stdin = sys.stdin
