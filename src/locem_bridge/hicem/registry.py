@@ -52,13 +52,13 @@ class NodeRegistry:
 
 def default_registry(extra: Iterable[Type[Ported]] = ()) -> NodeRegistry:
     """BT.CPP built-ins + HICEM's own controls + the HICEM node library (+ ``extra`` classes)."""
-    from .nodes import area_work, generic  # local import: the library imports this package's interfaces
+    from .nodes import area_work, generic, plasterboard  # local import: the library imports this package's interfaces
     reg = NodeRegistry()
     for cls in BUILTIN_NODES:
         reg.register(cls, builtin=True)
     for cls in EXTRA_CONTROL_NODES:
         reg.register(cls)
-    for cls in generic.LIBRARY + area_work.LIBRARY:
+    for cls in generic.LIBRARY + plasterboard.LIBRARY + area_work.LIBRARY:
         reg.register(cls)
     for cls in extra:
         reg.register(cls)

@@ -1,29 +1,27 @@
-"""The HICEM node library: generic nodes and plasterboard use-case nodes.
+"""Generic HICEM nodes (the paper's HHLC executes them): the ones any use case's trees need.
 
-Generic: CheckHealth, CheckDevicesUp (devices back after a failure, from LOCEM's STATUS), WaitForDevices (STATUS
-until they are, bounded), CheckSafetyStop (a latched safety stop in STATUS), SendLocemCommand,
-ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual, SelectEntry, IngestScan, MarkFeature.
-Use case: TagIdNameToObjectId (PEMKRE symbol → stored object id), GetTapingPosition (approach pose for a joint
-line), GetTapePath (line endpoints and wall normal), GetAreaRaster (base stations and raster rectangles for an
-area).
+Health and devices: CheckHealth (the HEM's view), CheckDevicesUp (devices back after a failure, from LOCEM's
+STATUS), WaitForDevices (STATUS until they are, bounded), CheckSafetyStop (a latched safety stop in STATUS).
+LOCEM: SendLocemCommand. Data store (HDM/HDICT through the HDH): ReadDataStore, WriteDataStore, IngestScan,
+MarkFeature. Operator and flow: WaitForOperator, Log, CheckEqual, SelectEntry.
 
 No node holds a number of its own: distances, speeds, offsets and timeouts arrive through ports, fed from the
-blackboard (``{@cfg....}`` = the robot/site parameters the controller loads, ``param_*`` = PEMKRE parameters) or
+blackboard (``{@cfg....}`` = the HICEM parameters the controller loads, ``param_*`` = PEMKRE parameters) or
 from the data store. Command templates (``SendLocemCommand.command``, ``WaitForOperator.text``, ``Log.message``)
-fill ``{key}`` / ``{key.field}`` from the blackboard; numbers are written in plain decimal, lists as
-space-separated numbers, and a substituted text containing whitespace is refused (it would smuggle extra
+fill ``{key}`` / ``{key.field}`` from the blackboard (:func:`render`); numbers are written in plain decimal, lists
+as space-separated numbers, and a substituted text containing whitespace is refused (it would smuggle extra
 command arguments).
 """
 import math
 import re
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, List, Optional, Sequence
 
 from py_trees.common import Status
 
 from ..errors import HicemError, LocemError, PortError
-from ..interfaces import check_reply, local_name
+from ..interfaces import check_reply
 from ..node_base import ConditionLeaf, Leaf
-from ..ports import TEMPLATE_FIELD, ANY, FLOAT, FLOAT_LIST, INT, JSON, STRING, STRING_LIST, input_port, output_port
+from ..ports import TEMPLATE_FIELD, ANY, FLOAT, INT, JSON, STRING, STRING_LIST, input_port, output_port
 
 _FIELD = TEMPLATE_FIELD
 
@@ -68,11 +66,6 @@ def render(template: str, blackboard: Any, words: bool = True) -> str:
     return _FIELD.sub(sub, template)
 
 
-def _norm_angle(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
-
-
-# ------------------------------------------------------------------------------------------------- generic --
 class CheckHealth(ConditionLeaf):
     DESCRIPTION = ("SUCCESS while the modules (default: all crucial ones) are healthy in the HEM; FAILURE "
                    "with the reason otherwise. Put it first in a ReactiveSequence to guard a running action.")
@@ -455,294 +448,5 @@ class MarkFeature(Leaf):
         return Status.SUCCESS
 
 
-# ------------------------------------------------------------------------------------------------ use case --
-class TagIdNameToObjectId(Leaf):
-    DESCRIPTION = ("Maps a PEMKRE symbol (IRI or local name) to the id of an object stored in HICEM and checks "
-                   "it exists with the expected kind (joint, area, wall: features from the scan; tool: the "
-                   "configured tools).")
-    PORTS = (
-        input_port("symbol", STRING, None, "", "PEMKRE parameter, e.g. {param_line}"),
-        input_port("kind", STRING, None, "", "expected object kind", choices=("joint", "area", "wall", "tool")),
-        input_port("tools", STRING_LIST, "{@cfg.tools}", "", "tool names known to this robot"),
-        output_port("object_id", STRING, None, "", "stored object id"),
-    )
-
-    def on_tick(self) -> Status:
-        sym = local_name(self.get("symbol").strip())
-        kind = self.get("kind")
-        if kind == "tool":
-            tools = self.get("tools")
-            if sym not in tools:
-                return self.fail("unknown tool '%s'; this robot has: %s" % (sym, ", ".join(tools)))
-        else:
-            self.ctx.require("data_handler", self.name).feature(sym, kind)
-        self.set("object_id", sym)
-        return Status.SUCCESS
-
-
-def _wall_frame(hdh: Any, wall_id: str) -> Tuple[List[float], List[float]]:
-    """(unit tangent p0→p1 in xy, inward normal (3D)) of a stored wall."""
-    w = hdh.feature(wall_id, "wall")
-    dx, dy = w["p1"][0] - w["p0"][0], w["p1"][1] - w["p0"][1]
-    n = math.hypot(dx, dy)
-    if n < 1e-9:
-        raise HicemError("wall '%s' has zero length" % wall_id)
-    return [dx / n, dy / n], list(w["normal"])
-
-
-def _facing(normal: List[float], yaw_offset: float) -> float:
-    """Base heading that faces the wall (base x axis against the inward normal) plus an offset."""
-    return _norm_angle(math.atan2(-normal[1], -normal[0]) + yaw_offset)
-
-
-def _joint_ends(j: Dict[str, Any], max_tilt: float) -> Tuple[List[float], List[float]]:
-    """Start and end of a stored joint as the robot tapes it. Plasterboard joints are plumb (vertical joints) or
-    level (horizontal ones): a vertical joint measured within ``max_tilt`` rad of plumb is taped plumb through
-    the mean horizontal position of its two ends, a horizontal one within ``max_tilt`` of level at their mean
-    height. The scanner's independent errors on the two ends then neither tilt the tape path nor add up at one
-    end (the mean halves their variance); a joint tilted more than ``max_tilt`` is taped as measured, and
-    ``max_tilt`` 0 keeps every measured line."""
-    start, end = [float(v) for v in j["start"]], [float(v) for v in j["end"]]
-    if max_tilt < 0.0:
-        raise PortError("max_tilt must be >= 0 rad, got %g" % max_tilt)
-    if max_tilt == 0.0:
-        return start, end
-    horizontal = math.hypot(end[0] - start[0], end[1] - start[1])
-    rise = abs(end[2] - start[2])
-    if j.get("kind") == "vertical" and math.atan2(horizontal, rise) <= max_tilt:
-        mx, my = (start[0] + end[0]) / 2.0, (start[1] + end[1]) / 2.0
-        return [mx, my, start[2]], [mx, my, end[2]]
-    if j.get("kind") == "horizontal" and math.atan2(rise, horizontal) <= max_tilt:
-        mz = (start[2] + end[2]) / 2.0
-        return [start[0], start[1], mz], [end[0], end[1], mz]
-    return start, end
-
-
-class GetTapingPosition(Leaf):
-    DESCRIPTION = ("Approach pose [x, y, theta] (map frame) of the base for taping a joint line: in front of the "
-                   "line's foot (vertical) or middle (horizontal) as straightened within max_tilt, standoff from "
-                   "the wall along its normal, "
-                   "shifted along the wall by lateral_offset, facing the wall plus yaw_offset.")
-    PORTS = (
-        input_port("line_id", STRING, None, "", "stored joint id"),
-        input_port("standoff", FLOAT, "{@cfg.taping.base_standoff}", "m", "base centre distance from the wall"),
-        input_port("lateral_offset", FLOAT, "{@cfg.taping.lateral_offset}", "m", "shift along the wall"),
-        input_port("yaw_offset", FLOAT, "{@cfg.taping.yaw_offset}", "rad", "added to the wall-facing heading"),
-        input_port("max_tilt", FLOAT, "{@cfg.taping.plumb_tolerance}", "rad",
-                   "a vertical joint within this angle of plumb (a horizontal one of level) is taped plumb (level) "
-                   "through the mean of its ends; 0: as measured"),
-        output_port("approach_pose", FLOAT_LIST, None, "m, m, rad", "x y theta for GOTO"),
-    )
-
-    def on_tick(self) -> Status:
-        hdh = self.ctx.require("data_handler", self.name)
-        j = hdh.feature(self.get("line_id"), "joint")
-        t, nrm = _wall_frame(hdh, j["wall"])
-        start, end = _joint_ends(j, self.get("max_tilt"))
-        if j["kind"] == "vertical":
-            fx, fy = start[0], start[1]
-        else:
-            fx, fy = (start[0] + end[0]) / 2.0, (start[1] + end[1]) / 2.0
-        nxy = math.hypot(nrm[0], nrm[1])
-        if nxy < 1e-9:
-            return self.fail("wall '%s' normal has no horizontal part" % j["wall"])
-        nx, ny = nrm[0] / nxy, nrm[1] / nxy
-        d, lat = self.get("standoff"), self.get("lateral_offset")
-        pose = [fx + nx * d + t[0] * lat, fy + ny * d + t[1] * lat, _facing([nx, ny], self.get("yaw_offset"))]
-        self.set("approach_pose", pose)
-        return Status.SUCCESS
-
-
-class GetTapePath(Leaf):
-    DESCRIPTION = ("Tape path of a joint line in the map frame: start and end points (straightened to plumb or "
-                   "level within max_tilt) moved off the wall by surface_offset along the wall normal, the normal "
-                   "itself and the length.")
-    PORTS = (
-        input_port("line_id", STRING, None, "", "stored joint id"),
-        input_port("surface_offset", FLOAT, "{@cfg.taping.surface_offset}", "m", "tool point off the wall"),
-        input_port("max_tilt", FLOAT, "{@cfg.taping.plumb_tolerance}", "rad",
-                   "a vertical joint within this angle of plumb (a horizontal one of level) is taped plumb (level) "
-                   "through the mean of its ends; 0: as measured"),
-        output_port("path_start", FLOAT_LIST, None, "m", "x y z"),
-        output_port("path_end", FLOAT_LIST, None, "m", "x y z"),
-        output_port("normal", FLOAT_LIST, None, "", "inward wall normal nx ny nz"),
-        output_port("length", FLOAT, None, "m", "path length"),
-    )
-
-    def on_tick(self) -> Status:
-        hdh = self.ctx.require("data_handler", self.name)
-        j = hdh.feature(self.get("line_id"), "joint")
-        _t, n = _wall_frame(hdh, j["wall"])
-        off = self.get("surface_offset")
-        start, end = _joint_ends(j, self.get("max_tilt"))
-        s = [start[i] + n[i] * off for i in range(3)]
-        e = [end[i] + n[i] * off for i in range(3)]
-        self.set("path_start", s)
-        self.set("path_end", e)
-        self.set("normal", n)
-        self.set("length", math.dist(s, e))
-        return Status.SUCCESS
-
-
-class GetTapeSegments(Leaf):
-    DESCRIPTION = ("Splits a joint line into pieces taped one after the other, each from its own base pose, for "
-                   "arms that cannot reach a whole joint from one pose. A vertical joint is clipped to the "
-                   "reachable height band [z_min, z_max] and taped outwards from its middle (middle to top, "
-                   "middle to bottom: the approach to mid height is the one free of the wall); a horizontal joint "
-                   "is cut into pieces no longer than segment_length, each approached in front of its middle. "
-                   "Each piece: approach [x, y, theta] at standoff from the wall facing it (plus yaw_offset, "
-                   "shifted along the wall by lateral_offset), start and end points (moved off the wall by "
-                   "surface_offset) and the inward normal. The clipped length is reported as skipped.")
-    PORTS = (
-        input_port("line_id", STRING, None, "", "stored joint id"),
-        input_port("segment_length", FLOAT, "{@cfg.taping.segment_length}", "m",
-                   "longest piece taped from one base pose"),
-        input_port("z_range", FLOAT_LIST, "{@cfg.taping.z_range}", "m",
-                   "z_min;z_max, the height band the arm reaches with the tool facing the wall"),
-        input_port("standoff", FLOAT, "{@cfg.taping.base_standoff}", "m", "base centre distance from the wall"),
-        input_port("lateral_offset", FLOAT, "{@cfg.taping.lateral_offset}", "m", "shift along the wall"),
-        input_port("yaw_offset", FLOAT, "{@cfg.taping.yaw_offset}", "rad", "added to the wall-facing heading"),
-        input_port("surface_offset", FLOAT, "{@cfg.taping.surface_offset}", "m", "tool point off the wall"),
-        input_port("max_tilt", FLOAT, "{@cfg.taping.plumb_tolerance}", "rad",
-                   "a vertical joint within this angle of plumb (a horizontal one of level) is taped plumb (level) "
-                   "through the mean of its ends; 0: as measured"),
-        output_port("segments", JSON, None, "", "list of {approach, start, end, normal, length}"),
-        output_port("count", INT, None, "", "number of pieces"),
-        output_port("skipped", FLOAT, None, "m", "joint length outside the reachable band (not taped)"),
-    )
-
-    def on_tick(self) -> Status:
-        hdh = self.ctx.require("data_handler", self.name)
-        j = hdh.feature(self.get("line_id"), "joint")
-        t, nrm = _wall_frame(hdh, j["wall"])
-        seg_len = self.get("segment_length")
-        if seg_len <= 0:
-            raise PortError("%s: segment_length must be > 0 m, got %g" % (self.name, seg_len))
-        band = list(self.get("z_range"))
-        if len(band) != 2 or band[0] >= band[1]:
-            raise PortError("%s: z_range must be two heights z_min < z_max, got %s" % (self.name, band))
-        nxy = math.hypot(nrm[0], nrm[1])
-        if nxy < 1e-9:
-            return self.fail("wall '%s' normal has no horizontal part" % j["wall"])
-        nx, ny = nrm[0] / nxy, nrm[1] / nxy
-        d, lat, off = self.get("standoff"), self.get("lateral_offset"), self.get("surface_offset")
-        heading = _facing([nx, ny], self.get("yaw_offset"))
-        start, end = _joint_ends(j, self.get("max_tilt"))
-        total = math.dist(start, end)
-        pieces = []  # (a, b, foot) in map, before the surface offset
-        if j["kind"] == "vertical":
-            lo, hi = sorted((start, end), key=lambda p: p[2])
-            z0, z1 = max(lo[2], band[0]), min(hi[2], band[1])
-            if z1 - z0 < 1e-3:
-                return self.fail("joint '%s' (z %.2f..%.2f m) lies outside the reachable band %.2f..%.2f m"
-                                 % (j["id"], lo[2], hi[2], band[0], band[1]))
-
-            def at(z: float) -> List[float]:
-                f = (z - lo[2]) / (hi[2] - lo[2])
-                return [lo[k] + (hi[k] - lo[k]) * f for k in range(3)]
-
-            mid = (z0 + z1) / 2.0
-            for a, b in ((mid, z1), (mid, z0)):
-                n = max(1, int(math.ceil(abs(b - a) / seg_len - 1e-9)))
-                for i in range(n):
-                    za, zb = a + (b - a) * i / n, a + (b - a) * (i + 1) / n
-                    pieces.append((at(za), at(zb), lo))
-        else:
-            n = max(1, int(math.ceil(total / seg_len - 1e-9)))
-            for i in range(n):
-                a = [start[k] + (end[k] - start[k]) * i / n for k in range(3)]
-                b = [start[k] + (end[k] - start[k]) * (i + 1) / n for k in range(3)]
-                pieces.append((a, b, [(a[k] + b[k]) / 2.0 for k in range(3)]))
-        segments = []
-        for a, b, foot in pieces:
-            approach = [foot[0] + nx * d + t[0] * lat, foot[1] + ny * d + t[1] * lat, heading]
-            segments.append({"approach": approach, "start": [a[k] + nrm[k] * off for k in range(3)],
-                             "end": [b[k] + nrm[k] * off for k in range(3)], "normal": list(nrm),
-                             "length": math.dist(a, b)})
-        self.set("segments", segments)
-        self.set("count", len(segments))
-        self.set("skipped", max(0.0, total - sum(s["length"] for s in segments)))
-        return Status.SUCCESS
-
-
-class GetAreaRaster(Leaf):
-    DESCRIPTION = ("Splits a wall area into sections no wider than section_width; for each: a base approach pose "
-                   "facing the section's middle at base_standoff, and the raster rectangle (origin, u, width, "
-                   "height, wall normal) in the map frame.")
-    PORTS = (
-        input_port("area_id", STRING, None, "", "stored area id"),
-        input_port("section_width", FLOAT, None, "m", "widest strip covered from one base pose"),
-        input_port("base_standoff", FLOAT, None, "m", "base centre distance from the wall"),
-        input_port("yaw_offset", FLOAT, None, "rad", "added to the wall-facing heading"),
-        input_port("edge_extension", FLOAT, "0.0", "m", "the first and last section reach this far beyond the "
-                   "area's ends (spray run-in at the outer edges; sections meet exactly in between)"),
-        output_port("sections", JSON, None, "", "list of {approach, origin, u, width, height, normal}"),
-        output_port("count", INT, None, "", "number of sections"),
-    )
-
-    def on_tick(self) -> Status:
-        hdh = self.ctx.require("data_handler", self.name)
-        a = hdh.feature(self.get("area_id"), "area")
-        _t, n = _wall_frame(hdh, a["wall"])
-        sw, bs = self.get("section_width"), self.get("base_standoff")
-        if sw <= 0:
-            raise PortError("%s: section_width must be > 0 m, got %g" % (self.name, sw))
-        count = max(1, int(math.ceil(a["width"] / sw - 1e-9)))
-        w = a["width"] / count
-        nxy = math.hypot(n[0], n[1]) or 1.0
-        heading = _facing([n[0] / nxy, n[1] / nxy], self.get("yaw_offset"))
-        ext = self.get("edge_extension")
-        if ext < 0:
-            raise PortError("%s: edge_extension must be >= 0 m, got %g" % (self.name, ext))
-        sections = []
-        for i in range(count):
-            o = [a["origin"][k] + a["u"][k] * w * i for k in range(3)]
-            mx, my = o[0] + a["u"][0] * w / 2.0, o[1] + a["u"][1] * w / 2.0
-            s0 = -ext if i == 0 else 0.0                   # along u, relative to the section's own start
-            s1 = w + ext if i == count - 1 else w
-            o = [o[k] + a["u"][k] * s0 for k in range(3)]
-            sections.append({"approach": [mx + n[0] / nxy * bs, my + n[1] / nxy * bs, heading], "origin": o,
-                             "u": list(a["u"]), "width": s1 - s0, "height": a["height"], "normal": n, "index": i})
-        self.set("sections", sections)
-        self.set("count", count)
-        return Status.SUCCESS
-
-
-class PlanTransit(Leaf):
-    DESCRIPTION = ("Base waypoints from the current pose to goal [x, y, theta] (map). A turn larger than max_turn "
-                   "is not made next to a wall, where the corners of the turning base would sweep into it: the "
-                   "base first drives to the transit point keeping its heading, turns there, then drives to the "
-                   "goal. Otherwise the goal alone.")
-    PORTS = (
-        input_port("here", ANY, None, "m, m, rad", "current pose: [x, y, theta] or GET_POSE's result"),
-        input_port("goal", FLOAT_LIST, None, "m, m, rad", "x y theta to reach"),
-        input_port("transit", FLOAT_LIST, "{@cfg.site.locations.home}", "m", "x y (theta ignored) with room "
-                   "to turn"),
-        input_port("max_turn", FLOAT, "{@cfg.site.max_turn_near_walls}", "rad", "largest turn made on the way"),
-        output_port("waypoints", JSON, None, "", "list of [x, y, theta] poses for GOTO, in order"),
-    )
-
-    def on_tick(self) -> Status:
-        here = self.get("here")
-        if isinstance(here, dict):
-            here = here.get("pose")
-        goal, transit = list(self.get("goal")), list(self.get("transit"))
-        if not isinstance(here, (list, tuple)) or len(here) != 3 or len(goal) != 3 or len(transit) < 2:
-            raise PortError("%s: here and goal must be [x, y, theta] and transit [x, y, ...], got %r, %r, %r"
-                            % (self.name, here, goal, transit))
-        turn = abs(_norm_angle(float(goal[2]) - float(here[2])))
-        if turn <= self.get("max_turn"):
-            waypoints = [goal]
-        else:
-            waypoints = [[transit[0], transit[1], float(here[2])], [transit[0], transit[1], float(goal[2])], goal]
-        kept = [waypoints[0]]
-        for w in waypoints[1:]:       # a goal at the transit point itself is not driven to twice
-            if max(abs(float(a) - float(b)) for a, b in zip(w, kept[-1])) > 1e-6:
-                kept.append(w)
-        self.set("waypoints", kept)
-        return Status.SUCCESS
-
-
 LIBRARY = (CheckHealth, CheckDevicesUp, WaitForDevices, CheckSafetyStop, SendLocemCommand, ReadDataStore,
-           WriteDataStore, WaitForOperator, Log, CheckEqual, SelectEntry, IngestScan, MarkFeature, TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments,
-           GetAreaRaster, PlanTransit)
+           WriteDataStore, WaitForOperator, Log, CheckEqual, SelectEntry, IngestScan, MarkFeature)
