@@ -258,7 +258,7 @@ def patch_odometry():
     At time scale 20 one control cycle covers 0.4 s of motion, 0.2-0.3 rad of turn in a GOTO."""
     import math as _m
     from locem_bridge.bridges.cia402_base import Cia402Base
-    from locem_bridge.bridges.geometry import wrap_angle
+    from locem_bridge.common.geometry import wrap_angle
     orig_cycle = Cia402Base._cycle
 
     def _odometry(self):

@@ -9,8 +9,8 @@ import pytest
 from locem_bridge.bridges import backends, commands_arm, commands_base, commands_compressor, commands_wall
 from locem_bridge.bridges.config import deep_merge, load_robot_config, need
 from locem_bridge.bridges.errors import BridgeConfigError
-from locem_bridge.bridges.geometry import (arm_base_in_footprint, invert, matrix_to_pose, matrix_to_rotvec, planar,
-                                           pose_to_matrix, rotvec_to_matrix, tool_frame_facing)
+from locem_bridge.bridges.geometry import arm_base_in_footprint, planar, tool_frame_facing
+from locem_bridge.common.geometry import invert, matrix_to_pose, matrix_to_rotvec, pose_to_matrix, rotvec_to_matrix
 from locem_bridge.common.mecanum import MecanumKinematics
 from locem_bridge.locem.catalogue import all_specs
 

@@ -11,7 +11,8 @@ Layout (one concept per module):
 * :mod:`.cia402_base` + :mod:`locem_bridge.common.mecanum` + :mod:`locem_bridge.common.can_bus`  four CiA 402 drives
   through canopen's ``BaseNode402``;
 * :mod:`.sim_scanner`  the SCAN source of the simulated worksite (perception stand-in on the site YAML);
-* :mod:`.geometry`    frames map -> base_footprint -> UR base, rotation vectors, the wall-facing TCP frame;
+* :mod:`.geometry`    frames map -> base_footprint -> UR base, the wall-facing TCP frame (rotations:
+  :mod:`locem_bridge.common.geometry`);
 * :mod:`.commands_*`  LOCEM declarations (``SPECS``, listed in :mod:`locem_bridge.locem.catalogue`) and the
   command sets that bind them to a backend; :mod:`.commands_wall` composes the plasterboard commands;
 * :mod:`.robot`       builds every configured backend and command set from one robot YAML.

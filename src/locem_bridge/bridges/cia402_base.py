@@ -45,7 +45,7 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from .config import need
 from .errors import BadRequest, BridgeConfigError, DeviceFault, LinkDown, MotionTimeout, NotConnected
-from .geometry import wrap_angle
+from locem_bridge.common.geometry import wrap_angle
 from .interfaces import Base, Health, Waiter
 from ..common.mecanum import MecanumKinematics
 from ..common.rate import FixedRate

@@ -12,7 +12,7 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Tuple
 from locem_bridge.locem.registry import Arg, CommandSpec
 
 from .errors import BadRequest
-from .geometry import angle_between
+from locem_bridge.common.geometry import angle_between
 from .ur_arm import MOTION_MARGIN_S, PATH_UPLOAD_S, ROTATION_WEIGHT, UrRtdeArm, joint_travel_bound
 
 CATEGORY = "arm"

@@ -11,7 +11,7 @@ from typing import Any, Dict, Iterable
 from locem_bridge.locem.registry import Arg, CommandSpec
 
 from .cia402_base import Cia402Base
-from .geometry import wrap_angle
+from locem_bridge.common.geometry import wrap_angle
 
 CATEGORY = "base"
 _BASE = frozenset({"base"})

@@ -29,8 +29,8 @@ from locem_bridge.locem.registry import Arg, CommandSpec
 
 from .commands_compressor import wait_for_pressure
 from .errors import BadRequest, BridgeError
-from .geometry import (angle_between, arm_base_in_footprint, invert, matrix_to_pose, planar, pose_to_matrix,
-                       tool_frame_facing)
+from locem_bridge.common.geometry import angle_between, invert, matrix_to_pose, pose_to_matrix
+from .geometry import arm_base_in_footprint, planar, tool_frame_facing
 
 CATEGORY = "wall"
 TOOLS = ("taping_tool", "spray_gun", "sander")

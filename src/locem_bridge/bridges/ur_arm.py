@@ -52,7 +52,8 @@ from locem_bridge.locem.errors import Aborted
 
 from .config import need
 from .errors import BadRequest, DeviceFault, LinkDown, MotionTimeout, NotConnected, SafetyStop
-from .geometry import angle_between, distance, rotvec_to_matrix
+from locem_bridge.common.geometry import angle_between, rotvec_to_matrix
+from .geometry import distance
 from .interfaces import Arm, Health, Waiter
 
 log = logging.getLogger(__name__)

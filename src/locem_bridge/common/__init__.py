@@ -7,8 +7,9 @@ Modules (each one concept):
 * :mod:`.rate`           a fixed-rate loop timer for device loops
 * :mod:`.config_errors`  one-line configuration errors and the one YAML reader of configuration files
 * :mod:`.can_bus`        opening the base's CAN bus (allowed interfaces, own-echo filter; bridge and simulator)
+* :mod:`.geometry`       angle wrapping, rotation vectors / matrices / RPY / quaternions, rigid transforms
 
 Anything that crosses layers (LOCEM codes, task statuses, the next-action record, health grading, geometry,
-CAN bus opening) belongs here, never copied into a layer. Modules here import only the standard library and
-numpy, never another ``locem_bridge`` package.
+CAN bus opening) belongs here, never copied into a layer. Modules here import only the standard library, numpy
+and PyYAML (python-can inside :mod:`.can_bus`'s functions), never another ``locem_bridge`` package.
 """

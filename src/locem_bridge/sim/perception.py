@@ -23,6 +23,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..common.finish import BARE, SANDED, SPRAYED
+from ..common.geometry import wrap_angle
 from .site import Area, Site, Wall, _r
 
 #: fraction of an area's cells that must be sprayed (sanded) for the scan to report it sprayed (sanded)
@@ -51,10 +52,6 @@ def area_finish(outcome: Any, area: Area) -> str:
     if spray < FINISHED_FRACTION:
         return BARE
     return SANDED if sand >= FINISHED_FRACTION else SPRAYED
-
-
-def _angle_wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 class WallScanner:
@@ -91,7 +88,7 @@ class WallScanner:
         rel = pts2 - sensor
         dist = np.hypot(rel[:, 0], rel[:, 1])
         ang = np.arctan2(rel[:, 1], rel[:, 0]) - heading
-        ang = (ang + np.pi) % (2 * np.pi) - np.pi
+        ang = wrap_angle(ang)
         in_front = float((sensor - wall.p0) @ wall.n[:2]) > 0.0
         return (dist <= self.range) & (np.abs(ang) <= self.fov / 2.0) & in_front
 

@@ -40,6 +40,7 @@ import pybullet as pb
 from .clock import SimClock
 from .config import TOOL_NAMES, find_example_robot_data, resolve_arm_urdf  # noqa: F401 (re-exported)
 from .errors import SimConfigError, SimStateError
+from ..common.geometry import matrix_to_quat, quat_to_rotvec, rotvec_to_quat
 from ..common.mecanum import MecanumKinematics
 from ..common.rate import FixedRate
 from .outcome import OutcomeRecorder
@@ -49,43 +50,6 @@ from .site import Site
 log = logging.getLogger(__name__)
 
 BASE_SUBSTEP = 0.01    # sim s: the base pose is integrated through wheel angles at most this far apart
-
-
-def rotvec_to_quat(rv: Sequence[float]) -> Tuple[float, float, float, float]:
-    rv = np.asarray(rv, dtype=float)
-    angle = float(np.linalg.norm(rv))
-    if angle < 1e-12:
-        return (0.0, 0.0, 0.0, 1.0)
-    axis = rv / angle
-    s = math.sin(angle / 2.0)
-    return (axis[0] * s, axis[1] * s, axis[2] * s, math.cos(angle / 2.0))
-
-
-def quat_to_rotvec(q: Sequence[float]) -> List[float]:
-    x, y, z, w = q
-    if w < 0:
-        x, y, z, w = -x, -y, -z, -w
-    s = math.sqrt(max(0.0, 1.0 - w * w))
-    angle = 2.0 * math.atan2(s, w)
-    if s < 1e-12:
-        return [0.0, 0.0, 0.0]
-    return [x / s * angle, y / s * angle, z / s * angle]
-
-
-def _quat_from_matrix(m: np.ndarray) -> Tuple[float, float, float, float]:
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = math.sqrt(tr + 1.0) * 2
-        return ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s)
-    i = int(np.argmax([m[0, 0], m[1, 1], m[2, 2]]))
-    j, k = (i + 1) % 3, (i + 2) % 3
-    s = math.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k]) * 2
-    q = [0.0, 0.0, 0.0, 0.0]
-    q[i] = 0.25 * s
-    q[j] = (m[j, i] + m[i, j]) / s
-    q[k] = (m[k, i] + m[i, k]) / s
-    q[3] = (m[k, j] - m[j, k]) / s
-    return tuple(q)  # type: ignore
 
 
 class World:
@@ -302,7 +266,7 @@ class World:
         """Position and quaternion (x, y, z, w) of the UR controller ``base`` frame in map (the placement the
         last :meth:`_place_robot` cached)."""
         rot, origin = self._ur_base_in_map
-        return origin.tolist(), list(_quat_from_matrix(rot))
+        return origin.tolist(), list(matrix_to_quat(rot))
 
     def wall_contact(self, tcp_pose: Sequence[float]) -> Optional[Tuple[float, List[float]]]:
         """Contact provider for the UR stand-in (``set_contact_provider``): how deep the TCP (a pose in the UR
@@ -345,7 +309,7 @@ class World:
         rot = np.column_stack([x, np.cross(z, x), z])
         p, q = self.arm_base_pose()
         ip, iq = pb.invertTransform(p, q)
-        out_p, out_q = pb.multiplyTransforms(ip, iq, list(position), _quat_from_matrix(rot))
+        out_p, out_q = pb.multiplyTransforms(ip, iq, list(position), matrix_to_quat(rot))
         return list(out_p) + quat_to_rotvec(out_q)
 
     def map_to_arm_base(self, point: Sequence[float]) -> List[float]:
@@ -372,7 +336,7 @@ class World:
         else:
             tcp = self.tools_cfg[self.mounted_tool]["tcp"]
             off, oq = tcp[:3], rotvec_to_quat(tcp[3:])
-        tq = _quat_from_matrix(rot)
+        tq = matrix_to_quat(rot)
         ioff, ioq = pb.invertTransform(off, oq)
         fpos, forn = pb.multiplyTransforms(list(position), tq, ioff, ioq)
         c = self._cid

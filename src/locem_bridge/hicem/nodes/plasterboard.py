@@ -13,14 +13,11 @@ from typing import Any, Dict, List, Tuple
 
 from py_trees.common import Status
 
+from ...common.geometry import wrap_angle
 from ..errors import HicemError, PortError
 from ..interfaces import local_name
 from ..node_base import Leaf
 from ..ports import ANY, FLOAT, FLOAT_LIST, INT, JSON, STRING, STRING_LIST, input_port, output_port
-
-
-def _norm_angle(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
 
 
 class TagIdNameToObjectId(Leaf):
@@ -59,7 +56,7 @@ def _wall_frame(hdh: Any, wall_id: str) -> Tuple[List[float], List[float]]:
 
 def _facing(normal: List[float], yaw_offset: float) -> float:
     """Base heading that faces the wall (base x axis against the inward normal) plus an offset."""
-    return _norm_angle(math.atan2(-normal[1], -normal[0]) + yaw_offset)
+    return wrap_angle(math.atan2(-normal[1], -normal[0]) + yaw_offset)
 
 
 def _joint_ends(j: Dict[str, Any], max_tilt: float) -> Tuple[List[float], List[float]]:
@@ -297,7 +294,7 @@ class PlanTransit(Leaf):
         if not isinstance(here, (list, tuple)) or len(here) != 3 or len(goal) != 3 or len(transit) < 2:
             raise PortError("%s: here and goal must be [x, y, theta] and transit [x, y, ...], got %r, %r, %r"
                             % (self.name, here, goal, transit))
-        turn = abs(_norm_angle(float(goal[2]) - float(here[2])))
+        turn = abs(wrap_angle(float(goal[2]) - float(here[2])))
         if turn <= self.get("max_turn"):
             waypoints = [goal]
         else:
