@@ -59,6 +59,8 @@ MASTER_TIMEOUT_MS = 500
 class Cia402Base(Base):
     """The base backend (see the module docstring). ``cfg`` is ``robot.base``."""
 
+    capabilities = frozenset({Base.LOCALISATION})
+
     def __init__(self, cfg: Mapping[str, Any], eds_path: str, initial_pose: Tuple[float, float, float] = (0.0, 0.0, 0.0),
                  bus: Any = None) -> None:
         w = "robot.base"

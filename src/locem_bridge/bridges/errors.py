@@ -14,6 +14,8 @@ class                      LOCEM code          raised when
 :class:`BadRequest`        INVALID_ARGUMENT    arguments are well-formed but impossible (unknown pose name,
                                                unreachable point, wrong tool)
 :class:`MotionTimeout`     TIMEOUT             a motion did not end within its path-length deadline
+:class:`NotSupported`      INVALID_COMMAND     the backend lacks the optional capability a command needs
+                                               (:meth:`~.interfaces.Backend.supports` says so beforehand)
 =========================  ==================  ===========================================================
 """
 
@@ -73,3 +75,9 @@ class BadRequest(BridgeError):
 
 class MotionTimeout(BridgeError):
     code = Code.TIMEOUT
+
+
+class NotSupported(BridgeError):
+    """A call into an optional capability group (:mod:`.interfaces`) the backend does not declare."""
+
+    code = Code.INVALID_COMMAND

@@ -16,7 +16,9 @@ when the link is not up, the device state starts with ``fault`` or ``safety``, o
 import abc
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional, Sequence
+from typing import Any, Callable, ClassVar, Dict, FrozenSet, List, Mapping, NoReturn, Optional, Sequence, Tuple
+
+from .errors import NotSupported
 
 try:  # typing.Protocol is 3.8+
     from typing import Protocol
@@ -110,9 +112,44 @@ def health_level(health: Dict[str, Any]) -> int:
 
 
 class Backend(abc.ABC):
-    """What every backend offers."""
+    """What every backend offers, and how an optional capability is declared.
+
+    A concrete backend **must** implement every abstract method of its device kind's interface (:class:`Arm`,
+    :class:`Compressor`, :class:`Base`) and set the attributes that interface annotates (in ``__init__``, from its
+    ``robot.<kind>`` section). It **may** implement optional capability groups: ``OPTIONAL`` of the interface names
+    each group and its methods; a backend lists the groups it implements in ``capabilities`` and overrides every
+    method of them. Callers ask :meth:`supports` before they use a group (never ``hasattr``); a method of a group
+    the backend does not declare raises :class:`~.errors.NotSupported` (``INVALID_COMMAND``).
+    ``test/bridges/test_device_interfaces.py`` checks every backend of :mod:`.backends` against this.
+
+    Errors of every method are :mod:`.errors` classes: :class:`~.errors.NotConnected` (``NOT_READY``) before the
+    link first came up, :class:`~.errors.LinkDown` / :class:`~.errors.DeviceFault` (``HARDWARE_ERROR``) for a
+    lost link or a device fault, :class:`~.errors.BadRequest` (``INVALID_ARGUMENT``) for well-formed but
+    impossible arguments; a long operation also ends with ``Aborted`` when its waiter is cancelled.
+    """
 
     kind = "device"
+    #: optional capability groups of this device kind: group name -> the methods that make it up
+    OPTIONAL: ClassVar[Mapping[str, Tuple[str, ...]]] = {}
+    #: the optional groups this backend implements (a subset of ``OPTIONAL``)
+    capabilities: ClassVar[FrozenSet[str]] = frozenset()
+
+    def supports(self, capability: str) -> bool:
+        """Whether this backend implements the optional group ``capability`` (ValueError for an unknown name)."""
+        if capability not in self.OPTIONAL:
+            raise ValueError("%s has no optional capability '%s'; known: %s"
+                             % (self.kind, capability, ", ".join(sorted(self.OPTIONAL)) or "none"))
+        return capability in self.capabilities
+
+    def require(self, capability: str) -> None:
+        """Raise :class:`~.errors.NotSupported` (``INVALID_COMMAND``) unless :meth:`supports` ``capability``:
+        a command that cannot run without the group refuses before anything moves."""
+        if not self.supports(capability):
+            self._unsupported(capability)
+
+    def _unsupported(self, capability: str) -> NoReturn:
+        raise NotSupported("this robot's %s (%s) has no %s capability" % (self.kind, type(self).__name__, capability),
+                           device=self.kind)
 
     @abc.abstractmethod
     def start(self) -> None:
@@ -141,57 +178,180 @@ class Backend(abc.ABC):
 
 
 class Arm(Backend):
-    """A 6-axis arm (UR semantics: joint positions in rad, poses ``[x, y, z, rx, ry, rz]`` in the arm base)."""
+    """A 6-axis arm, UR semantics.
+
+    Units and frames: joint positions in rad (``joint_names`` order), joint speeds rad/s, accelerations rad/s^2;
+    poses ``[x, y, z, rx, ry, rz]`` (m, rotation vector in rad) of the TCP in the arm ``base`` frame with the TCP
+    offset of :meth:`set_tcp` applied; linear speeds m/s, accelerations m/s^2; forces N.
+
+    Motions (:meth:`move_joints`, :meth:`move_linear`, :meth:`move_path`) block until the arm stands still at the
+    target and return ``{"q": [...], "tcp_pose": [...], "duration_s": s}``. They sleep through the ``waiter``
+    (cancel, ``STOP`` and deadlines reach the device at once) and stop the arm before they raise:
+    ``Aborted`` (cancel, :meth:`stop_motion`), :class:`~.errors.MotionTimeout` (over the backend's own
+    path-length deadline), :class:`~.errors.SafetyStop` (protective / emergency stop, latched until
+    :meth:`reset`), :class:`~.errors.DeviceFault` (refused, or ended off target), :class:`~.errors.NotConnected`.
+
+    Optional groups: ``path`` (:meth:`move_path`, one blended controller path) and ``force`` (force mode along
+    one task-frame axis: :meth:`force_mode_start`, :meth:`wait_for_contact`, :meth:`record_force`,
+    :meth:`contact_force`, :meth:`force_mode_stop`).
+    """
 
     kind = "arm"
+    PATH = "path"
+    FORCE = "force"
+    OPTIONAL: ClassVar[Mapping[str, Tuple[str, ...]]] = {
+        PATH: ("move_path",),
+        FORCE: ("force_mode_start", "wait_for_contact", "record_force", "contact_force", "force_mode_stop")}
+
+    #: s, the margin a motion's deadline adds by default (``robot.arm.deadline.margin``); the registry's
+    #: worst-case deadlines add it too
+    MOTION_MARGIN_S = 2.0
+    #: s, what a path may take before it moves (ur_rtde uploads the control script with the waypoints)
+    PATH_UPLOAD_S = 2.0
+    #: m per rad: the weight of rotation when a motion's length mixes translation and rotation (deadlines)
+    ROTATION_WEIGHT = 0.3
+
+    #: joint names, base to wrist (``robot.arm.joint_names``)
     joint_names: Sequence[str] = ()
+    #: named joint poses (rad) of ``robot.arm.named_poses`` (at least ``home``; the wall commands use
+    #: ``wall_ready`` and ``robot.arm.home_via``)
+    named_poses: Mapping[str, List[float]] = {}
+
+    # -- state -------------------------------------------------------------------------------------------
+    @abc.abstractmethod
+    def cached_state(self) -> Dict[str, Any]:
+        """The latest polled state, never blocking: ``q`` (rad), ``qd`` (rad/s), ``tcp`` (pose), ``stamp`` (wall
+        time ``time.time()`` of the sample, s); ``{}`` before the first poll. Read by the TCP-triggered tool
+        switch of the wall commands and by ``joint_states``."""
 
     @abc.abstractmethod
-    def joint_positions(self) -> List[float]: ...
+    def joint_positions(self) -> List[float]:
+        """A fresh read of the joint positions (rad)."""
 
     @abc.abstractmethod
-    def tcp_pose(self) -> List[float]: ...
+    def tcp_pose(self) -> List[float]:
+        """A fresh read of the TCP pose (arm base frame)."""
 
     @abc.abstractmethod
-    def move_joints(self, waiter: Waiter, q: Sequence[float], speed: float, accel: float) -> Dict[str, Any]: ...
+    def named_pose(self, name: str) -> List[float]:
+        """The joint positions of a named pose; BadRequest (``argument="pose"``) naming the known ones."""
 
     @abc.abstractmethod
-    def move_linear(self, waiter: Waiter, pose: Sequence[float], speed: float, accel: float) -> Dict[str, Any]: ...
+    def inverse_kinematics(self, pose: Sequence[float], qnear: Optional[Sequence[float]] = None) -> List[float]:
+        """Joint positions that put the TCP at ``pose``, the solution closest to ``qnear`` (default: the current
+        joints); BadRequest when the pose is not reachable."""
+
+    # -- motions -----------------------------------------------------------------------------------------
+    @abc.abstractmethod
+    def move_joints(self, waiter: Waiter, q: Sequence[float], speed: float, accel: float) -> Dict[str, Any]:
+        """Synchronised joint move to ``q`` (rad); ``speed`` of the leading joint (rad/s), ``accel`` rad/s^2."""
 
     @abc.abstractmethod
-    def stop_motion(self, reason: str = "") -> None: ...
+    def move_linear(self, waiter: Waiter, pose: Sequence[float], speed: float, accel: float) -> Dict[str, Any]:
+        """Straight TCP move to ``pose`` (arm base frame), ``speed`` m/s, ``accel`` m/s^2; ends within 1 mm."""
+
+    def move_path(self, waiter: Waiter, poses: Sequence[Sequence[float]], speed: float, accel: float,
+                  blends: Sequence[float]) -> Dict[str, Any]:
+        """Optional group ``path``: straight segments through ``poses`` as ONE controller motion; interior
+        waypoint i is rounded within ``blends[i]`` m without stopping (0 stops there), the last is reached
+        exactly and at rest. BadRequest before anything moves for a blend radius larger than half of a
+        neighbouring segment or a count of radii other than one per pose. Result as the other motions, plus
+        ``waypoints``."""
+        self._unsupported(self.PATH)
 
     @abc.abstractmethod
-    def set_tcp(self, pose: Sequence[float]) -> None: ...
+    def stop_motion(self, reason: str = "") -> None:
+        """Decelerate now and end force mode; the running motion ends ``Aborted`` naming ``reason``. Never
+        raises."""
+
+    # -- settings and I/O --------------------------------------------------------------------------------
+    @abc.abstractmethod
+    def set_tcp(self, pose: Sequence[float]) -> None:
+        """TCP offset from the flange, ``[x, y, z, rx, ry, rz]`` (m, rad)."""
 
     @abc.abstractmethod
-    def set_payload(self, mass: float, cog: Sequence[float]) -> None: ...
+    def set_payload(self, mass: float, cog: Sequence[float]) -> None:
+        """Payload ``mass`` (kg) and centre of gravity ``cog`` (m, flange frame)."""
 
     @abc.abstractmethod
-    def set_digital_output(self, index: int, value: bool) -> None: ...
+    def set_digital_output(self, index: int, value: bool) -> None:
+        """Switch standard digital output ``index`` (0..7); returns once the controller reports the change
+        (DeviceFault when it does not within 1 s)."""
+
+    @abc.abstractmethod
+    def digital_outputs(self) -> List[bool]:
+        """The standard digital outputs DO0..DO7 as last polled."""
 
     @abc.abstractmethod
     def reset(self, waiter: Waiter) -> Dict[str, Any]:
-        """Operator reset after a safety stop whose cause is gone."""
+        """Operator reset after a safety stop whose cause is gone: ``{"cleared": text, "steps": [...]}``;
+        DeviceFault when the arm does not come back."""
+
+    # -- optional group: force -----------------------------------------------------------------------------
+    def force_mode_start(self, task_frame: Sequence[float], force: float, speed_limit: float) -> None:
+        """Optional group ``force``: push with ``force`` N along the z axis of ``task_frame`` (a pose in the arm
+        base frame), compliant along that axis only, at most ``speed_limit`` m/s along it. Motions meanwhile
+        run along the other axes; their end check ignores the compliant axis."""
+        self._unsupported(self.FORCE)
+
+    def wait_for_contact(self, waiter: Waiter, tolerance: float, max_travel: float, timeout: float) -> float:
+        """Optional group ``force``: wait until the force along the axis is within ``tolerance`` N of the
+        set-point and return it; DeviceFault when the tool first travels ``max_travel`` m or ``timeout`` s
+        pass."""
+        self._unsupported(self.FORCE)
+
+    def record_force(self, on: bool) -> None:
+        """Optional group ``force``: start / stop recording the contact force (see :meth:`force_mode_stop`)."""
+        self._unsupported(self.FORCE)
+
+    def contact_force(self) -> float:
+        """Optional group ``force``: the force (N) along the force-mode axis now (0 outside force mode)."""
+        self._unsupported(self.FORCE)
+
+    def force_mode_stop(self) -> Dict[str, float]:
+        """Optional group ``force``: leave force mode (idempotent, never raises); the recorded force along the
+        axis: ``samples`` and, when there are any, ``mean``, ``min``, ``max`` (N)."""
+        self._unsupported(self.FORCE)
 
 
 class Compressor(Backend):
-    """A spray compressor: motor, pressure set-point, measured pressure, spray valve."""
+    """A spray compressor: motor, pressure set-point, measured pressure, spray valve. Pressures in bar.
+
+    Reading: :meth:`read` (a fresh request) and :meth:`cached` (the latest poll) return ``pressure``,
+    ``setpoint`` (bar), ``motor_running``, ``valve_open``, ``in_range`` (pressure inside ``pressure_range``),
+    ``fault`` (text, ``none`` when there is none) and ``fault_active``. Writes check the link first
+    (:class:`~.errors.LinkDown` when no poll succeeded recently, :class:`~.errors.NotConnected` until the safe
+    state after start, valve closed and motor off, is confirmed).
+    """
 
     kind = "compressor"
 
+    #: (low, high) bar: the working band the spray valve may open in (``robot.compressor.pressure_range``)
+    pressure_range: Tuple[float, float]
+    #: bar, the highest set-point this compressor accepts (``robot.compressor.max_setpoint``)
+    max_setpoint: float
+    #: Hz, how often the backend polls the device (the period :meth:`cached` is refreshed at)
+    poll_rate: float
+
     @abc.abstractmethod
     def read(self) -> Dict[str, Any]:
-        """A fresh reading: pressure, setpoint (bar), motor_running, valve_open, in_range, fault_code."""
+        """A fresh reading (see the class docstring)."""
 
     @abc.abstractmethod
-    def set_motor(self, on: bool) -> None: ...
+    def cached(self) -> Dict[str, Any]:
+        """The latest polled reading, never blocking (``{}`` before the first poll)."""
 
     @abc.abstractmethod
-    def set_setpoint(self, bar: float) -> None: ...
+    def set_motor(self, on: bool) -> None:
+        """Motor on / off (off closes the valve first)."""
 
     @abc.abstractmethod
-    def set_valve(self, open_: bool) -> None: ...
+    def set_setpoint(self, bar: float) -> None:
+        """Pressure set-point, bar."""
+
+    @abc.abstractmethod
+    def set_valve(self, open_: bool) -> None:
+        """Spray valve open / closed."""
 
     @abc.abstractmethod
     def check_link(self) -> None:
@@ -199,16 +359,30 @@ class Compressor(Backend):
 
 
 class Base(Backend):
-    """An omnidirectional mobile base with odometry in the ``map`` frame."""
+    """An omnidirectional mobile base with odometry in the ``map`` frame.
+
+    Poses ``[x, y, theta]`` of base_footprint in ``map`` (m, rad, REP 103), twists ``[vx, vy, wz]`` in the base
+    frame (m/s, rad/s). Optional group ``localisation``: :meth:`correct_pose` takes external pose fixes.
+    """
 
     kind = "base"
+    LOCALISATION = "localisation"
+    OPTIONAL: ClassVar[Mapping[str, Tuple[str, ...]]] = {LOCALISATION: ("correct_pose",)}
+
+    #: named poses ``[x, y, theta]`` of ``robot.base.named_poses`` (plus the node's ``~named_poses``)
+    named_poses: Mapping[str, List[float]] = {}
 
     @abc.abstractmethod
     def pose(self) -> List[float]:
         """``[x, y, theta]`` of base_footprint in map (odometry from the initial pose)."""
 
     @abc.abstractmethod
-    def set_pose(self, x: float, y: float, theta: float) -> None: ...
+    def set_pose(self, x: float, y: float, theta: float) -> None:
+        """Where the base is in the map now (resets odometry)."""
+
+    @abc.abstractmethod
+    def named_pose(self, name: str) -> List[float]:
+        """The pose of a named place; BadRequest (``argument="name"``) naming the known ones."""
 
     @abc.abstractmethod
     def twist(self) -> List[float]:
@@ -220,11 +394,35 @@ class Base(Backend):
 
     @abc.abstractmethod
     def goto(self, waiter: Waiter, x: float, y: float, theta: float, tolerance: float, angle_tolerance: float,
-             speed: float) -> Dict[str, Any]: ...
+             speed: float) -> Dict[str, Any]:
+        """Drive closed loop to ``(x, y, theta)`` in map until within ``tolerance`` m / ``angle_tolerance`` rad
+        and still; ``speed`` m/s. Returns ``pose``, ``error_xy``, ``error_theta``, ``duration_s``; raises
+        ``Aborted`` (:meth:`halt`, cancel), :class:`~.errors.MotionTimeout`, :class:`~.errors.DeviceFault`."""
+
+    @abc.abstractmethod
+    def halt(self) -> None:
+        """Zero velocity now; a running :meth:`goto` ends ``Aborted``. Never raises."""
+
+    @abc.abstractmethod
+    def reset(self, waiter: Waiter) -> Dict[str, Any]:
+        """Operator reset after a drive fault (nothing moves): ``{"cleared": text}``."""
+
+    def correct_pose(self, x: float, y: float, theta: float) -> bool:
+        """Optional group ``localisation``: a pose fix in map (m, rad); returns whether it was taken (a base
+        may ignore fixes while it moves)."""
+        self._unsupported(self.LOCALISATION)
 
 
 class Scanner(abc.ABC):
-    """Wall feature detection behind SCAN (result shape: docs/contracts.md)."""
+    """Wall feature detection behind SCAN (no link of its own: built, never started)."""
+
+    kind = "scanner"
 
     @abc.abstractmethod
-    def scan(self, base_pose: Sequence[float]) -> Dict[str, Any]: ...
+    def scan(self, base_pose: Sequence[float]) -> Dict[str, Any]:
+        """The wall features visible from ``base_pose`` (``[x, y, theta]`` in map): ``stamp``, ``walls``,
+        ``joints``, ``areas`` in the map frame (shape: docs/contracts.md)."""
+
+
+#: the interface of each device kind of :data:`.backends.BACKENDS`
+INTERFACES: Dict[str, type] = {"arm": Arm, "compressor": Compressor, "base": Base, "scanner": Scanner}

@@ -64,19 +64,21 @@ SAFETY_NAMES = {1: "NORMAL", 2: "REDUCED", 3: "PROTECTIVE_STOP", 4: "RECOVERY", 
 ROBOT_RUNNING = 7
 STOP_DECEL_J = 10.0                      # rad/s^2 used by stopJ (1 rad/s stops in 0.1 s)
 STOP_DECEL_L = 5.0                       # m/s^2 used by stopL
-MOTION_MARGIN_S = 2.0
+MOTION_MARGIN_S = Arm.MOTION_MARGIN_S    # s, default deadline margin (these three: the arm contract, :class:`~.interfaces.Arm`)
 JOINT_TOL = 2e-3                         # rad, "at the target" for joint moves
 LINEAR_TOL = 1e-3                        # m, "at the target" for linear moves
 REQUEST_TIMEOUT = 3.0
-PATH_UPLOAD_S = 2.0                      # s, budget for ur_rtde's script re-upload before a path starts
+PATH_UPLOAD_S = Arm.PATH_UPLOAD_S    # s, budget for ur_rtde's script re-upload before a path starts
 PATH_CALL_TIMEOUT = 10.0                 # s, the movePath request (stop script, upload, wait until it runs)
-ROTATION_WEIGHT = 0.3                    # m per rad when a path length mixes translation and rotation
+ROTATION_WEIGHT = Arm.ROTATION_WEIGHT    # m per rad when a path length mixes translation and rotation
 WATCHDOG_HZ = 1.0                        # min frequency of the controller's RTDE watchdog (see the docstring)
 FORCE_FREE_SPEED = 2.0                   # m/s, force-mode limit entry of the non-compliant axes (unused by type 2)
 
 
 class UrRtdeArm(Arm):
     """The UR arm backend (see the module docstring). ``cfg`` is ``robot.arm``."""
+
+    capabilities = frozenset({Arm.PATH, Arm.FORCE})
 
     def __init__(self, cfg: Mapping[str, Any], poll_rate: float = 50.0, connect_timeout: float = 20.0) -> None:
         self.host = need(cfg, "controller.host", str, where="robot.arm")
@@ -580,7 +582,3 @@ def _kill(proc: subprocess.Popen) -> None:
 def _fmt(values: Sequence[float]) -> str:
     return "[" + ", ".join("%.4f" % v for v in values) + "]"
 
-
-def joint_travel_bound(speed: float, accel: float) -> float:
-    """Registry deadline of a joint move before the start is known: a full turn of the farthest joint."""
-    return 2.0 * math.pi / speed + 2.0 * speed / accel + MOTION_MARGIN_S + 1.0
