@@ -13,7 +13,7 @@ from locem_bridge.locem.registry import Arg, CommandSpec
 
 from .errors import BadRequest
 from locem_bridge.common.geometry import angle_between
-from .ur_arm import MOTION_MARGIN_S, PATH_UPLOAD_S, ROTATION_WEIGHT, UrRtdeArm, joint_travel_bound
+from .interfaces import Arm
 
 CATEGORY = "arm"
 _ARM = frozenset({"arm"})
@@ -21,6 +21,12 @@ TWO_PI = 2.0 * math.pi
 REACH = 1.5                     # m, bound of TCP coordinates accepted (UR10e reach 1.3 m + tool)
 MAX_PATH_POINTS = 50
 MAX_BLEND = 0.5                 # m, largest blend radius accepted (ur_rtde allows up to 2 m)
+MOTION_MARGIN_S, PATH_UPLOAD_S, ROTATION_WEIGHT = Arm.MOTION_MARGIN_S, Arm.PATH_UPLOAD_S, Arm.ROTATION_WEIGHT
+
+
+def joint_travel_bound(speed: float, accel: float) -> float:
+    """Registry deadline of a joint move before the start is known: a full turn of the farthest joint."""
+    return 2.0 * math.pi / speed + 2.0 * speed / accel + MOTION_MARGIN_S + 1.0
 
 
 def _joints() -> tuple:
@@ -160,7 +166,7 @@ class ArmCommands:
 
     name = "arm"
 
-    def __init__(self, arm: UrRtdeArm) -> None:
+    def __init__(self, arm: Arm) -> None:
         self.arm = arm
 
     def specs(self) -> Iterable[CommandSpec]:
@@ -187,6 +193,7 @@ class ArmCommands:
         return self.arm.move_linear(ctx, [x, y, z, rx, ry, rz], speed, accel)
 
     def move_path(self, ctx: Any, waypoints: str, speed: float, accel: float, blend: float) -> Dict[str, Any]:
+        self.arm.require(Arm.PATH)
         points, own = parse_path(waypoints)
         radii = [blend if b is None else b for b in own]
         return self.arm.move_path(ctx, points, speed, accel, radii)

@@ -10,8 +10,8 @@ from typing import Any, Dict, Iterable
 
 from locem_bridge.locem.registry import Arg, CommandSpec
 
-from .cia402_base import Cia402Base
 from locem_bridge.common.geometry import wrap_angle
+from .interfaces import Base
 
 CATEGORY = "base"
 _BASE = frozenset({"base"})
@@ -74,7 +74,7 @@ class BaseCommands:
 
     name = "base"
 
-    def __init__(self, base: Cia402Base) -> None:
+    def __init__(self, base: Base) -> None:
         self.base = base
 
     def specs(self) -> Iterable[CommandSpec]:

@@ -12,8 +12,7 @@ from locem_bridge.locem.errors import NotReady
 from locem_bridge.locem.registry import Arg, CommandSpec
 
 from .errors import DeviceFault
-from .interfaces import Waiter
-from .modbus_compressor import ModbusCompressor
+from .interfaces import Compressor, Waiter
 
 CATEGORY = "compressor"
 _RES = frozenset({"compressor"})
@@ -55,7 +54,7 @@ def _public(state: Dict[str, Any]) -> Dict[str, Any]:
     return {k: state[k] for k in keys if k in state}
 
 
-def wait_for_pressure(compressor: ModbusCompressor, waiter: Waiter, setpoint: float, tolerance: float,
+def wait_for_pressure(compressor: Compressor, waiter: Waiter, setpoint: float, tolerance: float,
                       timeout: float) -> Dict[str, Any]:
     """Poll until |pressure - setpoint| <= tolerance; raises on link loss, fault or ``timeout``."""
     start = time.monotonic()
@@ -80,7 +79,7 @@ class CompressorCommands:
 
     name = "compressor"
 
-    def __init__(self, compressor: ModbusCompressor) -> None:
+    def __init__(self, compressor: Compressor) -> None:
         self.compressor = compressor
 
     def specs(self) -> Iterable[CommandSpec]:
@@ -98,11 +97,11 @@ class CompressorCommands:
 
     # -- handlers ----------------------------------------------------------------------------------------
     def on(self, ctx: Any) -> Dict[str, Any]:
-        c = self.compressor
-        c.set_motor(True)
+        comp = self.compressor
+        comp.set_motor(True)
         end = time.monotonic() + 2.0
         while True:
-            state = c.read()
+            state = comp.read()
             if state["motor_running"]:
                 return _public(state)
             if state["fault_active"] or time.monotonic() > end:
@@ -114,17 +113,17 @@ class CompressorCommands:
         return _public(self.compressor.read())
 
     def set_pressure(self, ctx: Any, pressure: float, wait: bool, tolerance: float) -> Dict[str, Any]:
-        c = self.compressor
-        if pressure > c.max_setpoint:
+        comp = self.compressor
+        if pressure > comp.max_setpoint:
             from .errors import BadRequest
             raise BadRequest("SET_PRESSURE: pressure %.2f bar exceeds this compressor's max_setpoint %.2f bar"
-                             % (pressure, c.max_setpoint), device="compressor", argument="pressure")
-        c.set_setpoint(pressure)
+                             % (pressure, comp.max_setpoint), device="compressor", argument="pressure")
+        comp.set_setpoint(pressure)
         if not wait:
-            return _public(c.read())
-        if not c.read()["motor_running"] and pressure > tolerance:
+            return _public(comp.read())
+        if not comp.read()["motor_running"] and pressure > tolerance:
             raise NotReady("SET_PRESSURE: the motor is off, the pressure cannot rise; send COMPRESSOR_ON first")
-        state = wait_for_pressure(c, ctx, pressure, tolerance, timeout=max(1.0, ctx.remaining() - 0.5)
+        state = wait_for_pressure(comp, ctx, pressure, tolerance, timeout=max(1.0, ctx.remaining() - 0.5)
                                   if hasattr(ctx, "remaining") else 55.0)
         out = _public(state)
         out["waited_s"] = state["waited_s"]
@@ -137,14 +136,14 @@ class CompressorCommands:
         return out
 
     def spray_on(self, ctx: Any) -> Dict[str, Any]:
-        c = self.compressor
-        state = c.read()
-        lo, hi = c.pressure_range
+        comp = self.compressor
+        state = comp.read()
+        lo, hi = comp.pressure_range
         if not lo <= state["pressure"] <= hi:
             raise NotReady("SPRAY_ON: pressure %.2f bar is outside the working band %.2f..%.2f bar; "
                            "SET_PRESSURE first" % (state["pressure"], lo, hi))
-        c.set_valve(True)
-        return _public(c.read())
+        comp.set_valve(True)
+        return _public(comp.read())
 
     def spray_off(self, ctx: Any) -> Dict[str, Any]:
         self.compressor.set_valve(False)

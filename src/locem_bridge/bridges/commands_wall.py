@@ -31,6 +31,7 @@ from .commands_compressor import wait_for_pressure
 from .errors import BadRequest, BridgeError
 from locem_bridge.common.geometry import angle_between, invert, matrix_to_pose, pose_to_matrix
 from .geometry import arm_base_in_footprint, planar, tool_frame_facing
+from .interfaces import Arm, Base, Compressor, Scanner
 
 CATEGORY = "wall"
 TOOLS = ("taping_tool", "spray_gun", "sander")
@@ -169,7 +170,7 @@ class LaneSwitch:
     #: longest prediction (s of wall time); a stalled state poll is not extrapolated further
     MAX_LEAD_S = 0.1
 
-    def __init__(self, ctx: Any, arm: Any, switch: Callable[[bool], None], a: Sequence[float], b: Sequence[float],
+    def __init__(self, ctx: Any, arm: Arm, switch: Callable[[bool], None], a: Sequence[float], b: Sequence[float],
                  f_on: float, f_off: float, clock: Callable[[], float] = time.time) -> None:
         """``clock``: wall time in s, the clock of the arm state's ``stamp``."""
         self._ctx, self._arm, self._raw_switch, self._clock = ctx, arm, switch, clock
@@ -238,7 +239,7 @@ class RasterSwitch(LaneSwitch):
     """:class:`LaneSwitch` for a whole raster driven as one blended path: the tool is on while the (predicted)
     TCP is on the worked stretch of any lane (fraction 0..1 of the stretch, within ``reach`` of its line)."""
 
-    def __init__(self, ctx: Any, arm: Any, switch: Callable[[bool], None],
+    def __init__(self, ctx: Any, arm: Arm, switch: Callable[[bool], None],
                  stretches: Sequence[Sequence[Sequence[float]]], reach: float,
                  clock: Callable[[], float] = time.time) -> None:
         super().__init__(ctx, arm, switch, stretches[0][0], stretches[0][1], 0.0, 1.0, clock)
@@ -267,8 +268,8 @@ class WallCommands:
 
     name = "wall"
 
-    def __init__(self, robot_cfg: Mapping[str, Any], arm: Any = None, base: Any = None, compressor: Any = None,
-                 scanner: Any = None) -> None:
+    def __init__(self, robot_cfg: Mapping[str, Any], arm: Optional[Arm] = None, base: Optional[Base] = None,
+                 compressor: Optional[Compressor] = None, scanner: Optional[Scanner] = None) -> None:
         self.tools = dict(robot_cfg.get("tools", {}))
         mount = robot_cfg.get("arm", {}).get("mount", {})
         self.mount = arm_base_in_footprint(mount.get("xyz", [0.0, 0.0, 0.0]), mount.get("rpy", [0.0, 0.0, 0.0]))
@@ -470,7 +471,7 @@ class WallCommands:
         heights = [height * k / (lanes - 1) for k in range(lanes)] if lanes > 1 else [height / 2.0]
         runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN
         start = time.monotonic()
-        if hasattr(arm, "move_path") and len(heights) > 1:
+        if arm.supports(Arm.PATH) and len(heights) > 1:
             return self._raster_path(ctx, tool, o, uu, up, n, width, heights, speed, offset, run_in, start)
         total = 0.0
         s1 = width + run_in
@@ -563,7 +564,7 @@ class WallCommands:
         lane is followed under force control, then force mode ends and the tool lifts back to the standoff."""
         self._need_tool("sander")
         arm = self._need("arm")
-        if contact != "force" or not hasattr(arm, "force_mode_start"):
+        if contact != "force" or not arm.supports(Arm.FORCE):
             try:
                 out = self._raster(ctx, "sander", [ox, oy, oz], [ux, uy, uz], width, height, [nx, ny, nz], spacing,
                                    speed, 0.0, run_in=0.0)

@@ -22,6 +22,7 @@ from locem_bridge.common.config_errors import ConfigError
 
 from .backends import backend_class
 from .config import need, resolve_path
+from .interfaces import Backend
 
 ALL_DEVICES = ("arm", "compressor", "base", "scanner")
 
@@ -37,8 +38,8 @@ class Robot:
         return self.backends.get(kind)
 
     def start(self) -> None:
-        for kind, backend in self.backends.items():
-            if hasattr(backend, "start") and kind != "scanner":
+        for backend in self.backends.values():
+            if isinstance(backend, Backend):          # a scanner has no link to start
                 backend.start()
 
     def close(self) -> None:

@@ -66,6 +66,7 @@ class LocemDevices:
         self._lock = threading.Lock()
 
     def start(self) -> None:
+        from locem_bridge.bridges.interfaces import Base
         arm, base = self.robot.get("arm"), self.robot.get("base")
         self._status_pub = rospy.Publisher("~status", Status, queue_size=100)
         self._diag_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
@@ -76,7 +77,7 @@ class LocemDevices:
             self._odom_pub = rospy.Publisher("odom", Odometry, queue_size=10)
             self._tf = tf2_ros.TransformBroadcaster()
             self._cmd_sub = rospy.Subscriber("cmd_vel", Twist, self._on_cmd_vel, queue_size=10)
-            if self.localisation_topic and hasattr(base, "correct_pose"):
+            if self.localisation_topic and base.supports(Base.LOCALISATION):
                 from geometry_msgs.msg import PoseWithCovarianceStamped
                 self._loc_sub = rospy.Subscriber(self.localisation_topic, PoseWithCovarianceStamped,
                                                  self._on_localisation, queue_size=1)
