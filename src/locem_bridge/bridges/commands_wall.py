@@ -31,7 +31,7 @@ from .commands_compressor import wait_for_pressure
 from .errors import BadRequest, BridgeError
 from locem_bridge.common.geometry import angle_between, invert, matrix_to_pose, pose_to_matrix
 from .geometry import arm_base_in_footprint, planar, tool_frame_facing
-from .interfaces import Arm, Base, Compressor, Scanner
+from .interfaces import Arm, Base, Compressor, Scanner, Waiter
 
 CATEGORY = "wall"
 TOOLS = ("taping_tool", "spray_gun", "sander")
@@ -128,20 +128,23 @@ HOME = CommandSpec(
 SPECS = (SCAN, MOUNT_TOOL, APPLY_TAPE_START, APPLY_TAPE, SPRAY_AREA, SAND_AREA, WALL_READY, HOME)
 
 
-class GuardedWaiter:
-    """A waiter that also runs ``guard()`` (e.g. the compressor link check) whenever it sleeps or checks."""
+class HookedWaiter:
+    """A :class:`~.interfaces.Waiter` that passes everything on to ``ctx`` and runs :meth:`_after_wait` (a
+    subclass's hook) after every sleep and check, i.e. at every wait of a device operation's loop."""
 
-    def __init__(self, ctx: Any, guard: Callable[[], None]) -> None:
+    def __init__(self, ctx: Waiter) -> None:
         self._ctx = ctx
-        self._guard = guard
+
+    def _after_wait(self) -> None:
+        pass
 
     def sleep(self, seconds: float) -> None:
         self._ctx.sleep(seconds)
-        self._guard()
+        self._after_wait()
 
     def check(self) -> None:
         self._ctx.check()
-        self._guard()
+        self._after_wait()
 
     def on_cancel(self, callback: Callable[[], None]) -> None:
         self._ctx.on_cancel(callback)
@@ -150,7 +153,18 @@ class GuardedWaiter:
         self._ctx.report(progress, text)
 
 
-class LaneSwitch:
+class GuardedWaiter(HookedWaiter):
+    """A waiter that also runs ``guard()`` (e.g. the compressor link check) whenever it sleeps or checks."""
+
+    def __init__(self, ctx: Waiter, guard: Callable[[], None]) -> None:
+        super().__init__(ctx)
+        self._guard = guard
+
+    def _after_wait(self) -> None:
+        self._guard()
+
+
+class LaneSwitch(HookedWaiter):
     """A waiter for one raster lane: on every wait of the arm's motion loop it reads the arm's latest TCP and
     switches the tool's process output on while the TCP is between ``f_on`` and ``f_off`` of the lane ``a -> b``
     (fractions of the straight line, arm base frame), off outside. The arm thus accelerates and brakes with the
@@ -170,10 +184,11 @@ class LaneSwitch:
     #: longest prediction (s of wall time); a stalled state poll is not extrapolated further
     MAX_LEAD_S = 0.1
 
-    def __init__(self, ctx: Any, arm: Arm, switch: Callable[[bool], None], a: Sequence[float], b: Sequence[float],
+    def __init__(self, ctx: Waiter, arm: Arm, switch: Callable[[bool], None], a: Sequence[float], b: Sequence[float],
                  f_on: float, f_off: float, clock: Callable[[], float] = time.time) -> None:
         """``clock``: wall time in s, the clock of the arm state's ``stamp``."""
-        self._ctx, self._arm, self._raw_switch, self._clock = ctx, arm, switch, clock
+        super().__init__(ctx)
+        self._arm, self._raw_switch, self._clock = arm, switch, clock
         self._a = np.asarray(a[:3], dtype=float)
         self._ab = np.asarray(b[:3], dtype=float) - self._a
         self._len2 = max(float(self._ab.dot(self._ab)), 1e-12)
@@ -220,26 +235,15 @@ class LaneSwitch:
             if want and self.switched_on_at is None:
                 self.switched_on_at = f
 
-    def sleep(self, seconds: float) -> None:
-        self._ctx.sleep(seconds)
+    def _after_wait(self) -> None:
         self._update()
-
-    def check(self) -> None:
-        self._ctx.check()
-        self._update()
-
-    def on_cancel(self, callback: Callable[[], None]) -> None:
-        self._ctx.on_cancel(callback)
-
-    def report(self, progress: float, text: str = "") -> None:
-        self._ctx.report(progress, text)
 
 
 class RasterSwitch(LaneSwitch):
     """:class:`LaneSwitch` for a whole raster driven as one blended path: the tool is on while the (predicted)
     TCP is on the worked stretch of any lane (fraction 0..1 of the stretch, within ``reach`` of its line)."""
 
-    def __init__(self, ctx: Any, arm: Arm, switch: Callable[[bool], None],
+    def __init__(self, ctx: Waiter, arm: Arm, switch: Callable[[bool], None],
                  stretches: Sequence[Sequence[Sequence[float]]], reach: float,
                  clock: Callable[[], float] = time.time) -> None:
         super().__init__(ctx, arm, switch, stretches[0][0], stretches[0][1], 0.0, 1.0, clock)
