@@ -4,7 +4,8 @@ Layout (one concept per module):
 
 * :mod:`.errors`      one exception hierarchy; every error carries the LOCEM code it maps to;
 * :mod:`.config`      the robot YAML as the bridges read it (addresses, ports, CAN ids, tools, named poses);
-* :mod:`.interfaces`  the small abstract interface of each device kind (arm, compressor, base, scanner);
+* :mod:`.interfaces`  the whole interface of each device kind (arm, compressor, base, scanner) with its
+  optional capability groups; the command sets use nothing else of a backend;
 * :mod:`.backends`    the name -> backend table, imported lazily (no device library is loaded until used);
 * :mod:`.ur_arm` + :mod:`.ur_worker`  ur_rtde in a supervised child process;
 * :mod:`.modbus_compressor`  pymodbus client with polling, retries and the valve-closed-on-return rule;

@@ -1,4 +1,4 @@
-"""The small abstract interface of each device kind, and the health record every backend reports.
+"""The interface of each device kind (the whole surface its callers use), and the health record every backend reports.
 
 A backend owns its link: ``start()`` begins connecting in the background (never blocks on a missing device),
 ``close()`` ends every thread and link. Long operations take a :class:`Waiter` (LOCEM's ``CommandContext``
