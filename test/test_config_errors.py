@@ -101,6 +101,14 @@ def _case_hicem_params(tmp_path):
     return ["--launch-arg", "params_file:=" + path], "%s: hhlc.tick_period_s: must be a finite number, got 'fast'" % path
 
 
+def _case_hicem_node_module(tmp_path):
+    data = yaml.safe_load(open(os.path.join(REPO, "config", "hicem", "plasterboard.yaml")))
+    data["hhlc"]["node_modules"].append("site_nodes_not_there")
+    path = _dump(tmp_path / "params.yaml", data)
+    return (["--launch-arg", "params_file:=" + path], "%s: hhlc.node_modules[3]: cannot import node module "
+            "'site_nodes_not_there': No module named 'site_nodes_not_there'" % path)
+
+
 def _case_tree_xml(tmp_path):
     trees = _copy_dir(tmp_path, "trees")
     bad = trees / "GO_HOME.xml"
@@ -123,8 +131,8 @@ def _case_robot_overrides(tmp_path):
 
 
 CASES = [_case_site_unknown_key, _case_site_bad_value, _case_robot_misspelt_device, _case_robot_missing_key,
-         _case_robot_relative_eds, _case_robot_controller_port, _case_hicem_params, _case_tree_xml, _case_turtle,
-         _case_robot_overrides]
+         _case_robot_relative_eds, _case_robot_controller_port, _case_hicem_params, _case_hicem_node_module,
+         _case_tree_xml, _case_turtle, _case_robot_overrides]
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.__name__[6:] for c in CASES])

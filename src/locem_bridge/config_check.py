@@ -23,14 +23,15 @@ def check_files(site: Optional[str] = None, robot: Optional[str] = None,
     if robot:
         from .bridges.config import load_robot_config
         load_robot_config(robot, robot_overrides or None)
+    params = None
     if params_file:
         from .hicem.config import load_params
-        load_params(params_file)
+        params = load_params(params_file)
     if trees_dir:
         from .hicem.xml_loader import TreeLibrary
         if not os.path.isdir(trees_dir):
             raise ConfigError("trees folder does not exist", file=trees_dir)
-        TreeLibrary().load_directory(trees_dir)
+        TreeLibrary(params.node_registry() if params is not None else None).load_directory(trees_dir)
     if ontology_dir:
         from .pemkre.ontology import load_files
         if not os.path.isdir(ontology_dir):

@@ -2,7 +2,8 @@
 
 :func:`load_params` reads the YAML file; :class:`HicemParams` checks the keys the executive itself needs
 (raising :class:`ConfigError` with the dotted key path) and flattens every leaf into blackboard entries
-``cfg.<section>.<key>`` that trees read as ``{@cfg.<section>.<key>}``.
+``cfg.<section>.<key>`` that trees read as ``{@cfg.<section>.<key>}``. ``hhlc.node_modules`` names the node
+modules whose classes the trees may use (:meth:`HicemParams.node_registry`).
 """
 import math
 import os
@@ -13,6 +14,7 @@ from .datastore import PruneRule
 from ..common.config_errors import read_yaml
 from .errors import ConfigError
 from .health import ModuleSpec
+from .registry import DEFAULT_NODE_MODULES, NODE_MODULES_KEY, NodeRegistry, default_registry
 
 _PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 DEFAULT_PARAMS_FILE = os.path.join(_PACKAGE_DIR, "config", "hicem", "plasterboard.yaml")
@@ -87,6 +89,13 @@ class HicemParams:
             raise ConfigError("must be a list of action types, got %r" % (ride,), key="health.ride_through",
                               allowed="action types whose trees wait for the devices themselves, e.g. [RECOVER]")
         self.ride_through: List[str] = list(ride)
+        hhlc = raw.get("hhlc") if isinstance(raw.get("hhlc"), dict) else {}
+        modules = hhlc.get("node_modules", list(DEFAULT_NODE_MODULES))
+        if not isinstance(modules, list) or not modules:
+            raise ConfigError("must be a non-empty list of node modules, got %r" % (modules,), key=NODE_MODULES_KEY,
+                              allowed="dotted Python module names, e.g. [%s]" % ", ".join(DEFAULT_NODE_MODULES))
+        self.node_modules: List[str] = list(modules)
+        self.node_registry()        # every module imports and declares its nodes: a bad name fails here, in one line
         self.persistent_collections = list(_get(raw, "datastore.persistent_collections", list))
         self.prune_rules = [_entry(PruneRule.from_dict, r, "datastore.prune[%d]" % i)
                             for i, r in enumerate(_get(raw, "datastore.prune", list))]
@@ -98,6 +107,10 @@ class HicemParams:
                      "safe_timeout_s"):
             if getattr(self, name) <= 0:
                 raise ConfigError("%r must be > 0" % getattr(self, name), key=_KEYS[name], allowed="> 0")
+
+    def node_registry(self) -> NodeRegistry:
+        """The node table of the trees: BT.CPP's and HICEM's controls plus the classes of ``hhlc.node_modules``."""
+        return default_registry(modules=self.node_modules)
 
     def blackboard_entries(self) -> Dict[str, Any]:
         return flatten(self.raw)

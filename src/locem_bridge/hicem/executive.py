@@ -42,7 +42,7 @@ def create_executive(pemkre: Any, locem: Any, hdict_path: Optional[str] = None,
     """Build every HICEM part. ``hdict_path`` None keeps everything in memory (no crash recovery)."""
     params = params or load_params(params_file)
     if library is None:
-        library = TreeLibrary()
+        library = TreeLibrary(params.node_registry())
         library.load_directory(trees_dir)
     persistent = SqliteStore(hdict_path, synchronous=params.hdict_synchronous) if hdict_path else None
     store = DataManager(MemoryStore(), persistent, params.persistent_collections, params.prune_rules)

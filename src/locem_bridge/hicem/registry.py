@@ -1,16 +1,23 @@
 """Name → node-class table used by the XML loader, and the Groot2 node catalogue generated from it.
 
+The node classes come from the node modules the HICEM parameters list under ``hhlc.node_modules`` (default
+:data:`DEFAULT_NODE_MODULES`, the shipped library in :mod:`locem_bridge.hicem.nodes`): each is a Python module
+importable by its dotted name that lists its node classes in ``LIBRARY``. An integrator adds nodes of their own
+by adding their module to that list (on the Python path, e.g. in a package of their own), without editing this
+package; a name that cannot be imported is a :class:`~.errors.ConfigError` naming the key and the module.
+
 The catalogue (``trees/node_catalogue.xml``, BT.CPP 4 ``TreeNodesModel`` that Groot2 imports) is produced by
 :func:`catalogue_xml` from the node classes' own ``PORTS`` declarations, never written by hand; regenerate it
 with ``python -m locem_bridge.hicem.registry trees/node_catalogue.xml``.
 """
 import difflib
+import importlib
 import sys
-from typing import Dict, Iterable, List, Optional, Type
+from typing import Dict, Iterable, List, Optional, Sequence, Type
 from xml.sax.saxutils import escape, quoteattr
 
 from .controls import BUILTIN_NODES, EXTRA_CONTROL_NODES
-from .errors import NodeDeclarationError
+from .errors import ConfigError, NodeDeclarationError
 from .node_base import Ported
 
 
@@ -50,16 +57,49 @@ class NodeRegistry:
         return [self._nodes[n] for n in sorted(self._nodes) if n not in self._builtin]
 
 
-def default_registry(extra: Iterable[Type[Ported]] = ()) -> NodeRegistry:
-    """BT.CPP built-ins + HICEM's own controls + the HICEM node library (+ ``extra`` classes)."""
-    from .nodes import area_work, generic, plasterboard  # local import: the library imports this package's interfaces
+NODE_MODULES_KEY = "hhlc.node_modules"
+DEFAULT_NODE_MODULES = ("locem_bridge.hicem.nodes.generic", "locem_bridge.hicem.nodes.plasterboard",
+                        "locem_bridge.hicem.nodes.area_work")
+
+
+def node_classes(modules: Sequence[str] = DEFAULT_NODE_MODULES) -> List[Type[Ported]]:
+    """The node classes of ``modules`` (dotted module names), each module's ``LIBRARY`` in order. A name that is
+    not a string, cannot be imported, or names a module without a ``LIBRARY`` of node classes raises
+    :class:`ConfigError` naming ``hhlc.node_modules[i]`` and the module."""
+    classes: List[Type[Ported]] = []
+    for i, name in enumerate(modules):
+        key = "%s[%d]" % (NODE_MODULES_KEY, i)
+        if not isinstance(name, str) or not name.strip():
+            raise ConfigError("%r is not a module name" % (name,), key=key,
+                              allowed="dotted Python module names, e.g. locem_bridge.hicem.nodes.generic")
+        try:
+            module = importlib.import_module(name.strip())
+        except Exception as exc:        # not found, or the module itself fails while importing (its own problem)
+            raise ConfigError("cannot import node module '%s': %s" % (name, " ".join(str(exc).split())
+                                                                       or type(exc).__name__), key=key)
+        library = getattr(module, "LIBRARY", None)
+        if not isinstance(library, (list, tuple)) or not all(
+                isinstance(c, type) and issubclass(c, Ported) for c in library):
+            raise ConfigError("node module '%s' has no LIBRARY tuple of node classes (subclasses of "
+                              "locem_bridge.hicem.node_base.Leaf)" % name, key=key)
+        classes.extend(library)
+    return classes
+
+
+def default_registry(extra: Iterable[Type[Ported]] = (),
+                     modules: Sequence[str] = DEFAULT_NODE_MODULES) -> NodeRegistry:
+    """BT.CPP built-ins + HICEM's own controls + the node modules' classes (:func:`node_classes`) + ``extra``.
+    A node ID two modules both declare raises :class:`ConfigError` naming ``hhlc.node_modules``."""
     reg = NodeRegistry()
     for cls in BUILTIN_NODES:
         reg.register(cls, builtin=True)
     for cls in EXTRA_CONTROL_NODES:
         reg.register(cls)
-    for cls in generic.LIBRARY + plasterboard.LIBRARY + area_work.LIBRARY:
-        reg.register(cls)
+    for cls in node_classes(modules):
+        try:
+            reg.register(cls)
+        except NodeDeclarationError as exc:
+            raise ConfigError("%s (in %s)" % (exc, cls.__module__), key=NODE_MODULES_KEY)
     for cls in extra:
         reg.register(cls)
     return reg

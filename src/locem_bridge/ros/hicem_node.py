@@ -76,7 +76,7 @@ class HicemNode:
         locem_ns = rospy.resolve_name(_param("locem_ns", "locem"))
         # the files first: a bad one fails the node at once (one line), not after waiting for LOCEM and PEMKRE
         params = load_params(params_file)
-        library = TreeLibrary()
+        library = TreeLibrary(params.node_registry())
         library.load_directory(trees_dir)
         self.locem = RosLocemClient(locem_ns, wait_s=float(_param("locem_wait", 10.0)))
         # times each PEMKRE call into $LOCEM_CALL_LOG when set (bench/bench_job.py); otherwise the client itself
