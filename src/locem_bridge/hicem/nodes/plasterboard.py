@@ -20,6 +20,18 @@ from ..node_base import Leaf
 from ..ports import ANY, FLOAT, FLOAT_LIST, INT, JSON, STRING, STRING_LIST, input_port, output_port
 
 
+# Ports the taping and area nodes declare alike, declared once: the same name, type, default and meaning in each.
+LINE_ID = input_port("line_id", STRING, None, "", "stored joint id")
+AREA_ID = input_port("area_id", STRING, None, "", "stored area id")
+STANDOFF = input_port("standoff", FLOAT, "{@cfg.taping.base_standoff}", "m", "base centre distance from the wall")
+LATERAL_OFFSET = input_port("lateral_offset", FLOAT, "{@cfg.taping.lateral_offset}", "m", "shift along the wall")
+YAW_OFFSET = input_port("yaw_offset", FLOAT, "{@cfg.taping.yaw_offset}", "rad", "added to the wall-facing heading")
+SURFACE_OFFSET = input_port("surface_offset", FLOAT, "{@cfg.taping.surface_offset}", "m", "tool point off the wall")
+MAX_TILT = input_port("max_tilt", FLOAT, "{@cfg.taping.plumb_tolerance}", "rad",
+                      "a vertical joint within this angle of plumb (a horizontal one of level) is taped plumb "
+                      "(level) through the mean of its ends; 0: as measured")
+
+
 class TagIdNameToObjectId(Leaf):
     DESCRIPTION = ("Maps a PEMKRE symbol (IRI or local name) to the id of an object stored in HICEM and checks "
                    "it exists with the expected kind (joint, area, wall: features from the scan; tool: the "
@@ -88,13 +100,7 @@ class GetTapingPosition(Leaf):
                    "the wall along its normal, "
                    "shifted along the wall by lateral_offset, facing the wall plus yaw_offset.")
     PORTS = (
-        input_port("line_id", STRING, None, "", "stored joint id"),
-        input_port("standoff", FLOAT, "{@cfg.taping.base_standoff}", "m", "base centre distance from the wall"),
-        input_port("lateral_offset", FLOAT, "{@cfg.taping.lateral_offset}", "m", "shift along the wall"),
-        input_port("yaw_offset", FLOAT, "{@cfg.taping.yaw_offset}", "rad", "added to the wall-facing heading"),
-        input_port("max_tilt", FLOAT, "{@cfg.taping.plumb_tolerance}", "rad",
-                   "a vertical joint within this angle of plumb (a horizontal one of level) is taped plumb (level) "
-                   "through the mean of its ends; 0: as measured"),
+        LINE_ID, STANDOFF, LATERAL_OFFSET, YAW_OFFSET, MAX_TILT,
         output_port("approach_pose", FLOAT_LIST, None, "m, m, rad", "x y theta for GOTO"),
     )
 
@@ -122,11 +128,7 @@ class GetTapePath(Leaf):
                    "level within max_tilt) moved off the wall by surface_offset along the wall normal, the normal "
                    "itself and the length.")
     PORTS = (
-        input_port("line_id", STRING, None, "", "stored joint id"),
-        input_port("surface_offset", FLOAT, "{@cfg.taping.surface_offset}", "m", "tool point off the wall"),
-        input_port("max_tilt", FLOAT, "{@cfg.taping.plumb_tolerance}", "rad",
-                   "a vertical joint within this angle of plumb (a horizontal one of level) is taped plumb (level) "
-                   "through the mean of its ends; 0: as measured"),
+        LINE_ID, SURFACE_OFFSET, MAX_TILT,
         output_port("path_start", FLOAT_LIST, None, "m", "x y z"),
         output_port("path_end", FLOAT_LIST, None, "m", "x y z"),
         output_port("normal", FLOAT_LIST, None, "", "inward wall normal nx ny nz"),
@@ -158,18 +160,12 @@ class GetTapeSegments(Leaf):
                    "shifted along the wall by lateral_offset), start and end points (moved off the wall by "
                    "surface_offset) and the inward normal. The clipped length is reported as skipped.")
     PORTS = (
-        input_port("line_id", STRING, None, "", "stored joint id"),
+        LINE_ID,
         input_port("segment_length", FLOAT, "{@cfg.taping.segment_length}", "m",
                    "longest piece taped from one base pose"),
         input_port("z_range", FLOAT_LIST, "{@cfg.taping.z_range}", "m",
                    "z_min;z_max, the height band the arm reaches with the tool facing the wall"),
-        input_port("standoff", FLOAT, "{@cfg.taping.base_standoff}", "m", "base centre distance from the wall"),
-        input_port("lateral_offset", FLOAT, "{@cfg.taping.lateral_offset}", "m", "shift along the wall"),
-        input_port("yaw_offset", FLOAT, "{@cfg.taping.yaw_offset}", "rad", "added to the wall-facing heading"),
-        input_port("surface_offset", FLOAT, "{@cfg.taping.surface_offset}", "m", "tool point off the wall"),
-        input_port("max_tilt", FLOAT, "{@cfg.taping.plumb_tolerance}", "rad",
-                   "a vertical joint within this angle of plumb (a horizontal one of level) is taped plumb (level) "
-                   "through the mean of its ends; 0: as measured"),
+        STANDOFF, LATERAL_OFFSET, YAW_OFFSET, SURFACE_OFFSET, MAX_TILT,
         output_port("segments", JSON, None, "", "list of {approach, start, end, normal, length}"),
         output_port("count", INT, None, "", "number of pieces"),
         output_port("skipped", FLOAT, None, "m", "joint length outside the reachable band (not taped)"),
@@ -234,7 +230,7 @@ class GetAreaRaster(Leaf):
                    "facing the section's middle at base_standoff, and the raster rectangle (origin, u, width, "
                    "height, wall normal) in the map frame.")
     PORTS = (
-        input_port("area_id", STRING, None, "", "stored area id"),
+        AREA_ID,
         input_port("section_width", FLOAT, None, "m", "widest strip covered from one base pose"),
         input_port("base_standoff", FLOAT, None, "m", "base centre distance from the wall"),
         input_port("yaw_offset", FLOAT, None, "rad", "added to the wall-facing heading"),
