@@ -24,6 +24,7 @@ from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Seque
 
 import numpy as np
 
+from locem_bridge.common.raster_progress import progress_text
 from locem_bridge.locem.errors import NotReady
 from locem_bridge.locem.registry import Arg, CommandSpec
 
@@ -42,6 +43,7 @@ STRAIGHT_APPROACH_ANGLE = 0.6  # rad, tool re-orientation up to which a wall app
 LANE_ACCEL = 4.0               # m/s^2, raster lanes (short run-up: 3 cm at 0.5 m/s)
 RUNUP_MARGIN = 0.01            # m, constant-speed travel before the tool switches on
 PATH_BLEND = 0.03              # m, blend radius of the turns between raster lanes (one blended path)
+SKIP_RESOLUTION = 0.001        # m, a lane with less than this left after SPRAY_AREA skip= is not worked again
 
 
 def _point(prefix: str, doc: str, suffix: str = "") -> tuple:
@@ -102,9 +104,14 @@ SPRAY_AREA = CommandSpec(
         Arg.number("pressure", "bar", 0.5, 10.0, "spray pressure", default=2.5, keyword_only=True),
         Arg.number("run_in", "m", 0.0, 0.5, "lane length sprayed beyond each end of the area (0 when a "
                    "neighbouring section continues the lanes: their spray footprints then add up evenly)",
-                   default=0.1, keyword_only=True)),
+                   default=0.1, keyword_only=True),
+        Arg.number("skip", "m", 0.0, 1000.0, "worked length of the raster left out from its start (lanes with "
+                   "their run-in end to end, turns not counted; at most lanes x (width + 2 run_in)): the command "
+                   "goes on where an interrupted one stopped, the point its feedback reported as 'raster <m> of "
+                   "<m> m'", default=0.0, keyword_only=True)),
     resources=frozenset({"arm", "tool", "compressor"}), category=CATEGORY, timeout=600.0, result=_WORK_RESULT
-    + (("lanes", "lanes sprayed"),), deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0)
+    + (("lanes", "lanes sprayed (a lane begun part way counts)"), ("skipped_m", "raster length left out (skip)")),
+    deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0)
 SAND_AREA = CommandSpec(
     "SAND_AREA", "Sand an area in horizontal raster lanes in contact with the wall, sander on only on the lanes.",
     args=_AREA_ARGS + _normal() + (
@@ -264,6 +271,84 @@ class RasterSwitch(LaneSwitch):
         if want != self.on:
             self._switch(want)
             self.on = want
+
+
+class RasterProgress(HookedWaiter):
+    """A waiter around a raster's tool switch (:class:`LaneSwitch`, :class:`RasterSwitch`; every wait goes on to
+    it) that reports the raster's progress: the worked length done (m, counted from the raster's start, a skipped
+    part included; :mod:`locem_bridge.common.raster_progress`) from the arm's measured TCP while the tool is on, at
+    most every ``PERIOD_S`` and whenever a stretch is finished (the tool switched off at its end). The arm's own
+    motion progress ("waypoint 3 of 24") is replaced by it. The measured TCP lags the tool, so the reported length
+    never runs ahead of the part actually worked."""
+
+    #: s of wall time between two reports while the tool is on (20 Hz)
+    PERIOD_S = 0.05
+
+    def __init__(self, switch: LaneSwitch, arm: Arm, stretches: Sequence[Sequence[Sequence[float]]],
+                 starts_m: Sequence[float], total_m: float, reach: float,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        """``stretches``: each worked stretch's start and end (arm base frame), ``starts_m`` where each begins in
+        metres of the raster, ``total_m`` the raster's whole worked length; ``reach``: distance from a stretch's
+        line within which the TCP counts as on it."""
+        super().__init__(switch)
+        self._switch, self._arm, self._clock = switch, arm, clock
+        self._lines = [(np.asarray(a[:3], dtype=float), np.asarray(b[:3], dtype=float) - np.asarray(a[:3], dtype=float))
+                       for a, b in stretches]
+        self._starts = [float(v) for v in starts_m]
+        self._total = float(total_m)
+        self._reach = reach
+        self._lane: Optional[int] = None                 # the stretch the tool was last on
+        self._was_on = False
+        self._last_report = -1e9
+        self._reported = -1.0
+        self.done_m = self._starts[0] if self._starts else 0.0
+
+    def _on_stretch(self) -> Optional[Tuple[int, float]]:
+        """(stretch index, fraction 0..1 along it) of the measured TCP, or None when it is on none."""
+        tcp = self._arm.cached_state().get("tcp")
+        if not tcp:
+            return None
+        p = np.asarray(tcp[:3], dtype=float)
+        for i, (a, ab) in enumerate(self._lines):
+            f = float((p - a).dot(ab)) / max(float(ab.dot(ab)), 1e-12)
+            if -0.05 <= f <= 1.05 and float(np.linalg.norm(p - a - ab * f)) <= self._reach:
+                return i, min(1.0, max(0.0, f))
+        return None
+
+    def _end_of(self, i: int) -> float:
+        return self._starts[i] + float(np.linalg.norm(self._lines[i][1]))
+
+    def _after_wait(self) -> None:
+        on = bool(self._switch.on)
+        finished = False
+        if on:
+            where = self._on_stretch()
+            if where is not None:
+                self._lane = where[0]
+                self._advance(self._starts[where[0]] + where[1] * float(np.linalg.norm(self._lines[where[0]][1])))
+        elif self._was_on and self._lane is not None:
+            self._advance(self._end_of(self._lane))      # switched off by position: the TCP passed the end
+            finished = True
+        self._was_on = on
+        now = self._clock()
+        if self.done_m > self._reported and (finished or now - self._last_report >= self.PERIOD_S):
+            self._report(now)
+
+    def _advance(self, done_m: float) -> None:
+        self.done_m = max(self.done_m, min(done_m, self._total))
+
+    def _report(self, now: float) -> None:
+        self._last_report, self._reported = now, self.done_m
+        super().report(self.done_m / self._total if self._total > 0 else 1.0, progress_text(self.done_m, self._total))
+
+    def finish(self) -> None:
+        """After the motion ended normally: it ends beyond the last stretch, whose end is reported."""
+        self._advance(self._end_of(len(self._lines) - 1))
+        if self.done_m > self._reported:
+            self._report(self._clock())
+
+    def report(self, progress: float, text: str = "") -> None:
+        pass                # the arm's motion progress: the raster's own is reported instead
 
 
 class WallCommands:
@@ -459,53 +544,92 @@ class WallCommands:
         except (BridgeError, NotReady):
             pass
 
+    @staticmethod
+    def _lane_heights(height: float, spacing: float) -> List[float]:
+        """Heights of a raster's lanes above the area's origin: bottom to top, ``spacing`` at most apart."""
+        lanes = max(1, int(math.ceil(height / spacing - 1e-9))) + 1
+        return [height * k / (lanes - 1) for k in range(lanes)] if lanes > 1 else [height / 2.0]
+
+    @staticmethod
+    def _raster_lanes(heights: Sequence[float], width: float, run_in: float,
+                      skip: float) -> List[Tuple[int, float, float, float, float]]:
+        """The lanes still to work after ``skip`` m of the raster's worked length (module
+        :mod:`locem_bridge.common.raster_progress`): ``(k, height, w0, w1, start_m)`` with the worked stretch
+        ``w0 -> w1`` along the area (lane k runs forward when k is even; the first lane left may start part way)
+        and ``start_m`` its start in metres of the raster. Lanes with less than ``SKIP_RESOLUTION`` left are
+        dropped."""
+        lane_len = width + 2.0 * run_in
+        out = []
+        for k, t in enumerate(heights):
+            forward = k % 2 == 0
+            w0, w1 = (-run_in, width + run_in) if forward else (width + run_in, -run_in)
+            begin = k * lane_len
+            cut = min(max(skip - begin, 0.0), lane_len)
+            if lane_len - cut < SKIP_RESOLUTION:
+                continue
+            w0 = w0 + cut if forward else w0 - cut
+            out.append((k, t, w0, w1, begin + cut))
+        return out
+
     def _raster(self, ctx: Any, tool: str, origin: Sequence[float], u: Sequence[float], width: float,
                 height: float, normal: Sequence[float], spacing: float, speed: float, offset: float,
-                run_in: float) -> Dict[str, Any]:
+                run_in: float, skip: float = 0.0) -> Dict[str, Any]:
         """Horizontal lanes from the area's bottom to its top, alternating direction. Each lane is one straight
         move that starts ``run-up`` before the worked stretch [-run_in, width + run_in] and ends as far after
         it (the distance the arm needs to reach ``speed`` at ``LANE_ACCEL``); the tool is on only over the
-        worked stretch (:class:`LaneSwitch`)."""
+        worked stretch (:class:`LaneSwitch`). ``skip``: metres of the raster's worked length (the stretches end
+        to end) left out from its start, so the first lane worked may start part way, with its own run-up.
+        Progress (:class:`RasterProgress`): the worked length done, counted from the raster's start."""
         arm = self._need("arm")
         n = self._unit(normal, "normal")
         uu = self._unit(u, "u")
         up = np.array([0.0, 0.0, 1.0])
         o = np.asarray(origin, dtype=float)
-        lanes = max(1, int(math.ceil(height / spacing - 1e-9))) + 1
-        heights = [height * k / (lanes - 1) for k in range(lanes)] if lanes > 1 else [height / 2.0]
-        runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN
+        heights = self._lane_heights(height, spacing)
+        total_m = len(heights) * (width + 2.0 * run_in)
+        lanes = self._raster_lanes(heights, width, run_in, skip)
         start = time.monotonic()
-        if arm.supports(Arm.PATH) and len(heights) > 1:
-            return self._raster_path(ctx, tool, o, uu, up, n, width, heights, speed, offset, run_in, start)
-        total = 0.0
-        s1 = width + run_in
-        for k, t in enumerate(heights):
-            forward = k % 2 == 0
-            w0, w1 = (-run_in, width + run_in) if forward else (width + run_in, -run_in)
-            s0, s1 = (w0 - runup, w1 + runup) if forward else (w0 + runup, w1 - runup)
-            a = o + uu * s0 + up * t + n * offset
-            b = o + uu * s1 + up * t + n * offset
-            if k == 0:
-                self._approach(ctx, self.to_arm(a + n * 0.05, n))
-            arm.move_linear(ctx, self.to_arm(a, n), APPROACH_SPEED, 1.2)
-            pa, pb = self.to_arm(a, n), self.to_arm(b, n)
-            span = abs(s1 - s0)
-            lane = LaneSwitch(ctx, arm, lambda on: self._switch(tool, on), pa, pb,
-                              runup / span, 1.0 - runup / span)
-            try:
-                arm.move_linear(lane, pb, speed, LANE_ACCEL)
-            finally:
-                self._switch_off_safely(tool)
-            total += abs(w1 - w0)
-            ctx.report((k + 1) / len(heights), "lane %d of %d" % (k + 1, len(heights)))
-        last = o + uu * s1 + up * heights[-1] + n * (offset + 0.05)
-        arm.move_linear(ctx, self.to_arm(last, n), APPROACH_SPEED, 1.2)
-        self._retract(ctx)
-        return {"length_m": round(total, 4), "lanes": len(heights), "duration_s": round(time.monotonic() - start, 3)}
+        if not lanes:
+            ctx.report(1.0, progress_text(total_m, total_m))
+            return {"length_m": 0.0, "lanes": 0, "skipped_m": round(min(skip, total_m), 4),
+                    "duration_s": round(time.monotonic() - start, 3)}
+        runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN
+        if arm.supports(Arm.PATH) and len(lanes) > 1:
+            out = self._raster_path(ctx, tool, o, uu, up, n, heights, lanes, total_m, speed, offset)
+        else:
+            s1 = 0.0
+            for i, (k, t, w0, w1, start_m) in enumerate(lanes):
+                forward = k % 2 == 0
+                s0, s1 = (w0 - runup, w1 + runup) if forward else (w0 + runup, w1 - runup)
+                a = o + uu * s0 + up * t + n * offset
+                b = o + uu * s1 + up * t + n * offset
+                if i == 0:
+                    self._approach(ctx, self.to_arm(a + n * 0.05, n))
+                arm.move_linear(ctx, self.to_arm(a, n), APPROACH_SPEED, 1.2)
+                pa, pb = self.to_arm(a, n), self.to_arm(b, n)
+                span = abs(s1 - s0)
+                lane = LaneSwitch(ctx, arm, lambda on: self._switch(tool, on), pa, pb,
+                                  runup / span, 1.0 - runup / span)
+                stretch = (self.to_arm(o + uu * w0 + up * t + n * offset, n),
+                           self.to_arm(o + uu * w1 + up * t + n * offset, n))
+                progress = RasterProgress(lane, arm, [stretch], [start_m], total_m, reach=0.05)
+                try:
+                    arm.move_linear(progress, pb, speed, LANE_ACCEL)
+                finally:
+                    self._switch_off_safely(tool)
+                progress.finish()
+            t_last = lanes[-1][1]
+            last = o + uu * s1 + up * t_last + n * (offset + 0.05)
+            arm.move_linear(ctx, self.to_arm(last, n), APPROACH_SPEED, 1.2)
+            self._retract(ctx)
+            out = {"lanes": len(lanes)}
+        out.update({"length_m": round(sum(abs(w1 - w0) for _k, _t, w0, w1, _s in lanes), 4),
+                    "skipped_m": round(lanes[0][4], 4), "duration_s": round(time.monotonic() - start, 3)})
+        return out
 
     def _raster_path(self, ctx: Any, tool: str, o: np.ndarray, uu: np.ndarray, up: np.ndarray, n: np.ndarray,
-                     width: float, heights: Sequence[float], speed: float, offset: float, run_in: float,
-                     start: float) -> Dict[str, Any]:
+                     heights: Sequence[float], lanes: Sequence[Tuple[int, float, float, float, float]],
+                     total_m: float, speed: float, offset: float) -> Dict[str, Any]:
         """The serpentine as ONE blended controller path (MOVE_PATH semantics): each lane's ends, run-up
         included, are waypoints; the turns between lanes are rounded (blend within the run-up, so the worked
         stretches are straight and at speed); the tool is switched by position (:class:`RasterSwitch`)."""
@@ -513,40 +637,49 @@ class WallCommands:
         spacing = abs(heights[1] - heights[0])
         blend = min(PATH_BLEND, 0.45 * spacing)
         runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN + blend
-        points, stretches = [], []
-        for k, t in enumerate(heights):
-            forward = k % 2 == 0
-            w0, w1 = (-run_in, width + run_in) if forward else (width + run_in, -run_in)
-            sign = 1.0 if forward else -1.0
+        points, stretches, starts = [], [], []
+        for k, t, w0, w1, start_m in lanes:
+            sign = 1.0 if k % 2 == 0 else -1.0
             a = o + uu * (w0 - sign * runup) + up * t + n * offset
             b = o + uu * (w1 + sign * runup) + up * t + n * offset
             points += [a, b]
             stretches.append((self.to_arm(o + uu * w0 + up * t + n * offset, n),
                               self.to_arm(o + uu * w1 + up * t + n * offset, n)))
+            starts.append(start_m)
         self._approach(ctx, self.to_arm(points[0] + n * 0.05, n))
         arm.move_linear(ctx, self.to_arm(points[0], n), APPROACH_SPEED, 1.2)
         poses = [self.to_arm(p, n) for p in points[1:]]
         blends = [blend] * (len(poses) - 1) + [0.0]          # every turn blended, the path ends at rest
         switch = RasterSwitch(ctx, arm, lambda on: self._switch(tool, on), stretches, reach=0.25 * spacing)
+        progress = RasterProgress(switch, arm, stretches, starts, total_m, reach=0.25 * spacing)
         try:
-            arm.move_path(switch, poses, speed, LANE_ACCEL, blends)
+            arm.move_path(progress, poses, speed, LANE_ACCEL, blends)
         finally:
             self._switch_off_safely(tool)
+        progress.finish()
         last = points[-1] + n * 0.05
         arm.move_linear(ctx, self.to_arm(last, n), APPROACH_SPEED, 1.2)
         self._retract(ctx)
-        total = len(heights) * (width + 2.0 * run_in)
-        return {"length_m": round(total, 4), "lanes": len(heights), "duration_s": round(time.monotonic() - start, 3)}
+        return {"lanes": len(lanes)}
 
     def spray_area(self, ctx: Any, ox: float, oy: float, oz: float, ux: float, uy: float, uz: float, width: float,
                    height: float, nx: float, ny: float, nz: float, spacing: float, standoff: float, speed: float,
-                   pressure: float, run_in: float = 0.1) -> Dict[str, Any]:
+                   pressure: float, run_in: float = 0.1, skip: float = 0.0) -> Dict[str, Any]:
         self._need_tool("spray_gun")
         comp = self._need("compressor")
         lo, hi = comp.pressure_range
         if not lo <= pressure <= hi:
             raise BadRequest("SPRAY_AREA: pressure %.2f bar is outside the working band %.2f..%.2f bar"
                              % (pressure, lo, hi), argument="pressure")
+        total_m = len(self._lane_heights(height, spacing)) * (width + 2.0 * run_in)
+        if skip > total_m + SKIP_RESOLUTION:
+            raise BadRequest("SPRAY_AREA: skip %.3f m is beyond the raster's worked length %.3f m (%d lanes of "
+                             "width + 2 x run_in = %.3f m); allowed 0..%.3f m"
+                             % (skip, total_m, len(self._lane_heights(height, spacing)), width + 2.0 * run_in,
+                                total_m), argument="skip")
+        if not self._raster_lanes(self._lane_heights(height, spacing), width, run_in, skip):
+            ctx.report(1.0, progress_text(total_m, total_m))         # nothing left: no device is touched
+            return {"length_m": 0.0, "lanes": 0, "skipped_m": round(min(skip, total_m), 4), "duration_s": 0.0}
         guarded = GuardedWaiter(ctx, comp.check_link)
         try:
             comp.check_link()
@@ -555,7 +688,7 @@ class WallCommands:
             comp.set_setpoint(pressure)
             wait_for_pressure(comp, guarded, pressure, 0.2, timeout=30.0)
             out = self._raster(guarded, "spray_gun", [ox, oy, oz], [ux, uy, uz], width, height, [nx, ny, nz],
-                               spacing, speed, standoff, run_in=run_in)
+                               spacing, speed, standoff, run_in=run_in, skip=skip)
         finally:
             self._switch_off_safely("spray_gun")
         return out
