@@ -2,8 +2,9 @@
 
 - :class:`LocemDouble`: an in-process stand-in for LOCEM's action interface. It checks command names and
   numeric arguments like the LOCEM grammar will (unknown name → INVALID_COMMAND, non-number → INVALID_ARGUMENT),
-  lets each command take a configurable time, answers SCAN with a site, supports cancel, injected failures and
-  odd codes, and logs every command (optionally to a file, fsync'ed, for the crash tests).
+  lets each command take a configurable time, answers SCAN with a site, supports cancel, injected failures,
+  odd codes and a progress feedback text per command name, and logs every command (optionally to a file,
+  fsync'ed, for the crash tests).
 - :class:`PemkreDouble`: a tiny process engine following docs/contracts.md for the taping process (SCAN →
   GET_TOOL → per joint VALIDATE_TAPE_LINE → TAPE_LINE or MANUAL_TAPING → GO_HOME → ended). It refuses status
   updates for tasks that are not running, like the real PEMKRE must, and can persist its state to a JSON file
@@ -63,6 +64,11 @@ class _Handle(CommandHandle):
             return LocemReply(False, "ABORTED", "cancelled")
         return self._reply if self.done() else None
 
+    def feedback(self) -> Optional[str]:
+        """The progress feedback the double gives for this command's name (``LocemDouble.feedback``), if any."""
+        name = self.command.split()[0].upper() if self.command.split() else ""
+        return self.owner.feedback.get(name)
+
     def cancel(self) -> None:
         if not self.cancelled and not (time.monotonic() >= self.t_done):
             self.cancelled = True
@@ -80,6 +86,8 @@ class LocemDouble(LocemClient):
         self.sent: List[str] = []
         self.handles: List[_Handle] = []
         self.fail_next: Dict[str, LocemReply] = {}
+        # name -> the progress feedback text its commands report (e.g. SPRAY_AREA: 'raster 2.345 of 6.480 m')
+        self.feedback: Dict[str, str] = {}
         self.pose = [1.4, 1.4, 0.7854]     # the default site's start (config/sites/default.yaml)
         # STATUS 'health' (LOCEM's per-backend records); health_script: answers given first, one per STATUS
         self.health: Dict[str, Dict[str, Any]] = {n: {"link": "up", "device": "ok", "last_error": ""}

@@ -61,9 +61,9 @@ def test_spray_area_sections_and_command_arguments():
                           "GOTO 0.3 1.7 1.570796"]  # 1.3 m in front of the first section's middle, facing the wall
     assert len(gotos) == 3 + 7                     # the other sections: along the wall, no turn, no transit
     # the outer sections reach edge_run_in (0.05 m) beyond the area; every section's lanes run section_run_in
-    # (0.02 m) beyond its own ends
+    # (0.02 m) beyond its own ends; a section not begun before is sprayed from its start (skip=0)
     assert sprays[0] == ("SPRAY_AREA -0.05 3 0 1 0 0 0.65 2.5 0 -1 0 spacing=0.15 standoff=0.3 speed=0.5 "
-                         "pressure=3.5 run_in=0.02")
+                         "pressure=3.5 run_in=0.02 skip=0")
     assert sprays[1].startswith("SPRAY_AREA 0.6 3 0 1 0 0 0.6 2.5 ")
     assert sprays[7].startswith("SPRAY_AREA 4.2 3 0 1 0 0 0.65 2.5 ")
     assert hdh.feature("wall_1_area_1")["status"] == "sprayed" and bb.get("task_detail") == "sprayed"

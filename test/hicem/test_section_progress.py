@@ -169,3 +169,69 @@ def test_a_retried_area_does_not_try_its_manual_section_again(tmp_path):
     assert _tick_refusing(tree, second, {}) == S, ctx.failures
     assert len(_sprays(second)) == 5                     # sections 4..8; the manual one is not tried again
     assert [m["section"] for m in parse_manual_work(tree.blackboard.get("task_detail"))] == [2]
+
+
+# ------------------------------------------------------------------------- a section cut while it runs: resume --
+def _skip(command):
+    return float([w for w in command.split() if w.startswith("skip=")][0].split("=", 1)[1])
+
+
+def test_a_cut_section_goes_on_after_the_raster_length_its_feedback_reported_and_the_record_goes_when_done(tmp_path):
+    # the 4th section's SPRAY_AREA is cut (LOCEM went away) after its feedback reported 2.345 m of its raster
+    store = _store(tmp_path / "hdict.sqlite")
+    first = LocemDouble()
+    first.feedback["SPRAY_AREA"] = "raster 2.345 of 6.480 m"
+    tree, _ = _spray_tree(store, first)
+    assert _tick(tree, first, fail_at=4) == F
+    assert [_skip(c) for c in _sprays(first)] == [0.0] * 4
+    # sections 0-2 finished (their partial records dropped), section 3 cut at 2.345 m
+    assert store.value(PROGRESS, "spray/wall_1_area_1") == {"done": [0, 1, 2], "partial": {"3": 2.345}}
+    store.close()
+    # HICEM restarts on the same HDICT file; the task is run again: section 3 goes on at 2.345 m, the rest from 0
+    store = _store(tmp_path / "hdict.sqlite")
+    again = LocemDouble()
+    tree, _ = _spray_tree(store, again)
+    assert _tick(tree, again) == S
+    sprays = _sprays(again)
+    assert len(sprays) == 5 and [_skip(c) for c in sprays] == [2.345, 0.0, 0.0, 0.0, 0.0]
+    assert sprays[0].replace("skip=2.345", "skip=0") == _sprays(first)[3]            # the same section
+    assert store.get(PROGRESS, "spray/wall_1_area_1") is None
+    store.close()
+
+
+def test_progress_is_recorded_as_the_feedback_arrives_only_forward_and_dropped_with_the_section(tmp_path):
+    store = DataManager()
+    lib = TreeLibrary()
+    lib.load_string('<root BTCPP_format="4"><BehaviorTree ID="T"><Sequence>'
+                    '<RecordSectionProgress area_id="a" work="spray" index="2" feedback="{fb}">'
+                    '<SendLocemCommand command="SPRAY_AREA 0 0 0 1 0 0 1 1 0 -1 0" timeout="100" feedback="{fb}"/>'
+                    '</RecordSectionProgress>'
+                    '<RecordSectionDone area_id="a" work="spray" index="2"/>'
+                    '</Sequence></BehaviorTree></root>')
+    locem = LocemDouble(durations={"SPRAY_AREA": 60.0})
+    ctx = NodeContext(locem=locem, store=store)
+    tree = lib.build("T", ctx, Blackboard())
+    assert tree.tick() == R
+    assert store.get(PROGRESS, "spray/a") is None                  # no feedback yet: nothing recorded
+    for text, recorded in (("raster 0.500 of 6.000 m", 0.5), ("waypoint 3 of 24", 0.5),
+                           ("raster 1.250 of 6.000 m", 1.25), ("raster 1.000 of 6.000 m", 1.25)):
+        locem.feedback["SPRAY_AREA"] = text
+        assert tree.tick() == R
+        assert store.value(PROGRESS, "spray/a") == {"done": [], "partial": {"2": recorded}}, text
+    locem.handles[-1].t_done = 0.0                                 # the command ends: OK
+    assert tree.tick() == S
+    assert store.value(PROGRESS, "spray/a") == {"done": [2]}       # the section's partial record is gone
+
+
+def test_section_resume_gives_the_recorded_point_less_the_back_off():
+    store = DataManager()
+    store.put(PROGRESS, "spray/a", {"done": [0], "partial": {"1": 2.5}}, source="test")
+    tree, bb = _leaf_tree('<Sequence><SectionResume area_id="a" work="spray" index="1" skip="{s1}"/>'
+                          '<SectionResume area_id="a" work="spray" index="1" back_off="0.1" skip="{s2}"/>'
+                          '<SectionResume area_id="a" work="spray" index="2" back_off="0.1" skip="{s3}"/>'
+                          '<SectionResume area_id="a" work="sand" index="1" skip="{s4}"/></Sequence>', store)
+    assert tree.tick() == S
+    assert (bb.get("s1"), bb.get("s2"), bb.get("s3"), bb.get("s4")) == (2.5, 2.4, 0.0, 0.0)
+    tree, _ = _leaf_tree('<SectionResume area_id="a" work="spray" index="1" back_off="-0.1" skip="{s}"/>', store)
+    assert tree.tick() == F
+    assert "back_off must be >= 0 m, got -0.1" in tree.ctx.last_failure()[1]

@@ -1,7 +1,7 @@
 """The handles HICEM is given for the layers around it, and the contract shapes that cross them.
 
-- :class:`LocemClient` / :class:`CommandHandle`: send one LOCEM command string without blocking, poll it,
-  cancel it. The ROS adapter implements it on the ``/locem/command_action`` action client; tests use in-process
+- :class:`LocemClient` / :class:`CommandHandle`: send one LOCEM command string without blocking, poll it (its
+  reply, its latest progress feedback), cancel it. The ROS adapter implements it on the ``/locem/command_action`` action client; tests use in-process
   doubles. :class:`LocemReply` mirrors the service/action result (success, code, message, result JSON).
 - :class:`PemkreClient`: start_process / next_action / set_task_status / report_world (docs/contracts.md);
   :func:`status_request_id`: the request id a client sends with a status report; a client raises
@@ -50,6 +50,11 @@ class CommandHandle(abc.ABC):
 
     @abc.abstractmethod
     def cancel(self) -> None: ...
+
+    def feedback(self) -> Optional[str]:
+        """The text of the command's latest progress feedback (action feedback ``message``, e.g. SPRAY_AREA's
+        ``raster 2.350 of 11.520 m``), None before the first; a client without feedback keeps this default."""
+        return None
 
 
 class LocemClient(abc.ABC):

@@ -2,7 +2,7 @@
 
 - :class:`RosLocemClient`: one ``actionlib.ActionClient`` on ``<locem>/command_action``; every ``send`` is a goal
   of its own (several may run at once, e.g. under a Parallel node); ``cancel`` cancels that goal, which LOCEM
-  turns into a device stop. A command sent while LOCEM is away (restarting) waits for it, within a deadline; a
+  turns into a device stop; the latest feedback's text is the handle's ``feedback()``. A command sent while LOCEM is away (restarting) waits for it, within a deadline; a
   running command whose LOCEM went away ends ``ABORTED`` and is not sent again.
 - :class:`LocemHealthFeed`: polls ``STATUS`` through the ``<locem>/command`` service every ``period`` seconds —
   an answer is LOCEM's heartbeat, each backend's ``health`` entry becomes module ``locem/<backend>`` — and
@@ -38,6 +38,7 @@ class _Goal(CommandHandle):
         self._gh: Any = None
         self._unsent: Optional[LocemReply] = None      # the reply of a command that never left HICEM / was lost
         self._lost_at: Optional[float] = None
+        self._feedback: Optional[str] = None            # the latest action feedback's message
         self._deadline = time.monotonic() + wait_s
         self._wait_s = wait_s
         self._try_send()
@@ -47,11 +48,17 @@ class _Goal(CommandHandle):
         if self._gh is not None or self._unsent is not None:
             return
         if self._client.server_ready():
-            self._gh = self._client.send_goal(self.command)
+            self._gh = self._client.send_goal(self.command, self._on_feedback)
             return
         if time.monotonic() >= self._deadline:
             self._unsent = LocemReply(False, "NOT_READY", "LOCEM action server %s not available for %.0f s: %r "
                                       "was not sent" % (self._client.name, self._wait_s, self.command))
+
+    def _on_feedback(self, _gh: Any, feedback: Any) -> None:
+        self._feedback = feedback.message
+
+    def feedback(self) -> Optional[str]:
+        return self._feedback
 
     def done(self) -> bool:
         with self._lock:
@@ -127,8 +134,8 @@ class RosLocemClient(LocemClient):
         # a timeout of 0 means "forever" to actionlib: 1 ms is one look (plus its 10 ms sleep when not ready)
         return bool(self._client.wait_for_server(rospy.Duration(0, 1000000)))
 
-    def send_goal(self, command: str) -> Any:
-        return self._client.send_goal(CommandGoal(command=command))
+    def send_goal(self, command: str, feedback_cb: Any = None) -> Any:
+        return self._client.send_goal(CommandGoal(command=command), feedback_cb=feedback_cb)
 
     def send(self, command: str) -> CommandHandle:
         return _Goal(self, command, self.wait_s)

@@ -10,6 +10,13 @@ Use in a tree: ``PendingSections`` after ``GetAreaRaster`` gives the sections st
 after each section's command succeeded, ``ForgetSectionsDone`` once the whole area is marked done (the next
 job on the same area starts from the first section).
 
+Part of a section: a section cut while it runs (LOCEM killed mid-spray, a link lost) would be worked again from
+its start, a second coat on its first part. ``RecordSectionProgress`` (a decorator around the section's command)
+keeps the command's progress feedback -- the raster's worked length done, ``raster <m> of <m> m``
+(:mod:`locem_bridge.common.raster_progress`) -- in the same entry as it arrives, ``{"done": [...], "partial":
+{"<index>": metres}}``; ``SectionResume`` gives the retried section's ``skip`` (SPRAY_AREA ``skip=``) from it, so
+the work goes on at the point reached; ``RecordSectionDone`` drops the section's partial record.
+
 Manual work: a section LOCEM refuses because the arm cannot reach it from its base pose (``LeaveSectionManual``
 after the section's command failed: the answer's code and a phrase of its message, ``area_work.unreachable_*``
 in the HICEM parameters) is recorded in the same entry, ``{"done": [...], "manual": [{index, along, height,
@@ -18,13 +25,16 @@ reason}]}``, counted as handled, and the area goes on; ``AreaDetail`` then write
 the run report lists (:func:`parse_manual_work`). Unreachable parts are manual work, not a failed process.
 """
 import re
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Optional
 
 from py_trees.common import Status
 
+from locem_bridge.common.raster_progress import parse_progress_text
+from locem_bridge.hicem.controls import _Decorator
+
 from ..errors import PortError
 from ..node_base import Leaf
-from ..ports import INT, JSON, STRING, STRING_LIST, input_port, output_port
+from ..ports import FLOAT, INT, JSON, STRING, STRING_LIST, input_port, output_port
 
 PROGRESS = "progress"
 
@@ -123,7 +133,101 @@ class RecordSectionDone(Leaf):
             record = _record(store, work, area)
             if self.get("index") not in record["done"]:
                 record["done"] = sorted(record["done"] + [self.get("index")])
+            partial = dict(record.get("partial", {}))
+            if partial.pop(str(self.get("index")), None) is not None:
+                record["partial"] = partial
+                if not partial:
+                    del record["partial"]
             store.put(PROGRESS, progress_key(work, area), record, source="tree")
+        return Status.SUCCESS
+
+
+def _partial(store: Any, work: str, area_id: str, index: int) -> float:
+    return float(_record(store, work, area_id).get("partial", {}).get(str(index), 0.0))
+
+
+class RecordSectionProgress(_Decorator):
+    DESCRIPTION = ("Runs its child (the section's command, e.g. the GuardedCommand subtree of SPRAY_AREA) and after "
+                   "each of its ticks, the last one included, records the command's progress feedback -- the "
+                   "raster's worked length done, 'raster <m> of <m> m' -- for section `index` of (work, area_id) in "
+                   "the data store collection 'progress' when it went further than recorded, so a section cut "
+                   "while it runs is resumed at that point (SectionResume). Other feedback texts are ignored; "
+                   "the result is the child's.")
+    PORTS = (
+        input_port("area_id", STRING, None, "", "stored area id"),
+        input_port("work", STRING, None, "", "what is done to the area (spray, sand)"),
+        input_port("index", INT, None, "", "the running section's index"),
+        input_port("feedback", STRING, "{feedback}", "", "the command's latest feedback text (SendLocemCommand's "
+                   "feedback port; GuardedCommand writes it to {feedback})"),
+    )
+
+    def tick(self):  # type: ignore[override]
+        if self.status != Status.RUNNING:
+            self._recorded: Optional[float] = None
+            self.initialise()
+        for node in self.decorated.tick():
+            yield node
+        self._record()
+        s = self.decorated.status
+        if s == Status.RUNNING:
+            self.status = Status.RUNNING
+        else:
+            self.stop(s)
+        yield self
+
+    def _record(self) -> None:
+        try:
+            text = self.ports.get("feedback")
+        except PortError:                 # nothing sent yet (the guard failed first): no feedback
+            return
+        parsed = parse_progress_text(text or "")
+        if parsed is None or parsed[0] <= 0.0:
+            return
+        done_m = parsed[0]
+        if self._recorded is not None and done_m <= self._recorded + 1e-6:
+            return
+        store = self.ctx.require("store", self.name)
+        work, area, index = _check_work(self), self.ports.get("area_id"), int(self.ports.get("index"))
+        with store.transaction():
+            record = _record(store, work, area)
+            partial = dict(record.get("partial", {}))
+            if done_m > float(partial.get(str(index), 0.0)) + 1e-6:
+                partial[str(index)] = round(done_m, 4)
+                record["partial"] = partial
+                store.put(PROGRESS, progress_key(work, area), record, source="tree")
+        self._recorded = done_m
+
+    def get(self, port: str) -> Any:          # _check_work reads the work port through this
+        return self.ports.get(port)
+
+
+class SectionResume(Leaf):
+    DESCRIPTION = ("Where a section's work goes on: `skip` = the raster length recorded done for section `index` of "
+                   "(work, area_id) by RecordSectionProgress (0 when none), less `back_off`, for the command's "
+                   "skip= argument (SPRAY_AREA). The recorded point is the arm's measured TCP while the tool was "
+                   "on, which lags the tool, and the tool stays on a little after a cut (the compressor's watchdog "
+                   "closes the valve up to 0.5 s after LOCEM died): the part beyond the point is already worked, "
+                   "so no back-off is needed to avoid a gap (default 0); a positive one buys a longer overlap.")
+    PORTS = (
+        input_port("area_id", STRING, None, "", "stored area id"),
+        input_port("work", STRING, None, "", "what is done to the area (spray, sand)"),
+        input_port("index", INT, None, "", "the section's index"),
+        input_port("back_off", FLOAT, "0", "m", "raster length worked again before the recorded point"),
+        output_port("skip", FLOAT, None, "m", "raster length to leave out: 0 for a section not begun"),
+    )
+
+    def on_tick(self) -> Status:
+        store = self.ctx.require("store", self.name)
+        back_off = self.get("back_off")
+        if back_off < 0:
+            raise PortError("%s: back_off must be >= 0 m, got %g" % (self.name, back_off))
+        done_m = _partial(store, _check_work(self), self.get("area_id"), int(self.get("index")))
+        skip = max(0.0, done_m - back_off) if done_m > 0 else 0.0
+        self.set("skip", round(skip, 4))
+        if skip > 0:
+            self.feedback_message = "section %d goes on after %.3f m" % (int(self.get("index")) + 1, skip)
+            self.ctx.log.info("%s of %s, section %d: goes on after %.3f m of its raster (cut there before)",
+                              _check_work(self), self.get("area_id"), int(self.get("index")) + 1, skip)
         return Status.SUCCESS
 
 
@@ -207,4 +311,5 @@ class ForgetSectionsDone(Leaf):
         return Status.SUCCESS
 
 
-LIBRARY = (PendingSections, RecordSectionDone, ForgetSectionsDone, LeaveSectionManual, AreaDetail)
+LIBRARY = (PendingSections, RecordSectionDone, ForgetSectionsDone, LeaveSectionManual, AreaDetail, RecordSectionProgress,
+           SectionResume)

@@ -240,10 +240,14 @@ class SendLocemCommand(Leaf):
         output_port("result", JSON, None, "", "the reply's result object"),
         output_port("code", STRING, None, "", "the reply's code (also on failure)"),
         output_port("message", STRING, None, "", "the reply's message (also on failure)"),
+        output_port("feedback", STRING, None, "", "the running command's latest progress feedback text (e.g. "
+                    "SPRAY_AREA's 'raster 2.350 of 11.520 m'), updated on every tick and on the last; empty "
+                    "before the first"),
     )
 
     def on_start(self) -> Optional[Status]:
         locem = self.ctx.require("locem", self.name)
+        self.set("feedback", "")
         self._cmd = render(self.get("command"), self.ports.blackboard)
         self._limit = self.get("timeout")
         self._t0 = self.ctx.clock()
@@ -261,6 +265,7 @@ class SendLocemCommand(Leaf):
 
     def on_tick(self) -> Status:
         h = self._handle
+        self.set("feedback", h.feedback() or "")
         if not h.done():
             if self.ctx.clock() - self._t0 > self._limit:
                 h.cancel()
