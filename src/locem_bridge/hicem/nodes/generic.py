@@ -265,7 +265,8 @@ class SendLocemCommand(Leaf):
 
     def on_tick(self) -> Status:
         h = self._handle
-        self.set("feedback", h.feedback() or "")
+        feedback = getattr(h, "feedback", None)          # a handle without feedback (not a CommandHandle): none
+        self.set("feedback", (feedback() if feedback is not None else None) or "")
         if not h.done():
             if self.ctx.clock() - self._t0 > self._limit:
                 h.cancel()
