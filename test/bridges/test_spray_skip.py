@@ -15,7 +15,7 @@ pytestmark = pytest.mark.slow
 NORMAL = "0 -1 0"
 # wall_1 of the short-wall site: s = x - 1.8 along the wall; the area starts at x = 2.0 (s = 0.2), z = 0.9.
 # 3 lanes (spacing 0.3 > the 0.29 m fan: a lane's spray does not reach its neighbour's row), 0.8 m each (run_in 0)
-AREA = "SPRAY_AREA 2.0 3.6 0.9 1 0 0 0.8 0.6 %s spacing=0.3 standoff=0.3 speed=0.2 pressure=3.5 run_in=0" % NORMAL
+AREA = "SPRAY_AREA 2.0 3.6 0.9 1 0 0 0.8 0.6 %s spacing=0.3 standoff=0.3 speed=0.1 pressure=3.5 run_in=0" % NORMAL
 LANE, TOTAL = 0.8, 2.4
 
 
@@ -55,14 +55,17 @@ def test_skip_leaves_out_exactly_that_length_of_the_raster_and_feedback_reports_
     s, row1 = _row(rig, 1.2)
     edge, plateau = _edge(s, row1, 0.25, 0.6)
     assert plateau >= rig.world.outcome.target
-    assert edge == pytest.approx(0.2 + LANE - 0.3, abs=0.02)       # the spray began 0.3 m into lane 1
+    # the spray began 0.3 m into lane 1: within one cell (2 cm) and the valve's first switching delay (a raster's
+    # first switch has no measured request time to lead by: up to ~50 ms of Modbus write under load, 2 cm at 0.4 m/s
+    # of wall time)
+    assert edge == pytest.approx(0.2 + LANE - 0.3, abs=0.03)
     assert rig.area_coverage("wall_1", (0.3, 0.9), (1.45, 1.55)) >= 0.98       # lane 2 whole (run_in 0: not its ends)
     # feedback: metres of the raster from its start, skipped part included, never going back, the end reported
     done = [(t, parse_progress_text(m)) for t, m, _p in events if parse_progress_text(m)]
     metres = [d[0] for _t, d in done]
     assert metres == sorted(metres) and metres[0] >= skip - 1e-6 and metres[-1] == pytest.approx(TOTAL)
     assert all(d[1] == pytest.approx(TOTAL) for _t, d in done)
-    # at least 5 reports a second while spraying (the lanes at 0.2 m/s of sim time, time scale 4)
+    # at least 5 reports a second while spraying (the lanes at 0.1 m/s of sim time, time scale 4)
     spraying = [t for t, d in done if skip + 0.05 < d[0] < TOTAL - 0.05]
     gaps = np.diff(spraying)
     assert len(spraying) >= 5 and float(np.median(gaps)) <= 0.1, gaps
