@@ -1,4 +1,5 @@
-"""HHLC: the high-level controller loop of HICEM (ROS-free core; ``ros/hicem_node`` adapts it).
+"""HHLC (the paper's HICEM High Level Controller): the high-level controller loop of HICEM (ROS-free core;
+``ros/hicem_node`` adapts it).
 
 Lifecycle of one process (:meth:`HighLevelController.start_process`, worker thread, or :meth:`run_process`,
 blocking): PEMKRE ``start_process`` → loop { ``next_action`` → pick the tree whose BehaviorTree ID is the

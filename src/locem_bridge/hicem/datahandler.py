@@ -1,4 +1,5 @@
-"""HDH: turns data from the other modules into HICEM data, and new world facts into PEMKRE updates.
+"""HDH (the paper's HICEM Data Handler): turns data from the other modules into HICEM data, and new world facts
+into PEMKRE updates.
 
 - :meth:`DataHandler.ingest_scan`: a LOCEM ``SCAN`` result (docs/contracts.md) is validated field by field
   (:class:`ScanFormatError` names the culprit), then, in one HDICT transaction, every wall/joint/area is stored

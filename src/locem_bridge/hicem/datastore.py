@@ -1,4 +1,5 @@
-"""HICEM data: HDM (volatile, in memory) and HDICT (non-volatile, SQLite) behind one interface.
+"""HICEM data: the paper's HDM (HICEM Data Manager; volatile, in memory) and HDICT (HICEM Dictionary;
+non-volatile, SQLite: :class:`SqliteStore`) behind one interface.
 
 Both stores hold JSON values addressed by ``(collection, key)`` with a stamp (wall-clock seconds of the last
 write) and a source tag. ``transaction()`` groups writes atomically: everything inside commits together or,

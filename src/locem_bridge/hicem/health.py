@@ -1,4 +1,4 @@
-"""HEM: the environment/health monitor.
+"""HEM (the paper's HICEM Environment Monitor): the environment/health monitor.
 
 Inputs: module heartbeats (:meth:`HealthMonitor.heartbeat`) and status/diagnostic reports
 (:meth:`report`, levels as in ``diagnostic_msgs/DiagnosticStatus``: OK 0, WARN 1, ERROR 2, STALE 3). A module

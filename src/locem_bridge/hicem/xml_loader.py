@@ -1,4 +1,5 @@
-"""Loader for BehaviorTree.CPP format 4 XML → py_trees trees with BT.CPP semantics.
+"""Loader for BehaviorTree.CPP format 4 XML → py_trees trees with BT.CPP semantics (with :mod:`.controls` and the
+node library :mod:`.nodes`, the paper's Behavior Tree Engine of the HHLC).
 
 Two phases:
 

@@ -1,6 +1,6 @@
 """The run report of a job: ``results/<run>/report.json``, ``report.md`` and the wall pictures.
 
-``report.json`` keeps at least the keys DESIGN.md fixes:
+``report.json`` keeps at least these keys:
 
 * ``processes``: list of ``{name, iri, status, duration_s}`` in the order they ran;
 * ``outcome.joints_total``, ``outcome.joints_taped``, ``outcome.tape_coverage``, ``outcome.spray_coverage``,
