@@ -1,6 +1,8 @@
 """The dispatcher's policy: validation first, one command per resource, STOP pre-empts, deadlines hold."""
 import time
 
+import pytest
+
 from locem_bridge.locem.codes import Code
 from locem_bridge.locem.execution import ExecState
 from locem_bridge.locem.registry import Interface
@@ -155,3 +157,36 @@ def test_read_only_queries_are_not_published_as_state_changes(core):
     assert events == []
     core.dispatcher.execute("STATUS now")  # a rejected query is still published
     assert [(e.name, e.state.value) for e in events] == [("STATUS", "rejected")]
+
+
+def test_status_names_what_runs_and_what_it_holds_then_idle_again(core, wait_until):
+    idle = core.dispatcher.execute("STATUS")
+    assert idle.message == "0 running; all resources idle"
+    assert (idle.result["running"], idle.result["resources"]) == ([], {})
+    assert isinstance(idle.result["uptime_s"], float) and idle.result["uptime_s"] >= 0.0
+    wait = core.dispatcher.submit("WAIT 5 hold=arm", Interface.SERVICE)
+    busy = core.dispatcher.execute("STATUS")
+    assert busy.message == "1 running; arm: %d" % wait.id
+    assert busy.result["resources"] == {"arm": wait.id}
+    assert [(r["id"], r["command"], r["resources"]) for r in busy.result["running"]] == [
+        (wait.id, "WAIT 5 hold=arm", ["arm"])]
+    wait.cancel()
+    assert wait_until(lambda: core.dispatcher.execute("STATUS").message == "0 running; all resources idle")
+
+
+def test_results_are_compact_json_with_sorted_keys_whatever_the_handler_returns():
+    import json
+
+    import numpy as np
+    from locem_bridge.locem.response import Response
+
+    result = {"b": (1, 2), "a": {3, 1}, "n": np.float64(0.25), "v": np.arange(3), "nan": float("nan"),
+              "text": "Wand \u00e4 \"1\"", "nested": {"z": None, "y": [True, 1.5]}}
+    text = Response(Code.OK, "done", result).result_json
+    assert text == ('{"a":[1,3],"b":[1,2],"n":0.25,"nan":NaN,"nested":{"y":[true,1.5],"z":null},'
+                    '"text":"Wand \\u00e4 \\"1\\"","v":[0,1,2]}')
+    assert json.loads(text)["text"] == result["text"]
+    cyclic = {"a": []}
+    cyclic["a"].append(cyclic)
+    with pytest.raises(ValueError, match="Circular reference"):
+        Response(Code.OK, "done", cyclic).result_json

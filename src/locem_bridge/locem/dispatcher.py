@@ -149,7 +149,7 @@ class Dispatcher:
             self._emit(self._rejection(text, interface, error))
             return Response.from_error(error)
         spec = bound.spec
-        if spec.query and spec.inline and not bound.claims:
+        if spec.query and spec.inline and not (spec.claims(bound.values) if spec.claims else spec.resources):
             handler = self.registry.handler(spec.name)
             if handler is not None:  # else submit() answers NOT_READY and publishes it
                 return self._call(Execution(next(self._ids), bound, interface, self.grace), handler)
@@ -222,11 +222,12 @@ class Dispatcher:
 
     def status(self, exclude: Optional[int] = None) -> Dict[str, Any]:
         """Running commands (but ``exclude``, e.g. the asking STATUS itself), occupied resources, health."""
-        with self._lock:
-            owners = {r: e.id for r, e in self._owners.items()}
-            running = [e.summary() for e in sorted(self._running.values(), key=lambda e: e.id) if e.id != exclude]
-        return {"uptime_s": round(time.monotonic() - self.started, 3), "running": running,
-                "resources": owners, "health": self.health()}
+        with self._lock:  # (an idle LOCEM, the common case, skips the comprehensions: STATUS is polled)
+            owners = {r: e.id for r, e in self._owners.items()} if self._owners else {}
+            running = [e.summary() for e in sorted(self._running.values(), key=lambda e: e.id)
+                       if e.id != exclude] if self._running else []
+        return {"uptime_s": round((time.monotonic() - self.started) * 1000.0) / 1000.0, "running": running,
+                "resources": owners, "health": self.health() if self._health else {}}
 
     def close(self) -> None:
         """Stop everything and end the watchdog (for node shutdown and tests)."""
@@ -276,7 +277,7 @@ class Dispatcher:
     def _call(self, execution: Execution, handler: Callable[..., Any]) -> Response:
         """Run the handler; every way it can end becomes a response (a bug in it too)."""
         try:
-            result = handler(CommandContext(execution), **dict(execution.bound.values))
+            result = handler(CommandContext(execution), **execution.bound.values)  # ** makes the handler's copy
             if result is not None and not isinstance(result, dict):
                 raise TypeError("handler returned %s, expected a dict or None" % type(result).__name__)
             result = dict(result or {})  # the handler's dict stays its own

@@ -14,6 +14,7 @@ execution is answered ``TIMEOUT`` and marked *stuck*; its resources stay occupie
 because the device it drives is in an unknown state.
 """
 
+import _thread
 import logging
 import threading
 import time
@@ -27,6 +28,7 @@ from .registry import BoundCommand, Interface
 from .response import Response
 
 _log = logging.getLogger(__name__)
+_RLock = getattr(_thread, "RLock", threading.RLock)  # what threading.RLock() returns, without its Python wrapper
 
 
 class ExecState(str, Enum):
@@ -163,7 +165,7 @@ class Execution:
         self._pause_callbacks: List[Any] = []
         self._listeners: List[Listener] = []
         self._feedback_listeners: List[Listener] = []
-        self._lock = threading.RLock()
+        self._lock = _RLock()
 
     @property
     def _wake(self) -> threading.Event:

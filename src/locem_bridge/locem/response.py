@@ -22,7 +22,7 @@ class Response:
 
     @property
     def result_json(self) -> str:
-        return _ENCODER.encode(self.result)
+        return encode_result(self.result)
 
     @classmethod
     def ok(cls, message: str = "done", result: Dict[str, Any] = None) -> "Response":
@@ -47,3 +47,25 @@ def _jsonable(value: Any) -> Any:
 
 _ENCODER = json.JSONEncoder(sort_keys=True, separators=(",", ":"), default=_jsonable)
 """One encoder for every response (``json.dumps`` with options builds a new one per call)."""
+
+try:  # the C encoder _ENCODER builds on every call, built once; without the cycle check (see encode_result)
+    from json.encoder import c_make_encoder as _c_make_encoder, encode_basestring_ascii as _ascii
+except ImportError:  # pragma: no cover - CPython always has the C accelerator
+    _c_make_encoder = None
+_C_ENCODE = None if _c_make_encoder is None else _c_make_encoder(
+    None, _jsonable, _ascii, None, ":", ",", True, False, True)  # the options of _ENCODER
+
+
+def encode_result(result: Dict[str, Any]) -> str:
+    """``result`` as compact JSON with sorted keys: what ``_ENCODER.encode`` gives, in half its time.
+
+    The prebuilt encoder keeps no cycle markers (a shared markers dict would see a false cycle when two
+    threads encode the same object at once); a real cycle ends it in RecursionError, and then the checked
+    encoder raises its usual ValueError naming the cycle.
+    """
+    if _C_ENCODE is not None:
+        try:
+            return "".join(_C_ENCODE(result, 0))
+        except RecursionError:
+            pass
+    return _ENCODER.encode(result)

@@ -86,7 +86,8 @@ class SystemCommands:
 
     def status(self, ctx: CommandContext) -> Dict[str, Any]:
         report = self._dispatcher.status(exclude=ctx.id)
-        busy = ", ".join("%s: %d" % item for item in sorted(report["resources"].items())) or "all resources idle"
+        resources = report["resources"]
+        busy = ", ".join("%s: %d" % item for item in sorted(resources.items())) if resources else "all resources idle"
         report["message"] = "%d running; %s" % (len(report["running"]), busy)
         return report
 
