@@ -1,10 +1,15 @@
 #!/usr/bin/env python3
 """LOCEM benchmark: parse+validate cost, service round trip vs a bare rospy echo service, action round trip.
 
-Run with the project environment:  tools/run.sh python bench/bench_locem.py [--calls N]
-Everything is measured in this one run; ratios compare LOCEM to a bare rospy baseline started alongside it,
-in rounds of interleaved calls (each side first in every other pair) so machine load hits both alike.
-Goals (issue 2): parse+validate median <= 50 us; /locem/command STATUS round trip median ratio <= 1.3.
+Run with the project environment:  tools/run.sh python bench/bench_locem.py [--calls N] [--placement same]
+Everything is measured in this one run; ratios compare LOCEM to a bare rospy baseline (bench/echo_node.py, the
+same service type) started alongside it, in rounds of interleaved calls (each side first in every other pair) so
+machine load hits both alike; the ratio is the median of the per-round ratios, printed with their spread.
+The service round trip is measured in every CPU placement (unpinned; client and both servers on one core; client
+on one core, both servers on the other): a round trip between cores takes about twice as long as one within a
+core, so an unpinned run mixes two populations and its ratio jumps between rounds. Both servers always share
+the placement. Goals (issues 2 and 15): parse+validate median <= 50 us; persistent-connection /locem/command
+STATUS round trip ratio <= 1.3 in every placement.
 """
 import argparse
 import os
@@ -45,7 +50,87 @@ def bench_parse(n):
     print("  => worst median %.1f us (goal <= 50 us): %s" % (max(medians), "MET" if max(medians) <= 50 else "MISSED"))
 
 
-def bench_ros(calls, goals):
+def _threads(pid):
+    """Every thread of process ``pid`` and of its descendants (rosrun may run the node as a child)."""
+    tids, pids = [], [pid]
+    while pids:
+        current = pids.pop()
+        try:
+            tasks = os.listdir("/proc/%d/task" % current)
+        except OSError:
+            continue
+        for tid in tasks:
+            tids.append(int(tid))
+            try:
+                with open("/proc/%d/task/%s/children" % (current, tid)) as children:
+                    pids += [int(c) for c in children.read().split()]
+            except OSError:
+                pass
+    return tids
+
+
+def pin(pid, cpus):
+    """Pin every thread of ``pid`` (and its children) to ``cpus``; threads started later inherit it."""
+    for tid in _threads(pid):
+        try:
+            os.sched_setaffinity(tid, cpus)
+        except OSError:  # a thread that ended meanwhile
+            pass
+
+
+def layouts(server_pids):
+    """(name, apply) pairs: the CPU placements every round-trip measurement runs in, both servers alike."""
+    everywhere = sorted(os.sched_getaffinity(0))
+
+    def place(client, servers):
+        def apply():
+            pin(os.getpid(), client)
+            for pid in server_pids:
+                pin(pid, servers)
+        return apply
+
+    found = [("unpinned", place(everywhere, everywhere))]
+    if len(everywhere) >= 2 and hasattr(os, "sched_setaffinity"):
+        first, second = {everywhere[0]}, {everywhere[1]}
+        found += [("same core: client and servers on CPU %d" % everywhere[0], place(first, first)),
+                  ("split: client on CPU %d, servers on CPU %d" % (everywhere[0], everywhere[1]),
+                   place(first, second))]
+    return found, place(everywhere, everywhere)
+
+
+def interleaved(locem, echo, calls, rounds):
+    """Rounds of interleaved pairs, each side first in every other pair; per side all samples (ms) and the
+    ratio of the two medians of every round."""
+    a, b, round_ratios = [], [], []
+    for r in range(rounds):
+        ra, rb = [], []
+        for i in range(max(1, calls // rounds)):
+            for side in ((0, 1) if (i + r) % 2 == 0 else (1, 0)):
+                start = time.perf_counter()
+                reply = (locem if side == 0 else echo)("STATUS")
+                (ra if side == 0 else rb).append((time.perf_counter() - start) * 1000)
+                assert reply.success, reply.message
+        round_ratios.append(statistics.median(ra) / statistics.median(rb))
+        a += ra
+        b += rb
+    return a, b, round_ratios
+
+
+def report(label, a, b, round_ratios, goal):
+    """One line per measurement (LOCEM median, baseline median, median of the per-round ratios, goal,
+    verdict), then the spread: p10/p99 of both sides and every round's ratio."""
+    ratio = statistics.median(round_ratios)
+    met = goal is None or ratio <= goal
+    print("  %-44s LOCEM %.3f ms  bare %.3f ms  ratio %.2f  %s" % (
+        label, statistics.median(a), statistics.median(b), ratio,
+        "(no goal)" if goal is None else "goal <= %.1f  %s" % (goal, "MET" if met else "MISSED")))
+    print("  %-44s p10 %.3f / %.3f ms  p99 %.3f / %.3f ms  rounds %.2f-%.2f: %s" % (
+        "", percentile(a, 10), percentile(b, 10), percentile(a, 99), percentile(b, 99),
+        min(round_ratios), max(round_ratios), " ".join("%.2f" % x for x in round_ratios)))
+    return met
+
+
+def bench_ros(calls, goals, rounds=10, goal=1.3, only=None):
     import actionlib
     import rospy
     from locem_bridge.msg import CommandAction, CommandGoal
@@ -55,45 +140,38 @@ def bench_ros(calls, goals):
     with RosProcesses() as ros:
         ros.start_master()
         os.environ.update(ros.env)
-        ros.spawn(["rosrun", "locem_bridge", "locem_node"], "locem")
-        ros.spawn([sys.executable, os.path.join(HERE, "echo_node.py")], "echo")
+        servers = [ros.spawn(["rosrun", "locem_bridge", "locem_node"], "locem"),
+                   ros.spawn([sys.executable, os.path.join(HERE, "echo_node.py")], "echo")]
         ros.wait_for_service("/locem/command")
         ros.wait_for_service("/echo/command")
         rospy.init_node("bench_locem", anonymous=True, disable_signals=True)
+        placements, unpin = layouts([s.pid for s in servers])
+        if only:
+            placements = [p for p in placements if p[0].startswith(only)]
+        verdicts = []
+        print("/locem/command STATUS round trip vs a bare rospy echo service of the same type, %d calls per side in "
+              "%d rounds of interleaved pairs; ratio = median of the per-round ratios:" % (calls, rounds))
         for persistent in (True, False):
             locem = rospy.ServiceProxy("/locem/command", Command, persistent=persistent)
             echo = rospy.ServiceProxy("/echo/command", Command, persistent=persistent)
-            for _ in range(50):  # warm up both
-                locem("STATUS")
-                echo("STATUS")
-            a, b = [], []
-            round_ratios = []
-            rounds = 10
-            for r in range(rounds):  # rounds of interleaved pairs, each side first in every other pair
-                ra, rb = [], []
-                for i in range(max(1, calls // rounds)):
-                    for side in ((0, 1) if (i + r) % 2 == 0 else (1, 0)):
-                        start = time.perf_counter()
-                        reply = (locem if side == 0 else echo)("STATUS")
-                        (ra if side == 0 else rb).append((time.perf_counter() - start) * 1000)
-                        assert reply.success, reply.message
-                round_ratios.append(statistics.median(ra) / statistics.median(rb))
-                a += ra
-                b += rb
-            ratio = statistics.median(a) / statistics.median(b)
             label = "persistent connection" if persistent else "new connection per call (rosservice default)"
-            print("/locem/command STATUS round trip, %s, %d calls:" % (label, len(a)))
-            print("  LOCEM       median %.3f ms  p10 %.3f ms  p99 %.3f ms"
-                  % (statistics.median(a), percentile(a, 10), percentile(a, 99)))
-            print("  bare rospy  median %.3f ms  p10 %.3f ms  p99 %.3f ms"
-                  % (statistics.median(b), percentile(b, 10), percentile(b, 99)))
-            print("  ratio per round of %d pairs: %s (spread shows the machine's load)"
-                  % (calls // rounds, " ".join("%.2f" % x for x in round_ratios)))
-            print("  p10 ratio %.2f" % (percentile(a, 10) / percentile(b, 10)))
-            print("  => median ratio %.2f (goal <= 1.3): %s" % (ratio, "MET" if ratio <= 1.3 else "MISSED"))
+            print(" %s:" % label)
+            for name, apply in (placements if persistent else placements[:1]):
+                apply()
+                for _ in range(50):  # warm up both in this placement
+                    locem("STATUS")
+                    echo("STATUS")
+                a, b, round_ratios = interleaved(locem, echo, calls, rounds)
+                met = report(name, a, b, round_ratios, goal if persistent else None)
+                if persistent:
+                    verdicts.append((name, met))
+            unpin()
             if persistent:
                 locem.close()
                 echo.close()
+        print("  => persistent-connection goal (<= %.1f in every placement): %s" % (
+            goal, "MET" if all(m for _, m in verdicts) else
+            "MISSED in " + ", ".join(n.split(":")[0] for n, m in verdicts if not m)))
         clients = {"LOCEM WAIT 0": actionlib.SimpleActionClient("/locem/command_action", CommandAction),
                    "bare actionlib": actionlib.SimpleActionClient("/echo/command_action", CommandAction)}
         results = {}
@@ -121,10 +199,13 @@ def main():
     parser.add_argument("--parse-calls", type=int, default=20000)
     parser.add_argument("--calls", type=int, default=2000, help="service calls per side")
     parser.add_argument("--goals", type=int, default=200, help="action goals per side")
+    parser.add_argument("--rounds", type=int, default=10, help="rounds the service calls are split into")
+    parser.add_argument("--placement", choices=("unpinned", "same", "split"),
+                        help="measure the service round trip in this CPU placement only (default: all of them)")
     args = parser.parse_args()
     print("machine: %d cores; python %s" % (os.cpu_count() or 0, sys.version.split()[0]))
     bench_parse(args.parse_calls)
-    bench_ros(args.calls, args.goals)
+    bench_ros(args.calls, args.goals, rounds=args.rounds, only=args.placement)
 
 
 if __name__ == "__main__":
