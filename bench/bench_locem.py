@@ -50,8 +50,9 @@ def bench_parse(n):
     print("  => worst median %.1f us (goal <= 50 us): %s" % (max(medians), "MET" if max(medians) <= 50 else "MISSED"))
 
 
-def _threads(pid):
-    """Every thread of process ``pid`` and of its descendants (rosrun may run the node as a child)."""
+def _threads(pid, children=True):
+    """Every thread of process ``pid`` and, with ``children``, of its descendants (rosrun may run the node as a
+    child)."""
     tids, pids = [], [pid]
     while pids:
         current = pids.pop()
@@ -61,6 +62,8 @@ def _threads(pid):
             continue
         for tid in tasks:
             tids.append(int(tid))
+            if not children:
+                continue
             try:
                 with open("/proc/%d/task/%s/children" % (current, tid)) as children:
                     pids += [int(c) for c in children.read().split()]
@@ -69,9 +72,9 @@ def _threads(pid):
     return tids
 
 
-def pin(pid, cpus):
+def pin(pid, cpus, children=True):
     """Pin every thread of ``pid`` (and its children) to ``cpus``; threads started later inherit it."""
-    for tid in _threads(pid):
+    for tid in _threads(pid, children):
         try:
             os.sched_setaffinity(tid, cpus)
         except OSError:  # a thread that ended meanwhile
@@ -84,7 +87,7 @@ def layouts(server_pids):
 
     def place(client, servers):
         def apply():
-            pin(os.getpid(), client)
+            pin(os.getpid(), client, children=False)  # (its children are roscore and the servers)
             for pid in server_pids:
                 pin(pid, servers)
         return apply
