@@ -179,3 +179,47 @@ def test_the_contract_check_detects_each_breach():
     assert any("compressor.reset_fault, which Compressor does not declare" in f for f in found)
     assert any("base.loop_rate, which Base does not declare" in f for f in found)
     assert any("probes the arm with hasattr" in f for f in found)
+
+
+# -- an arm without the path group: the wall commands work lane by lane ------------------------------------------
+@pytest.mark.slow
+def test_sand_area_with_an_arm_without_the_path_group_runs_lane_by_lane(robot, core, monkeypatch):
+    """The raster's one blended path is an optional group: a backend that does not declare it (here the real UR
+    backend, declaring force only) gets straight moves lane by lane, and the area is still sanded completely."""
+    pytest.importorskip("rtde_control")
+    from locem_bridge.bridges import robot as robot_module
+    from bridge_rigs import WorksiteRig
+
+    ur = backends.backend_class("arm", "ur_rtde")
+
+    class LaneByLaneArm(ur):
+        capabilities = frozenset({Arm.FORCE})
+
+        def move_path(self, *args, **kwargs):
+            raise AssertionError("move_path called on an arm that does not declare the path group")
+
+    real = robot_module.backend_class
+    monkeypatch.setattr(robot_module, "backend_class",
+                        lambda kind, name: LaneByLaneArm if kind == "arm" else real(kind, name))
+    rig = WorksiteRig(robot)
+    built = build_robot(rig.robot, site=rig.site_path, initial_pose=tuple(rig.world.base_pose()))
+    try:
+        built.start()
+        for command_set in built.command_sets:
+            core.install(command_set)
+        for kind in ("arm", "compressor", "base"):
+            assert built.get(kind).wait_ready(20.0), (kind, built.get(kind).health())
+        assert not built.get("arm").supports(Arm.PATH)
+        rig.world.mount_tool("sander")
+        assert core.dispatcher.execute("MOUNT_TOOL sander").success
+        assert core.dispatcher.execute("GOTO 2.4 2.6 1.5708").success
+        r = core.dispatcher.execute("SAND_AREA 2.0 3.6 0.9 1 0 0 0.8 0.6 0 -1 0 spacing=0.1 speed=0.15")
+        assert r.success, r.message
+        assert r.result["lanes"] == 7 and r.result["contact"] == "position"
+        m = rig.world.outcome.maps["wall_1"]
+        cells = m.sanded[(m.tc >= 0.9) & (m.tc <= 1.5)][:, (m.sc >= 0.2) & (m.sc <= 1.0)]
+        assert cells.mean() >= 0.98, cells.mean()
+        assert rig.nothing_running(), rig.running()
+    finally:
+        built.close()
+        rig.close()
