@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from locem_bridge.bridges.commands_arm import ArmCommands
-from locem_bridge.bridges.interfaces import HEALTH_ERROR, HEALTH_OK, health_level
+from locem_bridge.common.health import ERROR as HEALTH_ERROR, OK as HEALTH_OK, grade as health_level
 from locem_bridge.bridges.ur_arm import UrRtdeArm
 from locem_bridge.locem.registry import Interface
 

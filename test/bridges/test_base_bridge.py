@@ -7,7 +7,7 @@ import pytest
 
 from locem_bridge.bridges.cia402_base import Cia402Base
 from locem_bridge.bridges.commands_base import BaseCommands
-from locem_bridge.bridges.interfaces import HEALTH_ERROR, HEALTH_OK, health_level
+from locem_bridge.common.health import ERROR as HEALTH_ERROR, OK as HEALTH_OK, grade as health_level
 from locem_bridge.locem.registry import Interface
 
 from bridge_rigs import BaseRig, HeartbeatWatch, last_motion, sim_time_of, wait_until

@@ -9,7 +9,7 @@ import time
 import pytest
 
 from locem_bridge.bridges.commands_compressor import CompressorCommands
-from locem_bridge.bridges.interfaces import HEALTH_ERROR, HEALTH_OK, health_level
+from locem_bridge.common.health import ERROR as HEALTH_ERROR, OK as HEALTH_OK, grade as health_level
 from locem_bridge.bridges.modbus_compressor import ModbusCompressor
 
 from bridge_rigs import wait_until

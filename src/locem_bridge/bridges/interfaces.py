@@ -9,8 +9,7 @@ Health (``health()``), as ``STATUS``, ``/locem/status`` and ``/diagnostics`` sho
 
     {"link": "up" | "down" | "connecting", "device": "ok" | "<state>", "last_error": "", ...details}
 
-:func:`health_level` grades one record as ``diagnostic_msgs/DiagnosticStatus`` does (OK 0, WARN 1, ERROR 2): ERROR
-when the link is not up, the device state starts with ``fault`` or ``safety``, or a ``fault`` is latched.
+:func:`locem_bridge.common.health.grade` grades one record (OK, WARN, ERROR as ``diagnostic_msgs/DiagnosticStatus``).
 """
 
 import abc
@@ -96,19 +95,6 @@ class Health:
                    "link_since": round(self.since, 3)}
             out.update(self.details)
             return out
-
-
-HEALTH_OK, HEALTH_WARN, HEALTH_ERROR = 0, 1, 2
-
-
-def health_level(health: Dict[str, Any]) -> int:
-    """The diagnostic level of one health record (see the module docstring)."""
-    if health.get("link") != "up":
-        return HEALTH_ERROR
-    device = str(health.get("device", "ok"))
-    if device.startswith("fault") or device.startswith("safety") or health.get("fault"):
-        return HEALTH_ERROR
-    return HEALTH_OK if device in ("ok", "unknown") else HEALTH_WARN
 
 
 class Backend(abc.ABC):

@@ -9,6 +9,7 @@ Modules (each one concept):
 * :mod:`.can_bus`        opening the base's CAN bus (allowed interfaces, own-echo filter; bridge and simulator)
 * :mod:`.geometry`       angle wrapping, rotation vectors / matrices / RPY / quaternions, rigid transforms
 * :mod:`.raster_progress` the progress text of a raster command (LOCEM's SPRAY_AREA feedback, HICEM's resume)
+* :mod:`.health`         health levels (OK, WARN, ERROR, STALE) and the grading of a device's health record
 
 Anything that crosses layers (LOCEM codes, task statuses, the next-action record, health grading, geometry,
 CAN bus opening) belongs here, never copied into a layer. Modules here import only the standard library, numpy

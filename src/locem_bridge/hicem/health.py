@@ -1,7 +1,7 @@
 """HEM (the paper's HICEM Environment Monitor): the environment/health monitor.
 
 Inputs: module heartbeats (:meth:`HealthMonitor.heartbeat`) and status/diagnostic reports
-(:meth:`report`, levels as in ``diagnostic_msgs/DiagnosticStatus``: OK 0, WARN 1, ERROR 2, STALE 3). A module
+(:meth:`report`, levels of :mod:`locem_bridge.common.health`: OK 0, WARN 1, ERROR 2, STALE 3). A module
 is *faulty* when its last report is ERROR or STALE, or when it has a heartbeat timeout and no heartbeat
 arrived within it. A *crucial* module turning faulty calls every fault listener once (the controller halts the
 running tree); it is called from the reporting thread at once, or from the watchdog thread (period
@@ -12,10 +12,8 @@ import threading
 import time
 from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple, Union
 
+from ..common.health import ERROR, LEVEL_NAMES, level_of
 from .errors import HealthError
-
-LEVELS = {"OK": 0, "WARN": 1, "ERROR": 2, "STALE": 3}
-LEVEL_NAMES = {v: k for k, v in LEVELS.items()}
 
 
 class ModuleSpec:
@@ -90,11 +88,10 @@ class HealthMonitor:
 
     @staticmethod
     def _level(level: Union[int, str]) -> int:
-        if isinstance(level, str) and level.upper() in LEVELS:
-            return LEVELS[level.upper()]
-        if isinstance(level, int) and not isinstance(level, bool) and level in LEVEL_NAMES:
-            return level
-        raise HealthError("unknown health level %r; allowed: %s or 0..3" % (level, ", ".join(LEVELS)))
+        try:
+            return level_of(level)
+        except ValueError as exc:
+            raise HealthError(str(exc))
 
     def _ensure(self, module: str) -> _State:
         if not isinstance(module, str) or not module:
@@ -106,7 +103,7 @@ class HealthMonitor:
 
     def _fault_of(self, name: str, st: _State, now: float) -> Optional[str]:
         spec = self._specs[name]
-        if st.level >= LEVELS["ERROR"]:
+        if st.level >= ERROR:
             return "%s reports %s: %s" % (name, LEVEL_NAMES[st.level], st.message or "no message")
         if spec.heartbeat_timeout_s is not None and now - st.last_heartbeat > spec.heartbeat_timeout_s:
             return "%s silent for %.2f s (heartbeat timeout %.2f s)" % (

@@ -5,7 +5,8 @@
   turns into a device stop; the latest feedback's text is the handle's ``feedback()``. A command sent while LOCEM is away (restarting) waits for it, within a deadline; a
   running command whose LOCEM went away ends ``ABORTED`` and is not sent again.
 - :class:`LocemHealthFeed`: polls ``STATUS`` through the ``<locem>/command`` service every ``period`` seconds —
-  an answer is LOCEM's heartbeat, each backend's ``health`` entry becomes module ``locem/<backend>`` — and
+  an answer is LOCEM's heartbeat, each backend's ``health`` entry becomes module ``locem/<backend>`` at the level
+  :func:`locem_bridge.common.health.grade` gives it — and
   forwards ``diagnostics`` (``diagnostic_msgs/DiagnosticArray``) and ``<locem>/status`` (any message is a sign of life) to the HDH.
 """
 import json
@@ -17,12 +18,12 @@ import actionlib
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray
 
+from locem_bridge.common.health import grade, problems
 from locem_bridge.hicem.errors import HicemError
 from locem_bridge.hicem.interfaces import CommandHandle, LocemClient, LocemReply
 from locem_bridge.msg import CommandAction, CommandGoal, Status
 from locem_bridge.srv import Command
 
-_OK_LINKS = ("up", "ok", "connected", "ready", "simulated")
 #: how long the action server of a running goal may be gone before the goal counts as lost (s)
 LOST_GRACE_S = 0.5
 
@@ -165,10 +166,9 @@ class LocemHealthFeed:
         for name, h in sorted(health.items()):
             if not isinstance(h, dict):
                 continue
-            link = str(h.get("link", "unknown")).lower()
-            level = "OK" if link in _OK_LINKS else ("WARN" if link == "unknown" else "ERROR")
-            self._ingest({"module": "locem/%s" % name, "level": level,
-                          "message": "link %s%s" % (link, ("; " + str(h["last_error"])) if h.get("last_error") else "")})
+            self._ingest({"module": "locem/%s" % name, "level": grade(h),
+                          "message": "%s%s" % (", ".join(problems(h)) or "link up, device ok",
+                                               ("; " + str(h["last_error"])) if h.get("last_error") else "")})
 
     def _on_status(self, _msg: Any) -> None:
         self.hdh.heartbeat("locem")

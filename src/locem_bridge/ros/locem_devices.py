@@ -31,19 +31,13 @@ from geometry_msgs.msg import TransformStamped, Twist
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
 
-from locem_bridge.bridges.interfaces import HEALTH_OK, HEALTH_WARN, health_level
+from locem_bridge.common.health import ERROR, grade
 from locem_bridge.msg import Status
 
 
 def _quat_z(yaw: float) -> Any:
     from geometry_msgs.msg import Quaternion
     return Quaternion(0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
-
-
-def _level(health: Dict[str, Any]) -> int:
-    """DiagnosticStatus level of one backend's health record (graded by the ROS-free core)."""
-    return {HEALTH_OK: DiagnosticStatus.OK, HEALTH_WARN: DiagnosticStatus.WARN}.get(
-        health_level(health), DiagnosticStatus.ERROR)
 
 
 class LocemDevices:
@@ -140,7 +134,7 @@ class LocemDevices:
         array.header.stamp = rospy.Time.now()
         for name, health in sorted(self.health_source().items()):
             status = DiagnosticStatus()
-            status.level = _level(health)
+            status.level = grade(health)        # the levels are DiagnosticStatus's
             status.name = "locem: %s" % name
             status.hardware_id = name
             status.message = "link %s, device %s%s" % (health.get("link"), health.get("device"),
@@ -160,7 +154,7 @@ class LocemDevices:
                 return
             self._last_health = key
             self._last_health_stamp = now
-        bad = [n for n, h in sorted(health.items()) if _level(h) == DiagnosticStatus.ERROR]
+        bad = [n for n, h in sorted(health.items()) if grade(h) == ERROR]
         msg = Status()
         msg.header.stamp = rospy.Time.now()
         msg.name = "HEALTH"

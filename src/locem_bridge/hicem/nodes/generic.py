@@ -18,6 +18,7 @@ from typing import Any, List, Optional, Sequence
 
 from py_trees.common import Status
 
+from ...common.health import problems as device_problems
 from ..errors import HicemError, LocemError, PortError
 from ..interfaces import check_reply
 from ..node_base import ConditionLeaf, Leaf
@@ -81,8 +82,9 @@ class CheckHealth(ConditionLeaf):
 
 def devices_not_ready(status: Any, devices: Sequence[str], links_only: bool = False) -> List[str]:
     """Why the devices of a LOCEM STATUS result are not ready: one text per device that is not (empty when all
-    are). A device is ready when its ``health`` entry has link 'up' and, unless ``links_only``, device 'ok' and
-    no 'fault'. ``devices`` empty: every backend STATUS reports."""
+    are). A device is ready when its ``health`` entry grades OK (:mod:`locem_bridge.common.health`: link 'up',
+    device 'ok', no 'fault'), or with ``links_only`` when its link is up. ``devices`` empty: every backend STATUS
+    reports."""
     health = status.get("health") if isinstance(status, dict) else None
     if not isinstance(health, dict):
         return ["the STATUS result has no 'health' object (got %s)" % (
@@ -96,13 +98,7 @@ def devices_not_ready(status: Any, devices: Sequence[str], links_only: bool = Fa
         if not isinstance(h, dict):
             down.append("%s: not in STATUS (it reports %s)" % (name, ", ".join(sorted(health)) or "nothing"))
             continue
-        why = []
-        if h.get("link") != "up":
-            why.append("link %s" % h.get("link", "unknown"))
-        if not links_only and h.get("device", "ok") != "ok":
-            why.append("device %s" % h.get("device"))
-        if not links_only and h.get("fault"):
-            why.append("fault %s" % h.get("fault"))
+        why = device_problems(h, links_only)
         if why:
             err = h.get("last_error") or ""
             down.append("%s: %s%s" % (name, ", ".join(why), " (%s)" % err if err else ""))
