@@ -60,10 +60,11 @@ def _pemkre_client(kind: str) -> Any:
                                deadline_s=float(_param("pemkre_call_deadline", 10.0)))
     if kind == "embedded":
         from locem_bridge.hicem.pemkre_local import EngineClient
-        from locem_bridge.pemkre import OxigraphStore, ProcessEngine
+        from locem_bridge.pemkre import ProcessEngine
+        from locem_bridge.pemkre.store_factory import open_store
         store_path = os.path.expanduser(_param("pemkre_store", os.path.join(rospkg.get_ros_home(),
                                                                             "hicem_pemkre_store")))
-        return EngineClient(ProcessEngine(OxigraphStore(store_path)))
+        return EngineClient(ProcessEngine(open_store("rocksdb", store_path)))
     raise HicemError("~pemkre must be 'ros' or 'embedded', got %r" % kind)
 
 

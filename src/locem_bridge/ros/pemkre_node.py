@@ -23,17 +23,16 @@ Parameters: ``~store_path`` (directory of the persistent store; default ``$ROS_H
 import gc
 import json
 import os
-import shutil
 import threading
 from typing import Any, Callable, Optional
 
 import rospy
 
 from locem_bridge.common.config_errors import ConfigError
-from locem_bridge.pemkre import JournaledStore, OxigraphStore, ProcessEngine
+from locem_bridge.pemkre import ProcessEngine
 from locem_bridge.pemkre.engine import load_json
 from locem_bridge.pemkre.errors import PemkreError
-from locem_bridge.pemkre.store import TripleStore
+from locem_bridge.pemkre.store_factory import open_store
 from locem_bridge.pemkre.terms import bindings_from_strings
 from locem_bridge.srv import (PemkreNextAction, PemkreNextActionResponse, PemkreQuery, PemkreQueryResponse,
                               PemkreSetTaskStatus, PemkreSetTaskStatusResponse, PemkreStartProcess,
@@ -130,19 +129,6 @@ class PemkreNode:
             s.shutdown()
         if self.engine is not None:
             self.engine.store.close()
-
-
-def open_store(kind: str, path: str, fsync: bool = False, fresh: bool = False) -> TripleStore:
-    """The store named by the ``~store`` parameter."""
-    if kind == "memory":
-        return OxigraphStore(None)
-    if fresh and os.path.isdir(path):
-        shutil.rmtree(path)
-    if kind == "journal":
-        return JournaledStore(path, fsync=fsync)
-    if kind == "rocksdb":
-        return OxigraphStore(path)
-    raise ValueError("~store must be journal, rocksdb or memory, got %r" % kind)
 
 
 @config_guard("pemkre")

@@ -1,0 +1,50 @@
+"""The one store factory (PEMKRE's node and HICEM's embedded PEMKRE): each kind opens its store, the on-disk
+kinds keep a write across close/reopen, ``fresh`` starts empty, an unknown kind is refused naming the kinds."""
+import os
+
+import pytest
+from rdflib import Literal, URIRef
+
+from locem_bridge.pemkre import JournaledStore, OxigraphStore
+from locem_bridge.pemkre.store import G_WORLD, ChangeSet
+from locem_bridge.pemkre.store_factory import STORE_KINDS, open_store
+
+A, P = URIRef("https://ex.example/a"), URIRef("https://ex.example/p")
+
+
+@pytest.mark.parametrize("kind, cls, kept", [("journal", JournaledStore, True), ("rocksdb", OxigraphStore, True),
+                                             ("memory", OxigraphStore, False)])
+def test_each_kind_opens_its_store_and_the_disk_kinds_keep_a_write(kind, cls, kept, tmp_path):
+    path = str(tmp_path / "store")
+    store = open_store(kind, path)
+    assert isinstance(store, cls)
+    store.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    store.close()
+    assert os.path.isdir(path) == kept
+    again = open_store(kind, path)
+    try:
+        assert again.value(A, P) == (Literal(1) if kept else None)
+    finally:
+        again.close()
+
+
+@pytest.mark.parametrize("kind", ["journal", "rocksdb"])
+def test_fresh_starts_from_an_empty_store(kind, tmp_path):
+    path = str(tmp_path / "store")
+    store = open_store(kind, path)
+    store.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    store.close()
+    store = open_store(kind, path, fresh=True)
+    try:
+        assert store.value(A, P) is None and store.count() == 0
+    finally:
+        store.close()
+
+
+def test_an_unknown_kind_is_refused_before_anything_is_touched(tmp_path):
+    path = tmp_path / "store"
+    path.mkdir()
+    (path / "keep").write_text("data")
+    with pytest.raises(ValueError, match=r"store must be journal, rocksdb or memory, got 'sqlite'"):
+        open_store("sqlite", str(path), fresh=True)
+    assert (path / "keep").read_text() == "data" and STORE_KINDS == ("journal", "rocksdb", "memory")
