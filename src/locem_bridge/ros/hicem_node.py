@@ -38,31 +38,19 @@ from locem_bridge.srv import (HicemOperatorReply, HicemOperatorReplyResponse, Hi
 
 from .hicem_locem import LocemHealthFeed, RosLocemClient
 from .hicem_pemkre import RosPemkreClient
+from .params import package_share, param
 from .startup import config_guard
-
-
-def _share_dir() -> str:
-    try:
-        return rospkg.RosPack().get_path("locem_bridge")
-    except rospkg.ResourceNotFound:
-        return os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
-
-
-def _param(name: str, default: Any) -> Any:
-    """Private parameter; an empty string (launch-file default) means the built-in default."""
-    v = rospy.get_param("~" + name, default)
-    return default if v == "" else v
 
 
 def _pemkre_client(kind: str) -> Any:
     if kind == "ros":
-        return RosPemkreClient(rospy.resolve_name(_param("pemkre_ns", "pemkre")),
-                               deadline_s=float(_param("pemkre_call_deadline", 10.0)))
+        return RosPemkreClient(rospy.resolve_name(param("pemkre_ns", "pemkre")),
+                               deadline_s=param("pemkre_call_deadline", 10.0))
     if kind == "embedded":
         from locem_bridge.hicem.pemkre_local import EngineClient
         from locem_bridge.pemkre import ProcessEngine
         from locem_bridge.pemkre.store_factory import open_store
-        store_path = os.path.expanduser(_param("pemkre_store", os.path.join(rospkg.get_ros_home(),
+        store_path = os.path.expanduser(param("pemkre_store", os.path.join(rospkg.get_ros_home(),
                                                                             "hicem_pemkre_store")))
         return EngineClient(ProcessEngine(open_store("rocksdb", store_path)))
     raise HicemError("~pemkre must be 'ros' or 'embedded', got %r" % kind)
@@ -70,33 +58,33 @@ def _pemkre_client(kind: str) -> Any:
 
 class HicemNode:
     def __init__(self) -> None:
-        share = _share_dir()
-        trees_dir = _param("trees_dir", os.path.join(share, "trees"))
-        params_file = _param("params_file", os.path.join(share, "config", "hicem", "plasterboard.yaml"))
-        hdict = os.path.expanduser(_param("hdict_path", os.path.join(rospkg.get_ros_home(), "hicem_hdict.sqlite")))
-        locem_ns = rospy.resolve_name(_param("locem_ns", "locem"))
+        share = package_share()
+        trees_dir = param("trees_dir", os.path.join(share, "trees"))
+        params_file = param("params_file", os.path.join(share, "config", "hicem", "plasterboard.yaml"))
+        hdict = os.path.expanduser(param("hdict_path", os.path.join(rospkg.get_ros_home(), "hicem_hdict.sqlite")))
+        locem_ns = rospy.resolve_name(param("locem_ns", "locem"))
         # the files first: a bad one fails the node at once (one line), not after waiting for LOCEM and PEMKRE
         params = load_params(params_file)
         library = TreeLibrary(params.node_registry())
         library.load_directory(trees_dir)
-        self.locem = RosLocemClient(locem_ns, wait_s=float(_param("locem_wait", 10.0)))
+        self.locem = RosLocemClient(locem_ns, wait_s=param("locem_wait", 10.0))
         # times each PEMKRE call into $LOCEM_CALL_LOG when set (bench/bench_job.py); otherwise the client itself
-        self.pemkre = instrument_from_env(_pemkre_client(_param("pemkre", "ros")))
+        self.pemkre = instrument_from_env(_pemkre_client(param("pemkre", "ros")))
         self.ex = create_executive(self.pemkre, self.locem, hdict,
                                    params_file=params_file, trees_dir=trees_dir, params=params, library=library)
         self.ctrl = self.ex.controller
-        self.ctrl.pemkre_wait_s = float(_param("pemkre_wait", 600.0))
+        self.ctrl.pemkre_wait_s = param("pemkre_wait", 600.0)
         self.state_pub = rospy.Publisher("~state", HicemState, queue_size=20, latch=True)
         self.prompt_pub = rospy.Publisher("~prompts", HicemPrompt, queue_size=50)
         self.ctrl.add_state_listener(self._publish_state)
         self.ex.operator.add_listener(self._on_prompt)
-        self.feed = LocemHealthFeed(self.ex.data_handler, locem_ns, float(_param("status_period", 0.25)),
-                                    rospy.resolve_name(_param("diagnostics_topic", "diagnostics")))
+        self.feed = LocemHealthFeed(self.ex.data_handler, locem_ns, param("status_period", 0.25),
+                                    rospy.resolve_name(param("diagnostics_topic", "diagnostics")))
         self.services = [rospy.Service("~start_process", HicemStartProcess, self._start),
                          rospy.Service("~stop", HicemStop, self._stop),
                          rospy.Service("~operator_reply", HicemOperatorReply, self._reply)]
         self._publish_state(self.ctrl.state())
-        if _param("resume", "auto") == "auto" and self.ctrl.resume_in_background():
+        if param("resume", "auto") == "auto" and self.ctrl.resume_in_background():
             rospy.logwarn("hicem: resuming the process interrupted in the previous run (HDICT %s)", hdict)
         rospy.loginfo("hicem: %d trees from %s, HDICT %s, LOCEM %s", len(self.ex.library.tree_ids()), trees_dir,
                       hdict, locem_ns)

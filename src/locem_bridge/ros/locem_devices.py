@@ -23,7 +23,7 @@ Lifecycle: ``LocemDevices(robot, health_source)`` -> :meth:`start` (after ``rosp
 import json
 import math
 import threading
-from typing import Any, Dict, Optional
+from typing import Any, Optional
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue

@@ -54,6 +54,7 @@ from locem_bridge.srv import (
     ProcedureControl,
     ProcedureControlResponse,
 )
+from locem_bridge.ros.params import as_list, param
 from locem_bridge.ros.startup import config_guard
 
 
@@ -210,7 +211,7 @@ def _action_result(response: Optional[Response]) -> CommandResult:
 def _keep_tool(wall: Any) -> None:
     """The mounted tool outlives a LOCEM restart: kept in the private parameter ``~active_tool`` (the master
     outlives a respawned node) and restored from it at start."""
-    last = str(rospy.get_param("~active_tool", "") or "")
+    last = param("active_tool", "")
     if last:
         wall.restore_tool(last)
         rospy.logwarn("LOCEM restarted with the %s mounted (from ~active_tool)", last)
@@ -231,35 +232,33 @@ def main() -> None:
     answered BUSY), ``~status_queue_size`` (``~status`` events queued per subscriber, default 10000).
     """
     rospy.init_node("locem")
-    core = LocemCore(grace=float(rospy.get_param("~grace", 1.0)),
-                     stop_timeout=float(rospy.get_param("~stop_timeout", 2.0)),
-                     max_running=int(rospy.get_param("~max_running", DEFAULT_MAX_RUNNING)))
+    core = LocemCore(grace=param("grace", 1.0), stop_timeout=param("stop_timeout", 2.0),
+                     max_running=param("max_running", DEFAULT_MAX_RUNNING))
     robot = devices = None
-    robot_config = str(rospy.get_param("~robot_config", "") or "")
+    robot_config = param("robot_config", "")
     if robot_config:
         from locem_bridge.bridges.config import load_robot_config
         from locem_bridge.bridges.robot import build_robot
         from locem_bridge.ros.locem_devices import LocemDevices
 
-        robot_cfg = load_robot_config(robot_config, rospy.get_param("~robot_overrides", {}) or {})
-        site_config = str(rospy.get_param("~site_config", "") or "") or None
-        pose = rospy.get_param("~initial_pose", None) or None
+        robot_cfg = load_robot_config(robot_config, param("robot_overrides", {}))
+        site_config = param("site_config", "") or None
+        pose = param("initial_pose", None) or None
         if pose is None and site_config:           # odometry starts where the site says the robot stands
             from locem_bridge.sim.config import load_site
             pose = load_site(site_config)["site"]["robot_start"]
-        robot = build_robot(robot_cfg, devices=[d.strip() for d in str(rospy.get_param(
-                                "~devices", "arm,compressor,base,scanner")).split(",") if d.strip()],
+        robot = build_robot(robot_cfg, devices=as_list(param("devices", "arm,compressor,base,scanner")),
                             site=site_config,
                             initial_pose=tuple(float(v) for v in pose) if pose else None,
-                            named_base_poses=rospy.get_param("~named_poses", {}) or {})
+                            named_base_poses=param("named_poses", {}))
         for command_set in robot.command_sets:
             core.install(command_set)
             if hasattr(command_set, "restore_tool"):
                 _keep_tool(command_set)
         robot.start()
         devices = LocemDevices(robot, core.dispatcher.health,
-                               localisation_topic=str(rospy.get_param("~localisation_topic", "") or ""))
-    node = LocemNode(core, status_queue_size=int(rospy.get_param("~status_queue_size", STATUS_QUEUE_SIZE)))
+                               localisation_topic=param("localisation_topic", ""))
+    node = LocemNode(core, status_queue_size=param("status_queue_size", STATUS_QUEUE_SIZE))
     node.start()
     if devices is not None:
         devices.start()

@@ -29,6 +29,7 @@ from typing import Any, Dict, List, Optional
 from locem_bridge.job.report import run_name
 from locem_bridge.job.runs import RunEntry, RunRegistry, RunsError, addresses_of
 
+from .params import package_share
 from .processes import free_port
 from .startup import LINE as NODE_CONFIG_ERROR
 
@@ -53,7 +54,7 @@ def robot_file(launch_args: List[str]) -> str:
     for arg in reversed(launch_args):
         if arg.startswith("robot:="):
             return os.path.abspath(arg[len("robot:="):])
-    return os.path.join(_package_dir(), "config", "robots", "rbkairos_ur10e.yaml")    # the launch's default
+    return os.path.join(package_share(), "config", "robots", "rbkairos_ur10e.yaml")    # the launch's default
 
 
 def claim_addresses(args: argparse.Namespace, ports: List[int]) -> RunEntry:
@@ -71,22 +72,13 @@ def claim_addresses(args: argparse.Namespace, ports: List[int]) -> RunEntry:
                                taken_names=lambda name: os.path.lexists(os.path.join(results, name)))
 
 
-def _package_dir() -> str:
-    try:
-        import rospkg
-        return str(rospkg.RosPack().get_path("locem_bridge"))
-    except Exception:          # outside a sourced workspace: the source checkout
-        from locem_bridge.sim.config import repo_root
-        return repo_root()
-
-
 def preflight(args: argparse.Namespace, robot_overrides: Optional[Dict[str, Any]] = None) -> Optional[str]:
     """Check the files the launch will read (site, robot plus its overrides, HICEM parameters and trees, Turtle
     ontologies, job) with the nodes' own loaders; the one-line error, or None when all load (under a second)."""
     from locem_bridge.config_check import check_files
     from locem_bridge.common.config_errors import ConfigError
 
-    share = _package_dir()
+    share = package_share()
     launch = dict(a.split(":=", 1) for a in args.launch_arg if ":=" in a)
 
     def path(name: str, default: str) -> str:

@@ -26,6 +26,7 @@ import os
 import threading
 from typing import Any, Callable, Optional
 
+import rospkg
 import rospy
 
 from locem_bridge.common.config_errors import ConfigError
@@ -34,6 +35,7 @@ from locem_bridge.pemkre.engine import load_json
 from locem_bridge.pemkre.errors import PemkreError
 from locem_bridge.pemkre.store_factory import open_store
 from locem_bridge.pemkre.terms import bindings_from_strings
+from locem_bridge.ros.params import package_share, param
 from locem_bridge.srv import (PemkreNextAction, PemkreNextActionResponse, PemkreQuery, PemkreQueryResponse,
                               PemkreSetTaskStatus, PemkreSetTaskStatusResponse, PemkreStartProcess,
                               PemkreStartProcessResponse, PemkreUpdateWorld, PemkreUpdateWorldResponse)
@@ -135,27 +137,20 @@ class PemkreNode:
 def main() -> None:
     """Entry point of ``rosrun locem_bridge pemkre_node``."""
     rospy.init_node("pemkre")
-    ros_home = os.environ.get("ROS_HOME") or os.path.join(os.path.expanduser("~"), ".ros")
-    path = str(rospy.get_param("~store_path", "") or os.path.join(ros_home, "pemkre_store"))
-    kind = str(rospy.get_param("~store", "journal"))
-    onto_dir = str(rospy.get_param("~ontology_dir", ""))
-    if not onto_dir:
-        try:
-            import rospkg
-            onto_dir = os.path.join(rospkg.RosPack().get_path("locem_bridge"), "ontologies")
-        except Exception:
-            onto_dir = ""
-    if onto_dir and not os.path.isdir(onto_dir):
+    path = param("store_path", os.path.join(rospkg.get_ros_home(), "pemkre_store"))
+    kind = param("store", "journal")
+    onto_dir = param("ontology_dir", os.path.join(package_share(), "ontologies"))
+    if not os.path.isdir(onto_dir):
         raise ConfigError("ontology folder does not exist", file=onto_dir)
-    files = sorted(os.path.join(onto_dir, f) for f in os.listdir(onto_dir) if f.endswith(".ttl")) if onto_dir else None
+    files = sorted(os.path.join(onto_dir, f) for f in os.listdir(onto_dir) if f.endswith(".ttl"))
 
     def factory() -> ProcessEngine:
-        store = open_store(kind, path, bool(rospy.get_param("~fsync", False)), bool(rospy.get_param("~fresh", False)))
+        store = open_store(kind, path, param("fsync", False), param("fresh", False))
         try:
             return ProcessEngine(store, files,
-                                 site_namespace=rospy.get_param("~site_namespace", "") or None,
-                                 log_namespace=rospy.get_param("~log_namespace", "") or None,
-                                 reasoning_max_seconds=float(rospy.get_param("~reasoning_max_seconds", 5.0)))
+                                 site_namespace=param("site_namespace", "") or None,
+                                 log_namespace=param("log_namespace", "") or None,
+                                 reasoning_max_seconds=param("reasoning_max_seconds", 5.0))
         except ConfigError as exc:          # a process-model error names no file: name the folder it came from
             store.close()
             raise exc.in_file(onto_dir)

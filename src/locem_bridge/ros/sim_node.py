@@ -37,6 +37,7 @@ import rospy
 from geometry_msgs.msg import Pose2D
 
 from locem_bridge.common.config_errors import ConfigError
+from locem_bridge.ros.params import package_share, param
 from locem_bridge.sim.config import default_robot_path, default_site_path, load_robot, load_site
 from locem_bridge.sim.errors import SimError
 from locem_bridge.sim.worksite import Worksite
@@ -69,7 +70,7 @@ class SimNode:
         from geometry_msgs.msg import PoseWithCovarianceStamped
         self._loc_msg = PoseWithCovarianceStamped
         self._loc_pub = rospy.Publisher("~localisation", PoseWithCovarianceStamped, queue_size=1)
-        self._loc_noise = float(rospy.get_param("~localisation_noise", 0.002))
+        self._loc_noise = param("localisation_noise", 0.002)
         self._loc_rng = random.Random(1)
         self._loc_timer = rospy.Timer(rospy.Duration(0.2), self._publish_localisation)
 
@@ -136,12 +137,11 @@ def main() -> None:
     """Entry point of ``rosrun locem_bridge sim_worksite``. A worksite that cannot start (a stand-in's address
     taken, a bad file) ends the node with one line naming what and where, not a traceback."""
     rospy.init_node("sim")
-    overrides = {key: rospy.get_param("~" + key) for key in ("host", "modbus_port", "can_interface", "can_channel",
-                                                            "can_port", "time_scale", "gui")
-                 if rospy.has_param("~" + key) and rospy.get_param("~" + key) != ""}
-    worksite = Worksite(load_site(rospy.get_param("~site", default_site_path())),
-                        load_robot(rospy.get_param("~robot", default_robot_path()),
-                                   rospy.get_param("~robot_overrides", {}) or {}), **overrides)
+    overrides = {key: param(key) for key in ("host", "modbus_port", "can_interface", "can_channel", "can_port",
+                                             "time_scale", "gui")}
+    worksite = Worksite(load_site(param("site", default_site_path(package_share()))),
+                        load_robot(param("robot", default_robot_path(package_share())), param("robot_overrides", {})),
+                        **{key: value for key, value in overrides.items() if value is not None})
     try:
         endpoints = worksite.start()
     except ConfigError:

@@ -87,14 +87,14 @@ def repo_root() -> str:
     return os.path.abspath(os.path.join(here, "..", "..", ".."))
 
 
-def default_site_path() -> str:
-    """Path of ``config/sites/default.yaml`` in the source tree."""
-    return os.path.join(repo_root(), "config", "sites", "default.yaml")
+def default_site_path(root: str = "") -> str:
+    """Path of ``config/sites/default.yaml`` in the package folder ``root`` (default: the source tree)."""
+    return os.path.join(root or repo_root(), "config", "sites", "default.yaml")
 
 
-def default_robot_path() -> str:
-    """Path of ``config/robots/rbkairos_ur10e.yaml`` in the source tree."""
-    return os.path.join(repo_root(), "config", "robots", "rbkairos_ur10e.yaml")
+def default_robot_path(root: str = "") -> str:
+    """Path of ``config/robots/rbkairos_ur10e.yaml`` in the package folder ``root`` (default: the source tree)."""
+    return os.path.join(root or repo_root(), "config", "robots", "rbkairos_ur10e.yaml")
 
 
 def _load_yaml(path: str) -> Dict[str, Any]:
