@@ -26,7 +26,6 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional
 
-import rospkg
 import rospy
 
 from locem_bridge.common.config_errors import ConfigError, read_yaml
@@ -34,6 +33,8 @@ from locem_bridge.job.report import JobEnd, RunRecord, write_report
 from locem_bridge.job.tracker import TERMINAL_PHASES, JobStep, JobTracker
 from locem_bridge.msg import HicemPrompt, HicemState
 from locem_bridge.srv import HicemStartProcess, JsonCall, PemkreQuery
+from locem_bridge.ros.calls import CallFailed, timed
+from locem_bridge.ros.params import package_share, param
 from locem_bridge.ros.startup import config_guard
 
 
@@ -196,30 +197,6 @@ OUTCOME_PERIOD_S = 10.0     # the worksite's outcome is read this often while a 
 END_CALL_TIMEOUT_S = 2.0    # each call made to write the report (the launch may be shutting down)
 
 
-class CallFailed(Exception):
-    """A ROS call made for the report failed or did not answer in time (message: what and why)."""
-
-
-def timed(fn: Callable[[], Any], timeout: float, what: str) -> Any:
-    """``fn()`` in a helper thread; :class:`CallFailed` naming ``what`` if it raises or outlives ``timeout``."""
-    box: Dict[str, Any] = {}
-
-    def run() -> None:
-        try:
-            box["value"] = fn()
-        except Exception as err:  # noqa: BLE001 - reported below
-            box["error"] = err
-
-    worker = threading.Thread(target=run, name="job-call", daemon=True)
-    worker.start()
-    worker.join(timeout)
-    if worker.is_alive():
-        raise CallFailed("%s: no answer within %.1f s" % (what, timeout))
-    if "error" in box:
-        raise CallFailed("%s: %s" % (what, box["error"]))
-    return box.get("value")
-
-
 class OutcomeCache:
     """The latest worksite outcome the job could read, and when (read in the background, never blocking)."""
 
@@ -262,7 +239,7 @@ def device_addresses(robot_path: str) -> Dict[str, Any]:
     from locem_bridge.bridges.config import load_robot_config
     from locem_bridge.job.runs import addresses_of
     try:
-        return addresses_of(load_robot_config(robot_path, rospy.get_param("locem/robot_overrides", {}) or {})).as_dict()
+        return addresses_of(load_robot_config(robot_path, param("locem/robot_overrides", {}, private=False))).as_dict()
     except Exception as exc:  # the report is written anyway; it says why the addresses are missing
         return {"error": str(exc).splitlines()[0] if str(exc) else type(exc).__name__}
 
@@ -272,12 +249,11 @@ def main() -> None:
     rospy.init_node("job")
     shutdown: Dict[str, str] = {}
     rospy.core.add_preshutdown_hook(lambda reason: shutdown.setdefault("reason", signal_name(str(reason))))
-    share = rospkg.RosPack().get_path("locem_bridge")
-    steps = load_steps(rospy.get_param("~job", os.path.join(share, "config", "jobs", "plasterboard.yaml")),
-                       rospy.get_param("~validate_lines", ""))
-    results_dir = rospy.get_param("~results_dir", "") or os.environ.get("LOCEM_RESULTS") or os.path.abspath("results")
-    timeout = float(rospy.get_param("~process_timeout", 900.0))
-    settings = json.loads(rospy.get_param("~settings", "{}") or "{}")
+    steps = load_steps(param("job", os.path.join(package_share(), "config", "jobs", "plasterboard.yaml")),
+                       param("validate_lines", ""))
+    results_dir = param("results_dir", "") or os.environ.get("LOCEM_RESULTS") or os.path.abspath("results")
+    timeout = param("process_timeout", 900.0)
+    settings = json.loads(param("settings", "{}"))
     if settings.get("robot"):       # read now, while the master is surely there
         settings.setdefault("devices", device_addresses(str(settings["robot"])))
     outcomes = OutcomeCache()
@@ -298,7 +274,7 @@ def main() -> None:
                    "%s: %s" % (service, exc)))
     totals = {"joints": len(outcomes.outcome.get("joints", {})), "areas": len(scan.get("areas", []))}
     tracker = JobTracker(steps, totals, say=lambda line: print(line, flush=True))
-    sequencer = ProcessSequencer(tracker, timeout, float(rospy.get_param("~peer_wait", 120.0)),
+    sequencer = ProcessSequencer(tracker, timeout, param("peer_wait", 120.0),
                                  while_waiting=outcomes.refresh_every(OUTCOME_PERIOD_S),
                                  shutdown_reason=lambda: shutdown.get("reason", "ROS shutdown"))
     rospy.Subscriber("hicem/state", HicemState, sequencer.on_state)
@@ -353,7 +329,7 @@ def main() -> None:
                        timing={"wall_clock_s": time.time() - started},
                        pictures=[os.path.join(pictures_dir, p) for p in outcome.get("pictures", [])],
                        manual_areas=tracker.manual_areas, ended=ended)
-    folder = write_report(record, results_dir, run=rospy.get_param("~run", "") or None)
+    folder = write_report(record, results_dir, run=param("run", "") or None)
     print("[job] ended: %s%s%s" % (ended.reason, " (early)" if ended.as_dict()["early"] else "",
                                    (": " + ended.detail) if ended.detail else ""), flush=True)
     print("[job] report: %s" % os.path.join(folder, "report.md"), flush=True)
