@@ -1,30 +1,6 @@
-"""How HICEM's state and health read on the operator's screen, the picture folder scan, the default answers."""
-from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
-from locem_bridge.hmi import DEFAULT_CONFIG, AutoOperatorConfig, health_summary, snapshot_from_hicem, wall_pictures_in
+"""How HICEM's state reads on the operator's screen, the picture folder scan, the default answers."""
+from locem_bridge.hmi import DEFAULT_CONFIG, AutoOperatorConfig, snapshot_from_hicem, wall_pictures_in
 from locem_bridge.hmi.auto_operator import AutoOperatorPolicy
-
-
-class Clock:
-    t = 0.0
-
-    def __call__(self):
-        return self.t
-
-
-def test_health_from_the_real_health_monitor():
-    clock = Clock()
-    hem = HealthMonitor([ModuleSpec("locem", crucial=True, heartbeat_timeout_s=1.0), ModuleSpec("pemkre")],
-                        clock=clock)
-    assert health_summary({})["status"] == "unknown"
-    hem.heartbeat("locem")
-    ok = health_summary(hem.snapshot())
-    assert ok["status"] == "ok" and "locem" in ok["detail"] and "pemkre" in ok["detail"]
-    hem.report("pemkre", "WARN", "slow SPARQL")
-    degraded = health_summary(hem.snapshot())
-    assert degraded == {"status": "degraded", "detail": "pemkre reports WARN: slow SPARQL"}
-    clock.t = 5.0                                                  # locem silent past its heartbeat timeout
-    fault = health_summary(hem.snapshot())
-    assert fault["status"] == "fault" and "locem silent" in fault["detail"] and "pemkre" not in fault["detail"]
 
 
 def test_snapshot_from_a_controller_state():

@@ -7,8 +7,11 @@
 - :mod:`.hub` -- :class:`StateHub`: polls the backend in one thread and pushes only changes.
 - :mod:`.auto_operator` -- :class:`AutoOperator` / :class:`AutoOperatorPolicy`: answers prompts from
   configuration (tool mounted -> done after N s; line valid, except listed line ids -> invalid).
-- :mod:`.hicem_view` -- pure functions: HICEM state + health monitor snapshot -> HMI snapshot; wall pictures in
-  a folder.
+- :mod:`.hicem_view` -- pure functions: HICEM state -> HMI snapshot; wall pictures in a folder.
+- :mod:`.health` -- the page's health line from HICEM's health monitor or from ``/diagnostics`` (levels of
+  :mod:`locem_bridge.common.health`).
+- :mod:`.pictures` -- :class:`SimPictures`: the simulated worksite's wall pictures, asked for at most every
+  period and not again while nothing moves.
 - :mod:`.pemkre_view` -- pure functions: processes from the ontologies, KPI/query rows from PEMKRE answers,
   taping progress.
 - :mod:`.sim_hands` -- the simulated operator's hands: simulator operations an answer implies (mount the tool,
@@ -70,11 +73,14 @@ from .backend import HmiBackend, normalize_prompt, normalize_snapshot  # noqa: F
 from .errors import (AutoOperatorConfigError, BackendRefused, BackendUnavailable, HmiError,  # noqa: F401
                      RequestError, ServerStartError)
 from .executive_backend import ExecutiveBackend  # noqa: F401
-from .hicem_view import health_summary, snapshot_from_hicem, wall_pictures_in  # noqa: F401
+from .health import DiagnosticsHealth, health_summary  # noqa: F401
+from .hicem_view import snapshot_from_hicem, wall_pictures_in  # noqa: F401
+from .pictures import SimPictures  # noqa: F401
 from .hub import StateHub  # noqa: F401
 from .server import HmiServer  # noqa: F401
 
-__all__ = ["DEFAULT_CONFIG", "AutoOperator", "AutoOperatorConfig", "AutoOperatorConfigError", "AutoOperatorPolicy",
-           "BackendRefused", "BackendUnavailable", "ExecutiveBackend", "HmiBackend", "HmiError", "HmiServer",
-           "PromptRule", "RequestError", "ServerStartError", "StateHub", "health_summary", "normalize_prompt",
+__all__ = ["AutoOperator", "AutoOperatorConfig", "AutoOperatorConfigError", "AutoOperatorPolicy",
+           "BackendRefused", "BackendUnavailable", "DEFAULT_CONFIG", "DiagnosticsHealth",
+           "ExecutiveBackend", "HmiBackend", "HmiError", "HmiServer", "PromptRule", "RequestError",
+           "ServerStartError", "SimPictures", "StateHub", "health_summary", "normalize_prompt",
            "normalize_snapshot", "snapshot_from_hicem", "wall_pictures_in"]

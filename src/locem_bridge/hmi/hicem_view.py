@@ -9,6 +9,8 @@ import os
 import re
 from typing import Any, Dict, Mapping, Optional
 
+from .health import health_summary
+
 _FEATURE = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 # the work an action type does, for the progress bar (see locem_bridge.hmi.pemkre_view.work_progress)
 WORK_OF_ACTION = {"VALIDATE_TAPE_LINE": "taping", "TAPE_LINE": "taping", "MANUAL_TAPING": "taping",
@@ -39,27 +41,6 @@ def local_name(iri: str) -> str:
     text = iri or ""
     cut = max(text.rfind("#"), text.rfind("/"))
     return text[cut + 1:] if cut >= 0 and cut + 1 < len(text) else text
-
-
-def health_summary(modules: Optional[Dict[str, Dict[str, Any]]]) -> Dict[str, str]:
-    """``{"status": ok | degraded | fault | unknown, "detail": str}`` from a HEM snapshot.
-
-    fault: a crucial module is faulty; degraded: a non-crucial module is faulty or any module reports WARN or
-    worse; ok: modules known and none of that; unknown: no modules reported at all.
-    """
-    if not modules:
-        return {"status": "unknown", "detail": "no module has reported yet"}
-    crucial = ["%s" % m.get("fault") for _n, m in sorted(modules.items()) if m.get("fault") and m.get("crucial")]
-    if crucial:
-        return {"status": "fault", "detail": "; ".join(crucial)}
-    other = ["%s" % m.get("fault") for _n, m in sorted(modules.items()) if m.get("fault")]
-    other += ["%s reports %s%s" % (n, m.get("level"), (": %s" % m["message"]) if m.get("message") else "")
-              for n, m in sorted(modules.items())
-              if not m.get("fault") and str(m.get("level", "OK")).upper() not in ("OK", "DEBUG", "INFO")]
-    if other:
-        return {"status": "degraded", "detail": "; ".join(other)}
-    return {"status": "ok", "detail": "%d module%s alive: %s" % (len(modules), "" if len(modules) == 1 else "s",
-                                                                ", ".join(sorted(modules)))}
 
 
 def action_label(action_type: str, task: str) -> str:

@@ -8,13 +8,14 @@ interfaces (names relative to the node's namespace unless absolute):
   (``HicemStop``), ``<hicem>/operator_reply`` (``HicemOperatorReply``); a ``success: false`` answer becomes a
   refusal shown to the operator (HTTP 409), an unreachable service a 503;
 - ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) -> health, with HICEM's own liveness and its
-  ``waiting_for_health`` phase;
+  ``waiting_for_health`` phase (read by :class:`locem_bridge.hmi.health.DiagnosticsHealth`);
 - ``<pemkre>/query`` (``locem_bridge/PemkreQuery``, SPARQL results JSON) -> KPIs (``kpi_by_process``,
   ``kpi_by_task_type`` for the running specific process) and progress (``feature_status``: joints while the
   running process tapes, areas while it sprays or sands; see ``WorkFollower``). When PEMKRE is not up the page
   says so and the rest keeps working.
 - wall pictures: every ``<wall_id>.png`` in ``~pictures_dir``, and, when the simulated worksite runs, its
-  pictures refreshed every ``~sim_picture_period`` s through ``<sim>/save_outcome`` into a private folder;
+  pictures refreshed every ``~sim_picture_period`` s through ``<sim>/save_outcome`` into a private folder
+  (:class:`locem_bridge.hmi.pictures.SimPictures`);
 - the simulated operator's hands (:mod:`locem_bridge.hmi.sim_hands`): before an answer is sent, the simulator
   operations it implies (``<sim>/remove_tool`` + ``<sim>/mount_tool`` for a mounted tool, ``<sim>/manual_taping``
   for a joint taped by hand) run through ``locem_bridge/JsonCall``; if one fails the answer is not sent and the
@@ -36,64 +37,34 @@ import glob
 import json
 import logging
 import os
-import shutil
 import sys
-import tempfile
 import threading
 import time
 from typing import Any, Callable, Dict, List, Optional
 
+import rospy
+import rosservice
+from diagnostic_msgs.msg import DiagnosticArray
 
-def _see_virtualenv() -> None:
-    """catkin's relay runs nodes with /usr/bin/python3; the project's virtual environment (tools/setup.sh, made
-    from that interpreter) holds rdflib. Append its site-packages so they are found (system ones win)."""
-    venv = os.environ.get("VIRTUAL_ENV")
-    if venv:
-        for p in sorted(glob.glob(os.path.join(venv, "lib", "python3*", "site-packages"))):
-            if p not in sys.path:
-                sys.path.append(p)
-
-
-_see_virtualenv()
-
-import rospy  # noqa: E402
-import rosservice  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-
-from locem_bridge.hmi import (DEFAULT_CONFIG, AutoOperator, AutoOperatorConfig, BackendRefused,  # noqa: E402
-                              BackendUnavailable, HmiError, HmiServer, snapshot_from_hicem, wall_pictures_in)
-from locem_bridge.hmi.hicem_view import WorkFollower  # noqa: E402
-from locem_bridge.hmi.pemkre_view import (KPI_QUERIES, processes_from_ontologies, rows_from_result,  # noqa: E402
-                                          work_progress)
-from locem_bridge.hmi.sim_hands import HandsError, hand_actions  # noqa: E402
-from locem_bridge.msg import HicemState  # noqa: E402
-from locem_bridge.srv import (HicemOperatorReply, HicemStartProcess, HicemStop, JsonCall,  # noqa: E402
-                              PemkreQuery)
-from locem_bridge.ros.startup import config_guard  # noqa: E402
+from locem_bridge.hmi import (DEFAULT_CONFIG, AutoOperator, AutoOperatorConfig, BackendRefused, BackendUnavailable,
+                              DiagnosticsHealth, HmiError, HmiServer, SimPictures, snapshot_from_hicem,
+                              wall_pictures_in)
+from locem_bridge.hmi.hicem_view import WorkFollower
+from locem_bridge.hmi.pemkre_view import KPI_QUERIES, processes_from_ontologies, rows_from_result, work_progress
+from locem_bridge.hmi.sim_hands import HandsError, hand_actions
+from locem_bridge.msg import HicemState
+from locem_bridge.srv import HicemOperatorReply, HicemStartProcess, HicemStop, JsonCall, PemkreQuery
+from locem_bridge.ros.calls import timed
+from locem_bridge.ros.params import as_list, package_share, param
+from locem_bridge.ros.startup import config_guard
 
 STATE_FIELDS = ("process", "specific_process", "phase", "action_type", "task", "tree", "node", "path", "detail")
-DIAG_LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
 MODES = ("web", "auto", "both")
 
 
 def _timed_call(fn: Callable[[], Any], timeout: float, what: str) -> Any:
-    """Run a blocking ROS call in a helper thread; BackendUnavailable if it fails or does not answer in time."""
-    box: Dict[str, Any] = {}
-
-    def run() -> None:
-        try:
-            box["value"] = fn()
-        except Exception as err:  # noqa: BLE001 - reported to the caller below
-            box["error"] = err
-
-    t = threading.Thread(target=run, name="hmi-ros-call", daemon=True)
-    t.start()
-    t.join(timeout)
-    if t.is_alive():
-        raise BackendUnavailable("%s did not answer within %.1f s" % (what, timeout))
-    if "error" in box:
-        raise BackendUnavailable("%s failed: %s" % (what, box["error"]))
-    return box.get("value")
+    """A blocking ROS call; BackendUnavailable (the page shows 503) if it fails or does not answer in time."""
+    return timed(fn, timeout, what, BackendUnavailable)
 
 
 class RosHmiBackend:
@@ -116,7 +87,7 @@ class RosHmiBackend:
         self._lock = threading.Lock()
         self._state: Optional[Dict[str, Any]] = None
         self._prompts: List[Dict[str, Any]] = []
-        self._diag: Dict[str, Any] = {}             # status name -> (level name, message, receive time)
+        self._diag = DiagnosticsHealth()
         self._alive_checked = 0.0
         self._alive = False
         self._progress: Optional[Dict[str, Any]] = None
@@ -127,10 +98,9 @@ class RosHmiBackend:
         if str(sim_hands).lower() not in ("auto", "true", "false"):
             raise HmiError("~sim_hands must be auto, true or false, got %r" % (sim_hands,))
         self.sim_hands = str(sim_hands).lower()
-        self.sim_picture_period_s = float(sim_picture_period_s)
-        self._sim_pictures_dir = tempfile.mkdtemp(prefix="operator_hmi_walls_")
-        self._sim_pictures_at = -1e9
-        self._sim_pictures_phase: Optional[str] = None
+        self._sim_pictures = SimPictures(sim_picture_period_s,
+                                         draw=lambda folder: self.sim_call("save_outcome", {"folder": folder}),
+                                         can_draw=lambda: self._service_exists(self.sim + "/save_outcome"))
         self._joints: Optional[List[str]] = None
         self._start = rospy.ServiceProxy(self.hicem + "/start_process", HicemStartProcess)
         self._stop = rospy.ServiceProxy(self.hicem + "/stop", HicemStop)
@@ -142,7 +112,7 @@ class RosHmiBackend:
         for s in self._subs:
             s.unregister()
         self._subs = []
-        shutil.rmtree(self._sim_pictures_dir, ignore_errors=True)
+        self._sim_pictures.close()
 
     # -- subscriptions --------------------------------------------------------------------------------------
     def _on_state(self, msg: Any) -> None:
@@ -161,11 +131,8 @@ class RosHmiBackend:
             self._follower.update(state)
 
     def _on_diagnostics(self, msg: Any) -> None:
-        now = time.monotonic()
-        with self._lock:
-            for st in msg.status:
-                self._diag[st.name] = (DIAG_LEVELS.get(int(ord(st.level) if isinstance(st.level, bytes) else st.level),
-                                                       "ERROR"), st.message, now)
+        for st in msg.status:
+            self._diag.note(st.name, st.level, st.message)
 
     # -- health ---------------------------------------------------------------------------------------------
     def _hicem_alive(self) -> bool:
@@ -179,22 +146,7 @@ class RosHmiBackend:
         return self._alive
 
     def _health(self, state: Optional[Dict[str, Any]]) -> Dict[str, str]:
-        if not self._hicem_alive():
-            return {"status": "fault", "detail": "HICEM is not running (no %s/stop service)" % self.hicem}
-        if state is None:
-            return {"status": "unknown", "detail": "no %s/state received yet" % self.hicem}
-        if state.get("phase") == "waiting_for_health":
-            return {"status": "fault", "detail": state.get("detail") or "HICEM waits for crucial modules"}
-        now = time.monotonic()
-        with self._lock:
-            recent = {n: v for n, v in self._diag.items() if now - v[2] < 10.0}
-        bad = ["%s %s: %s" % (n, lvl, m) for n, (lvl, m, _t) in sorted(recent.items()) if lvl == "ERROR"]
-        if bad:
-            return {"status": "fault", "detail": "; ".join(bad)}
-        warn = ["%s %s: %s" % (n, lvl, m) for n, (lvl, m, _t) in sorted(recent.items()) if lvl in ("WARN", "STALE")]
-        if warn:
-            return {"status": "degraded", "detail": "; ".join(warn)}
-        return {"status": "ok", "detail": "HICEM up" + (", %d diagnostics OK" % len(recent) if recent else "")}
+        return self._diag.summary(self.hicem, self._hicem_alive(), state)
 
     # -- PEMKRE queries -------------------------------------------------------------------------------------
     def query(self, name: str, bindings: Optional[Dict[str, str]] = None) -> List[Dict[str, Any]]:
@@ -254,19 +206,6 @@ class RosHmiBackend:
             self.sim_call(operation, args)
             rospy.loginfo("operator_hmi: simulated operator did %s %s", operation, json.dumps(args))
 
-    def _sim_pictures(self, phase: str) -> Dict[str, str]:
-        now = time.monotonic()
-        due = now - self._sim_pictures_at >= self.sim_picture_period_s
-        if self.sim_picture_period_s <= 0 or not due:
-            return wall_pictures_in(self._sim_pictures_dir)
-        if phase == self._sim_pictures_phase and phase in ("", "idle", "ended", "failed", "stopped"):
-            return wall_pictures_in(self._sim_pictures_dir)        # nothing moves: no need to redraw
-        self._sim_pictures_at = now
-        if self._service_exists(self.sim + "/save_outcome"):
-            self.sim_call("save_outcome", {"folder": self._sim_pictures_dir})
-            self._sim_pictures_phase = phase
-        return wall_pictures_in(self._sim_pictures_dir)
-
     # -- HmiBackend -----------------------------------------------------------------------------------------
     def list_processes(self) -> List[Dict[str, Any]]:
         return [dict(p) for p in self.processes]
@@ -325,29 +264,9 @@ class RosHmiBackend:
     def wall_pictures(self) -> Dict[str, Any]:
         with self._lock:
             phase = (self._state or {}).get("phase", "")
-        pictures: Dict[str, Any] = dict(self._sim_pictures(phase))
+        pictures: Dict[str, Any] = dict(self._sim_pictures.pictures(phase))
         pictures.update(wall_pictures_in(self.pictures_dir))
         return pictures
-
-
-def _param(name: str, default: Any) -> Any:
-    """Private parameter; an empty string (launch-file default) means the built-in default."""
-    v = rospy.get_param("~" + name, default)
-    return default if v == "" else v
-
-
-def _share_dir() -> str:
-    try:
-        import rospkg
-        return rospkg.RosPack().get_path("locem_bridge")
-    except Exception:  # noqa: BLE001 - not in a ROS package path: the checkout this file lives in
-        return os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
-
-
-def _list_param(value: Any) -> List[str]:
-    if isinstance(value, str):
-        return [v.strip() for v in value.split(",") if v.strip()]
-    return [str(v) for v in (value or [])]
 
 
 def auto_config_from_params(raw: Any, reject_lines: List[str]) -> AutoOperatorConfig:
@@ -359,7 +278,7 @@ def auto_config_from_params(raw: Any, reject_lines: List[str]) -> AutoOperatorCo
         kinds = cfg.setdefault("kinds", {})
         rule = dict(kinds.get("validate_line") or DEFAULT_CONFIG["kinds"]["validate_line"])
         per = dict(rule.get("per_feature") or {})
-        per["invalid"] = sorted(set(_list_param(per.get("invalid"))) | set(reject_lines))
+        per["invalid"] = sorted(set(as_list(per.get("invalid"))) | set(reject_lines))
         rule["per_feature"] = per
         kinds["validate_line"] = rule
     return AutoOperatorConfig.from_dict(cfg, base=DEFAULT_CONFIG)
@@ -385,32 +304,32 @@ class OperatorHmiNode:
             hmi_log.addHandler(_RosLogHandler())
             hmi_log.setLevel(logging.INFO)
             hmi_log.propagate = False
-        mode = str(_param("mode", "web"))
+        mode = param("mode", "web")
         if mode not in MODES:
             raise HmiError("~mode must be one of %s, got %r" % (", ".join(MODES), mode))
-        port = int(_param("port", 8088))
+        port = param("port", 8088)
         if not 0 <= port <= 65535:
             raise HmiError("~port must be in [0, 65535], got %d" % port)
-        processes = _param("processes", None)
+        processes = param("processes", None)
         if not processes:
-            files = _list_param(_param("ontologies", "")) or sorted(glob.glob(os.path.join(_share_dir(),
-                                                                                             "ontologies", "*.ttl")))
+            files = as_list(param("ontologies", None)) or sorted(glob.glob(os.path.join(package_share(),
+                                                                                            "ontologies", "*.ttl")))
             processes = processes_from_ontologies(files)
-        options = _param("process_options", {})
+        options = param("process_options", {})
         if isinstance(options, str):
             options = json.loads(options) if options.strip() else {}
-        self.backend = RosHmiBackend(_param("hicem_ns", "hicem"), _param("pemkre_ns", "pemkre"), processes,
-                                     options, str(_param("pictures_dir", "")), float(_param("call_timeout", 5.0)),
-                                     sim_ns=str(_param("sim_ns", "sim")), sim_hands=str(_param("sim_hands", "auto")),
-                                     sim_picture_period_s=float(_param("sim_picture_period", 5.0)))
+        self.backend = RosHmiBackend(param("hicem_ns", "hicem"), param("pemkre_ns", "pemkre"), processes, options,
+                                     param("pictures_dir", ""), param("call_timeout", 5.0),
+                                     sim_ns=param("sim_ns", "sim"), sim_hands=param("sim_hands", "auto"),
+                                     sim_picture_period_s=param("sim_picture_period", 5.0))
         self.server: Optional[HmiServer] = None
         self.auto: Optional[AutoOperator] = None
         if mode in ("auto", "both"):
-            self.auto = AutoOperator(self.backend, auto_config_from_params(_param("auto_operator", {}),
-                                                                           _list_param(_param("reject_lines", ""))))
+            self.auto = AutoOperator(self.backend, auto_config_from_params(param("auto_operator", {}),
+                                                                           as_list(param("reject_lines", None))))
             self.auto.start()
         try:
-            self.server = HmiServer(self.backend, str(_param("host", "127.0.0.1")), port).start()
+            self.server = HmiServer(self.backend, param("host", "127.0.0.1"), port).start()
             rospy.loginfo("operator_hmi: serving the operator page on %s", self.server.url)
         except HmiError as err:
             if mode != "auto":
