@@ -35,8 +35,11 @@ from locem_bridge.hicem.controls import _Decorator
 from ..errors import PortError
 from ..node_base import Leaf
 from ..ports import FLOAT, INT, JSON, STRING, STRING_LIST, input_port, output_port
+from .plasterboard import AREA_ID
 
 PROGRESS = "progress"
+# the port every node of an area's record takes besides AREA_ID, declared once
+WORK = input_port("work", STRING, None, "", "what is done to the area (spray, sand)")
 
 
 def progress_key(work: str, area_id: str) -> str:
@@ -98,7 +101,7 @@ class PendingSections(Leaf):
                    "working finished sections again.")
     PORTS = (
         input_port("sections", JSON, None, "", "list of sections, each with its 'index' (GetAreaRaster)"),
-        input_port("area_id", STRING, None, "", "stored area id"),
+        AREA_ID,
         input_port("work", STRING, None, "", "what is done to the area (spray, sand): one record per work"),
         output_port("pending", JSON, None, "", "the sections not done yet, in their order"),
         output_port("done_count", INT, None, "", "number of sections already done"),
@@ -121,8 +124,7 @@ class PendingSections(Leaf):
 class RecordSectionDone(Leaf):
     DESCRIPTION = "Records section `index` of (work, area_id) as done in the data store collection 'progress'."
     PORTS = (
-        input_port("area_id", STRING, None, "", "stored area id"),
-        input_port("work", STRING, None, "", "what is done to the area (spray, sand)"),
+        AREA_ID, WORK,
         input_port("index", INT, None, "", "the finished section's index"),
     )
 
@@ -154,8 +156,7 @@ class RecordSectionProgress(_Decorator):
                    "while it runs is resumed at that point (SectionResume). Other feedback texts are ignored; "
                    "the result is the child's.")
     PORTS = (
-        input_port("area_id", STRING, None, "", "stored area id"),
-        input_port("work", STRING, None, "", "what is done to the area (spray, sand)"),
+        AREA_ID, WORK,
         input_port("index", INT, None, "", "the running section's index"),
         input_port("feedback", STRING, "{feedback}", "", "the command's latest feedback text (SendLocemCommand's "
                    "feedback port; GuardedCommand writes it to {feedback})"),
@@ -209,8 +210,7 @@ class SectionResume(Leaf):
                    "closes the valve up to 0.5 s after LOCEM died): the part beyond the point is already worked, "
                    "so no back-off is needed to avoid a gap (default 0); a positive one buys a longer overlap.")
     PORTS = (
-        input_port("area_id", STRING, None, "", "stored area id"),
-        input_port("work", STRING, None, "", "what is done to the area (spray, sand)"),
+        AREA_ID, WORK,
         input_port("index", INT, None, "", "the section's index"),
         input_port("back_off", FLOAT, "0", "m", "raster length worked again before the recorded point"),
         output_port("skip", FLOAT, None, "m", "raster length to leave out: 0 for a section not begun"),
@@ -238,8 +238,7 @@ class LeaveSectionManual(Leaf):
                    "so the area goes on with its next section and the process does not fail for it. Any other "
                    "failure: FAILURE, keeping the command's failure as the action's reason.")
     PORTS = (
-        input_port("area_id", STRING, None, "", "stored area id"),
-        input_port("work", STRING, None, "", "what is done to the area (spray, sand)"),
+        AREA_ID, WORK,
         input_port("section", JSON, None, "", "the section (GetAreaRaster): index, origin, width, height"),
         input_port("code", STRING, None, "", "the failed command's code (GuardedCommand's code)"),
         input_port("message", STRING, "", "", "the failed command's message"),
@@ -283,8 +282,7 @@ class AreaDetail(Leaf):
                    "('sanded; manual work on wall_1_area_1: section 3 (along 1.2..1.8 m, height 0..2.5 m)'), "
                    "read from the data store collection 'progress' before ForgetSectionsDone drops the record.")
     PORTS = (
-        input_port("area_id", STRING, None, "", "stored area id"),
-        input_port("work", STRING, None, "", "what is done to the area (spray, sand)"),
+        AREA_ID, WORK,
         input_port("done", STRING, None, "", "the word for a finished area, e.g. sanded"),
         output_port("detail", STRING, None, "", "the task detail"),
     )
@@ -301,8 +299,7 @@ class ForgetSectionsDone(Leaf):
     DESCRIPTION = ("Removes the section record of (work, area_id) once the whole area is done, so the next job "
                    "on it starts from its first section.")
     PORTS = (
-        input_port("area_id", STRING, None, "", "stored area id"),
-        input_port("work", STRING, None, "", "what is done to the area (spray, sand)"),
+        AREA_ID, WORK,
     )
 
     def on_tick(self) -> Status:
