@@ -137,7 +137,7 @@ def test_main_job_refuses_at_once_when_no_device_addresses_are_free(tmp_path):
     """Every slot taken (here the only one allowed, by a run under way in the registry): one line naming the
     addresses and the run holding them, exit status 2, nothing started."""
     from locem_bridge.job.runs import RunRegistry, addresses_of
-    from locem_bridge.sim.config import load_robot
+    from locem_bridge.robot_file import load_robot
     registry = RunRegistry(str(tmp_path / "runs"))
     holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:

@@ -21,8 +21,8 @@ def check_files(site: Optional[str] = None, robot: Optional[str] = None,
         from .sim.config import load_site
         load_site(site)
     if robot:
-        from .bridges.config import load_robot_config
-        load_robot_config(robot, robot_overrides or None)
+        from .robot_file import load_robot
+        load_robot(robot, robot_overrides or None)
     params = None
     if params_file:
         from .hicem.config import load_params

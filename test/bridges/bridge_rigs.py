@@ -212,7 +212,7 @@ class WorksiteRig:
         self.site_path = site_path
         self.site = load_site(site_path)
         self.clock = SimClock(time_scale)
-        from locem_bridge.bridges.config import deep_merge
+        from locem_bridge.common.config_keys import deep_merge
         self.robot = copy.deepcopy(robot)
         if overrides:                          # the addresses the LOCEM node under test was given
             self.robot = deep_merge(self.robot, overrides)

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from locem_bridge.bridges import backends, commands_arm, commands_base, commands_compressor, commands_wall
-from locem_bridge.bridges.config import deep_merge, load_robot_config, need
+from locem_bridge.bridges.config import load_robot_config, need
 from locem_bridge.bridges.errors import BridgeConfigError
 from locem_bridge.bridges.geometry import arm_base_in_footprint, planar, tool_frame_facing
+from locem_bridge.common.config_keys import deep_merge
 from locem_bridge.common.geometry import invert, matrix_to_pose, matrix_to_rotvec, pose_to_matrix, rotvec_to_matrix
 from locem_bridge.common.mecanum import MecanumKinematics
 from locem_bridge.locem.catalogue import all_specs
@@ -83,7 +84,7 @@ def test_the_bridges_load_robot_files_through_the_one_validation_the_simulator_u
         load_robot_config(ROBOT_YAML, {"scanner": {"backend": "lidar"}})
     robot = load_robot_config(ROBOT_YAML)
     assert os.path.isabs(robot["base"]["eds"]) and os.path.isfile(robot["base"]["eds"])   # resolved at load
-    # optional keys the bridges read are known keys (a new one goes into sim.config.ROBOT_KEYS with its check)
+    # optional keys the bridges read are known keys (a new one goes into robot_file.ROBOT_KEYS with its check)
     robot = load_robot_config(ROBOT_YAML, {"compressor": {"watchdog_timeout": 1.0, "timeout": 0.3},
                                            "arm": {"deadline": {"scale": 2.0, "margin": 3.0}},
                                            "base": {"deadline": {"scale": 2.0}, "control_rate": 40.0,

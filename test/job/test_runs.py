@@ -13,7 +13,7 @@ import pytest
 
 from locem_bridge.job.runs import (DeviceAddresses, NoFreeAddresses, RunRegistry, addresses_of, probe,
                                    slot_addresses)
-from locem_bridge.sim.config import load_robot
+from locem_bridge.robot_file import load_robot
 
 # a base on its own loopback address and CAN port range, so these tests never meet a running job's devices
 BASE = DeviceAddresses(host="127.76.0.1", ur_ports=(29999, 30003, 30004), modbus_port=5020,

@@ -82,7 +82,7 @@ def test_bad_site_files_are_refused_with_a_clear_message(mutate, message, test_s
     (lambda d: d["robot"]["tools"]["taping_tool"].update(tcp=[0, 0, 0.2]), "list of 6 finite numbers"),
 ])
 def test_bad_robot_files_are_refused_with_a_clear_message(mutate, message):
-    from locem_bridge.sim.config import default_robot_path
+    from locem_bridge.robot_file import default_robot_path
     data = _raw(default_robot_path())
     mutate(data)
     with pytest.raises(SimConfigError) as exc:
@@ -98,7 +98,7 @@ def _write(tmp_path, name, data):
 
 def _robot_copy(tmp_path, mutate):
     """The shipped robot file, changed by ``mutate``, written next to a copy of its EDS (relative paths)."""
-    from locem_bridge.sim.config import default_robot_path
+    from locem_bridge.robot_file import default_robot_path
     data = _raw(default_robot_path())
     mutate(data)
     eds = os.path.join(os.path.dirname(default_robot_path()), "cia402_drive.eds")

@@ -2,19 +2,19 @@
 
 ``load_robot_config(path, overrides)`` returns the ``robot`` section (a plain dict) with ``overrides`` deep-merged
 into it (e.g. a test's own loopback address: ``{"arm": {"controller": {"host": "127.70.0.1"}}}``), validated by the
-simulator's robot-file validation (one schema for both), and the file's folder remembered under ``_dir``
-(relative paths such as the drives' EDS are resolved against it and checked at load). :func:`need` reads
-one key with a clear error naming the key path, what was found and what is allowed.
+one robot-file loader every layer uses (:mod:`locem_bridge.robot_file`), and the file's folder remembered under
+``_dir`` (relative paths such as the drives' EDS are resolved against it and checked at load). :func:`need` reads
+one key with a clear error naming the key path, what was found and what is allowed (a backend built from a
+section by hand, as tests do, is checked the same way).
 """
 
 import math
 import os
 from typing import Any, Dict, Mapping, Optional, Sequence
 
-import yaml
+from locem_bridge.robot_file import load_robot
 
 from .errors import BridgeConfigError
-from locem_bridge.sim.config import deep_merge  # noqa: F401 (one definition, re-exported for the bridges)
 
 _MISSING = object()
 
@@ -22,18 +22,12 @@ _MISSING = object()
 def load_robot_config(path: str, overrides: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
     """The ``robot`` section of the YAML file at ``path``, with ``overrides`` merged in, validated.
 
-    The file and its overrides go through the one robot-file validation the simulator uses too
-    (:func:`locem_bridge.sim.config.load_robot`): unknown keys, missing keys, ranges, relative paths (resolved
+    The file and its overrides go through the one robot-file loader the simulator uses too
+    (:func:`locem_bridge.robot_file.load_robot`): unknown keys, missing keys, ranges, relative paths (resolved
     against the file and checked) and the controller ports ur_rtde can dial. A problem raises
     :class:`BridgeConfigError`, printed as one line ``FILE: KEY: PROBLEM (allowed: ...)``.
     """
-    from locem_bridge.sim.config import load_robot
-    from locem_bridge.sim.errors import SimConfigError
-
-    try:
-        data = load_robot(path, dict(overrides) if overrides else None)
-    except SimConfigError as error:
-        raise BridgeConfigError(error.problem, file=error.file, key=error.key, allowed=error.allowed or None)
+    data = load_robot(path, dict(overrides) if overrides else None, error=BridgeConfigError)
     robot = data["robot"]
     robot["_dir"] = os.path.dirname(os.path.abspath(path))
     robot["_path"] = os.path.abspath(path)

@@ -6,6 +6,7 @@ Modules (each one concept):
 * :mod:`.mecanum`        mecanum base kinematics (the base bridge and the simulated worksite)
 * :mod:`.rate`           a fixed-rate loop timer for device loops
 * :mod:`.config_errors`  one-line configuration errors and the one YAML reader of configuration files
+* :mod:`.config_keys`    checked reading of a configuration mapping (type, range, allowed values, known keys)
 * :mod:`.can_bus`        opening the base's CAN bus (allowed interfaces, own-echo filter; bridge and simulator)
 * :mod:`.geometry`       angle wrapping, rotation vectors / matrices / RPY / quaternions, rigid transforms
 * :mod:`.raster_progress` the progress text of a raster command (LOCEM's SPRAY_AREA feedback, HICEM's resume)

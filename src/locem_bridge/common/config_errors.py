@@ -49,6 +49,13 @@ class ConfigError(Exception):
             self.file = path
         return self
 
+    def recast(self, error: Callable[..., "ConfigError"]) -> "ConfigError":
+        """This error as ``error`` (a layer's own :class:`ConfigError` type: ``SimConfigError``,
+        ``BridgeConfigError``, ...) with the same file, key, problem and allowed values; itself if it is one."""
+        if isinstance(error, type) and isinstance(self, error):
+            return self
+        return error(self.problem, file=self.file, key=self.key, allowed=self.allowed or None)
+
     def one_line(self) -> str:
         """``FILE: KEY: PROBLEM (allowed: ...)``, leaving out the parts that are empty; always one line."""
         parts = [p for p in (self.file, self.key, self.problem) if p]

@@ -61,7 +61,7 @@ def claim_addresses(args: argparse.Namespace, ports: List[int]) -> RunEntry:
     """This run's slot in the machine's run registry: its own device addresses (raises NoFreeAddresses or
     RunsError with a one-line reason)."""
     from locem_bridge.common.config_errors import ConfigError
-    from locem_bridge.sim.config import load_robot
+    from locem_bridge.robot_file import load_robot
     path = robot_file(list(args.launch_arg))
     try:
         robot = load_robot(path)["robot"]      # the loader the nodes use (preflight has checked the file)
@@ -94,7 +94,7 @@ def preflight(args: argparse.Namespace, robot_overrides: Optional[Dict[str, Any]
                                   key="robot_overrides:=")
             if not isinstance(extra, dict):
                 raise ConfigError("must be a YAML mapping, found %r" % (extra,), key="robot_overrides:=")
-            from locem_bridge.sim.config import deep_merge
+            from locem_bridge.common.config_keys import deep_merge
             overrides = deep_merge(overrides, extra)
         check_files(site=os.path.abspath(args.site) if args.site else path("site", os.path.join(
                         share, "config", "sites", "default.yaml")),

@@ -37,8 +37,9 @@ import rospy
 from geometry_msgs.msg import Pose2D
 
 from locem_bridge.common.config_errors import ConfigError
+from locem_bridge.robot_file import default_robot_path
 from locem_bridge.ros.params import package_share, param
-from locem_bridge.sim.config import default_robot_path, default_site_path, load_robot, load_site
+from locem_bridge.sim.config import default_site_path, load_robot, load_site
 from locem_bridge.sim.errors import SimError
 from locem_bridge.sim.worksite import Worksite
 from locem_bridge.srv import JsonCall, JsonCallResponse

@@ -13,7 +13,8 @@ import sys
 import threading
 from typing import List, Optional
 
-from .config import default_robot_path, default_site_path, load_robot, load_site
+from ..robot_file import default_robot_path
+from .config import default_site_path, load_robot, load_site
 from .errors import SimError
 from .worksite import Worksite
 

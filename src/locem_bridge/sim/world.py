@@ -38,7 +38,8 @@ import numpy as np
 import pybullet as pb
 
 from .clock import SimClock
-from .config import TOOL_NAMES, find_example_robot_data, resolve_arm_urdf  # noqa: F401 (re-exported)
+from ..robot_file import TOOL_NAMES
+from .config import find_example_robot_data, resolve_arm_urdf  # noqa: F401 (re-exported)
 from .errors import SimConfigError, SimStateError
 from ..common.geometry import matrix_to_quat, quat_to_rotvec, rotvec_to_quat
 from ..common.mecanum import MecanumKinematics

@@ -1,0 +1,300 @@
+"""The robot file (``config/robots/*.yaml``): its keys, its validation and the one loader every layer uses.
+
+A robot file describes one robot: base (kinematics, limits, CAN drives), pedestal, arm (model, mount, named poses,
+UR controller address), tools, compressor (Modbus address, limits) and scanner. The bridges
+(:func:`locem_bridge.bridges.config.load_robot_config`), the simulated worksite
+(:func:`locem_bridge.sim.config.load_robot`), the pre-flight (:mod:`locem_bridge.config_check`) and the main job
+all load it through :func:`load_robot`; each passes its own error type (``error=``), so a problem is one line
+``FILE: KEY: PROBLEM (allowed: ...)`` of the caller's error family. Every key a loader reads is listed in
+:data:`ROBOT_KEYS` with its check below; an unknown key is refused by name.
+"""
+import math
+import os
+import re
+from typing import Any, Callable, Dict, Mapping, Optional, Sequence
+
+from .common.can_bus import CAN_INTERFACES
+from .common.config_errors import ConfigError
+from .common.config_keys import deep_merge, get, item, load_mapping, mapping, only, vec
+
+TOOL_NAMES = ("taping_tool", "spray_gun", "sander")
+# The ports ur_rtde dials: its RTDEControlInterface / RTDEReceiveInterface / RTDEIOInterface take a host and no
+# port, so a UR controller on other ports cannot be reached by the arm bridge (another robot takes another
+# address). The UR stand-in itself takes any ports (Worksite(ur_ports=...)) for its own tests.
+UR_RTDE_PORTS = {"dashboard_port": 29999, "script_port": 30003, "rtde_port": 30004}
+
+# Every key a robot file may hold, per mapping (lists' items under their own name). A key not listed is refused
+# with its name: a misspelt section would otherwise be ignored and its device left out or on defaults. A new key a
+# loader reads is added here too, with its check in :func:`validate_robot`.
+ROBOT_KEYS: Dict[str, Sequence[str]] = {
+    "": ("robot",),
+    "robot": ("name", "namespace", "base", "pedestal", "arm", "tools", "compressor", "scanner"),
+    "robot.base": ("kind", "frame", "control_rate", "localisation_window", "named_poses", "chassis", "wheel",
+                   "limits", "drives", "eds", "deadline"),
+    "robot.base.chassis": ("length", "width", "height", "clearance", "mass"),
+    "robot.base.wheel": ("radius", "width", "half_wheelbase", "half_track"),
+    "robot.base.limits": ("max_wheel_speed", "max_linear_velocity", "max_angular_velocity", "linear_acceleration",
+                          "angular_acceleration"),
+    "robot.base.drives": ("profile", "mode", "can", "master_node_id", "master_timeout_ms", "heartbeat_ms",
+                          "consumer_timeout_factor",
+                          "tpdo_period_ms", "velocity_units_per_rad_s", "counts_per_rad", "profile_acceleration",
+                          "stop_deceleration", "wheels"),
+    "robot.base.drives.can": ("interface", "channel", "port", "bitrate"),
+    "wheel": ("name", "node_id", "polarity"),
+    "deadline": ("scale", "margin"),
+    "robot.pedestal": ("height", "size", "xy"),
+    "robot.arm": ("backend", "model", "description", "mount", "joint_names", "controller", "named_poses",
+                  "home_via", "wall_ready_flange", "deadline"),
+    "robot.arm.description": ("package", "urdf"),
+    "robot.arm.mount": ("xyz", "rpy"),
+    "robot.arm.controller": ("host", "dashboard_port", "script_port", "rtde_port", "rtde_frequency",
+                             "watchdog_frequency"),
+    "robot.tools": TOOL_NAMES,
+    "tool": ("tcp", "mass", "cog", "switch", "body"),
+    "robot.tools.taping_tool": ("tape_width",),
+    "robot.tools.spray_gun": ("spray_half_angle", "standoff"),
+    "robot.tools.sander": ("pad_radius",),
+    "switch": ("source", "index"),
+    "body": ("radius", "length"),
+    "robot.compressor": ("protocol", "host", "port", "device_id", "timeout", "watchdog_timeout", "pressure_range",
+                         "max_setpoint", "sim"),
+    "robot.compressor.sim": ("time_constant", "max_pressure", "valve_drop", "idle_current", "current_per_bar",
+                             "overpressure_limit"),
+    "robot.scanner": ("backend", "mount", "range", "fov"),
+    "robot.scanner.mount": ("xyz", "yaw"),
+}
+
+ErrorType = Callable[..., ConfigError]
+
+
+class RobotFileError(ConfigError):
+    """A robot file is missing, malformed or holds a value that is not allowed (when no ``error=`` is given)."""
+
+
+def default_robot_path(root: str = "") -> str:
+    """Path of ``config/robots/rbkairos_ur10e.yaml`` in the package folder ``root`` (default: the source tree)."""
+    root = root or os.path.abspath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
+    return os.path.join(root, "config", "robots", "rbkairos_ur10e.yaml")
+
+
+def validate_robot(data: Dict[str, Any], base_dir: Optional[str] = None,
+                   error: ErrorType = RobotFileError) -> Dict[str, Any]:
+    """Check a robot document (already parsed); returns the normalised dictionary.
+
+    ``base_dir`` is the robot file's folder: relative paths (``robot.base.eds``, ``robot.arm.description.urdf``
+    without a ``package``) are resolved against it, checked to exist and stored absolute. A problem raises
+    ``error``."""
+    try:
+        return _validate(data, base_dir)
+    except ConfigError as exc:
+        raise exc.recast(error)
+
+
+def load_robot(path: Optional[str] = None, overrides: Optional[Mapping[str, Any]] = None,
+               error: ErrorType = RobotFileError) -> Dict[str, Any]:
+    """Load and validate a robot file (default: :func:`default_robot_path`); ``overrides`` (a mapping deep-merged
+    into the ``robot`` section, e.g. another address) are checked with the file. Returns the document
+    (``{"robot": {...}, "_path": ...}``); a problem raises ``error`` naming the file (``FILE (with overrides)``
+    when the key came from ``overrides``)."""
+    path = path or default_robot_path()
+    try:
+        data = load_mapping(path)
+        if overrides:
+            if not isinstance(overrides, dict):
+                raise ConfigError("robot overrides must be a mapping, found %r" % (overrides,))
+            if isinstance(data.get("robot"), dict):
+                data["robot"] = deep_merge(data["robot"], overrides)
+        data = _validate(data, os.path.dirname(os.path.abspath(path)))
+    except ConfigError as exc:
+        raise exc.recast(error).in_file(path + (" (with overrides)" if _overridden(exc.key, overrides) else ""))
+    data["_path"] = os.path.abspath(path)
+    return data
+
+
+def _overridden(key: str, overrides: Optional[Mapping[str, Any]]) -> bool:
+    """Whether the key path ``robot.a.b[2].c`` (or a parent of it) was set by ``overrides``."""
+    node: Any = overrides
+    parts = [p for p in re.sub(r"\[\d+\]", "", key).split(".")[1:] if p] if key.startswith("robot.") else []
+    for part in parts:
+        if not isinstance(node, Mapping) or part not in node:
+            return False
+        node = node[part]
+    return bool(parts)
+
+
+def _backend(section: Dict[str, Any], key: str, path: str, kind: str, default: str) -> str:
+    from .bridges.backends import BACKENDS      # the bridges' name -> backend table (imports no device library)
+    return get(section, key, path, str, default=default, choices=sorted(BACKENDS[kind]))
+
+
+def _deadline(section: Dict[str, Any], path: str) -> None:
+    """``deadline: {scale, margin}`` of a motion device (the bridges' defaults apply to what is left out)."""
+    dl = mapping(section, "deadline", path, ROBOT_KEYS["deadline"], default={})
+    if "scale" in dl:
+        dl["scale"] = get(dl, "scale", path + ".deadline", float, lo=0.01, hi=100.0)
+    if "margin" in dl:
+        dl["margin"] = get(dl, "margin", path + ".deadline", float, lo=0.0, hi=600.0)
+
+
+def _existing_file(rel: Any, key: str, base_dir: Optional[str]) -> str:
+    """``rel`` resolved against ``base_dir`` (the robot file's folder) and checked to be a file."""
+    if not isinstance(rel, str) or not rel:
+        raise ConfigError("must be a file path, found %r" % (rel,), key=key)
+    path = rel if os.path.isabs(rel) else os.path.join(base_dir or os.getcwd(), rel)
+    if not os.path.isfile(path):
+        raise ConfigError("%s does not exist%s" % (path, "" if os.path.isabs(rel) else
+                                                     " (relative paths are read from the robot file's folder)"),
+                          key=key)
+    return os.path.abspath(path)
+
+
+def _validate(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str, Any]:
+    K = ROBOT_KEYS
+    only(data, "", K[""])
+    robot = mapping(data, "robot", "", K["robot"])
+    get(robot, "name", "robot", str)
+    get(robot, "namespace", "robot", str, default="")
+    base = mapping(robot, "base", "robot", K["robot.base"])
+    get(base, "kind", "robot.base", str, choices=("mecanum",))
+    ch = mapping(base, "chassis", "robot.base", K["robot.base.chassis"])
+    for key in ("length", "width", "height"):
+        ch[key] = get(ch, key, "robot.base.chassis", float, lo=0.05, hi=5.0)
+    ch["clearance"] = get(ch, "clearance", "robot.base.chassis", float, default=0.05, lo=0.0, hi=1.0)
+    wheel = mapping(base, "wheel", "robot.base", K["robot.base.wheel"])
+    for key in ("radius", "width", "half_wheelbase", "half_track"):
+        wheel[key] = get(wheel, key, "robot.base.wheel", float, lo=0.005, hi=5.0)
+    lim = mapping(base, "limits", "robot.base", K["robot.base.limits"])
+    for key in ("max_wheel_speed", "max_linear_velocity", "max_angular_velocity"):
+        lim[key] = get(lim, key, "robot.base.limits", float, lo=0.1 if key == "max_wheel_speed" else 0.01)
+    for key, dflt in (("linear_acceleration", 0.6), ("angular_acceleration", 1.2)):
+        lim[key] = get(lim, key, "robot.base.limits", float, default=dflt, lo=0.01)
+    # the ranges the base bridge applies (bridges/cia402_base.py), checked here so a file is refused at load
+    base["control_rate"] = get(base, "control_rate", "robot.base", float, default=50.0, lo=5.0, hi=1000.0)
+    base["localisation_window"] = get(base, "localisation_window", "robot.base", int, default=10, lo=1, hi=1000)
+    poses = get(base, "named_poses", "robot.base", dict, default={})
+    for name in list(poses):
+        poses[name] = vec(poses, name, "robot.base.named_poses", 3)
+    _deadline(base, "robot.base")
+    drv = mapping(base, "drives", "robot.base", K["robot.base.drives"])
+    p = "robot.base.drives"
+    _backend(drv, "profile", p, "base", "cia402")
+    can = mapping(drv, "can", p, K["robot.base.drives.can"])
+    can["interface"] = get(can, "interface", p + ".can", str, choices=CAN_INTERFACES)
+    can["channel"] = str(get(can, "channel", p + ".can"))
+    can["bitrate"] = get(can, "bitrate", p + ".can", int, default=1000000, lo=10000, hi=1000000)
+    if "port" in can:
+        can["port"] = get(can, "port", p + ".can", int, lo=1, hi=65535)
+    drv["heartbeat_ms"] = get(drv, "heartbeat_ms", p, int, lo=1, hi=65535)    # the bridge watches it
+    drv["consumer_timeout_factor"] = get(drv, "consumer_timeout_factor", p, float, default=1.5, lo=1.0, hi=10.0)
+    # the drives stop by themselves when the master's heartbeat is silent this long (bridges/cia402_base.py)
+    drv["master_node_id"] = get(drv, "master_node_id", p, int, default=127, lo=1, hi=127)
+    drv["master_timeout_ms"] = get(drv, "master_timeout_ms", p, int, default=500, lo=10, hi=65535)
+    drv["tpdo_period_ms"] = get(drv, "tpdo_period_ms", p, int, lo=1, hi=65535)
+    drv["velocity_units_per_rad_s"] = get(drv, "velocity_units_per_rad_s", p, float, lo=1e-6)
+    drv["counts_per_rad"] = get(drv, "counts_per_rad", p, float, lo=1e-6)
+    drv["profile_acceleration"] = get(drv, "profile_acceleration", p, float, lo=0.1)
+    drv["stop_deceleration"] = get(drv, "stop_deceleration", p, float, default=200.0, lo=1.0)
+    wheels = get(drv, "wheels", p, list)
+    if len(wheels) != 4:
+        raise ConfigError("must list 4 wheels, found %d" % len(wheels), key=p + ".wheels",
+                          allowed="front_left, front_right, rear_left, rear_right")
+    seen = set()
+    for i, w in enumerate(wheels):
+        wp = "%s.wheels[%d]" % (p, i)
+        item(w, wp, K["wheel"])
+        get(w, "name", wp, str)
+        nid = get(w, "node_id", wp, int, lo=1, hi=127)
+        if nid in seen:
+            raise ConfigError("%d is used twice; CAN node ids must be unique" % nid, key=wp + ".node_id")
+        seen.add(nid)
+        get(w, "polarity", wp, int, choices=(1, -1))
+    base["eds"] = _existing_file(get(base, "eds", "robot.base"), "robot.base.eds", base_dir)
+    ped = mapping(robot, "pedestal", "robot", K["robot.pedestal"])
+    ped["height"] = get(ped, "height", "robot.pedestal", float, lo=0.0, hi=3.0)
+    ped["size"] = vec(ped, "size", "robot.pedestal", 2)
+    ped["xy"] = vec(ped, "xy", "robot.pedestal", 2)
+    arm = mapping(robot, "arm", "robot", K["robot.arm"])
+    backend = _backend(arm, "backend", "robot.arm", "arm", "ur_rtde")
+    desc = mapping(arm, "description", "robot.arm", K["robot.arm.description"], default={})
+    if "urdf" in desc:         # a file path is checked now; one in a package when the simulator builds the arm
+        get(desc, "urdf", "robot.arm.description", str)
+        get(desc, "package", "robot.arm.description", str, default="", choices=("", "example-robot-data"))
+        if not desc.get("package") or os.path.isabs(desc["urdf"]):
+            desc["urdf"] = _existing_file(desc["urdf"], "robot.arm.description.urdf", base_dir)
+    mount = mapping(arm, "mount", "robot.arm", K["robot.arm.mount"])
+    mount["xyz"] = vec(mount, "xyz", "robot.arm.mount", 3)
+    mount["rpy"] = vec(mount, "rpy", "robot.arm.mount", 3)
+    names = get(arm, "joint_names", "robot.arm", list)
+    if len(names) != 6:
+        raise ConfigError("must list 6 joints, found %d" % len(names), key="robot.arm.joint_names")
+    poses = get(arm, "named_poses", "robot.arm", dict, default={})
+    for name in list(poses):
+        poses[name] = vec(poses, name, "robot.arm.named_poses", 6)
+    if arm.get("home_via") is not None and get(arm, "home_via", "robot.arm", str) not in poses:
+        raise ConfigError("%r is not a named pose of the arm" % arm["home_via"], key="robot.arm.home_via",
+                          allowed=sorted(poses))
+    if "wall_ready_flange" in arm:
+        arm["wall_ready_flange"] = vec(arm, "wall_ready_flange", "robot.arm", 3)
+    _deadline(arm, "robot.arm")
+    ctl = mapping(arm, "controller", "robot.arm", K["robot.arm.controller"])
+    cp = "robot.arm.controller"
+    get(ctl, "host", cp, str)
+    # RTDE watchdog the arm bridge sets (Hz; 0 = none): the arm stops when LOCEM's polls stop (bridges/ur_arm.py)
+    ctl["watchdog_frequency"] = get(ctl, "watchdog_frequency", cp, float, default=1.0, lo=0.0, hi=100.0)
+    ctl["rtde_frequency"] = get(ctl, "rtde_frequency", cp, float, default=500.0, lo=1.0, hi=500.0)
+    for key, port in sorted(UR_RTDE_PORTS.items()):
+        ctl[key] = get(ctl, key, cp, int, default=port, lo=1, hi=65535)
+        if backend == "ur_rtde" and ctl[key] != port:
+            raise ConfigError("%d cannot be used: ur_rtde always dials the UR ports 29999 (dashboard), 30003 "
+                              "(script) and 30004 (RTDE); another robot takes another address (host)"
+                              % ctl[key], key="%s.%s" % (cp, key), allowed=port)
+    tools = mapping(robot, "tools", "robot", K["robot.tools"])
+    for name in TOOL_NAMES:
+        tp = "robot.tools.%s" % name
+        tool = mapping(tools, name, "robot.tools", tuple(K["tool"]) + tuple(K[tp]))
+        tool["tcp"] = vec(tool, "tcp", tp, 6)
+        tool["mass"] = get(tool, "mass", tp, float, lo=0.0, hi=12.5)
+        tool["cog"] = vec(tool, "cog", tp, 3, default=[0.0, 0.0, 0.0])
+        sw = mapping(tool, "switch", tp, K["switch"])
+        src = get(sw, "source", tp + ".switch", str, choices=("ur_digital_out", "compressor_valve"))
+        if src == "ur_digital_out":
+            get(sw, "index", tp + ".switch", int, lo=0, hi=7)
+        body = mapping(tool, "body", tp, K["body"], default={"radius": 0.05, "length": 0.15})
+        body["radius"] = get(body, "radius", tp + ".body", float, lo=0.005, hi=0.5)
+        body["length"] = get(body, "length", tp + ".body", float, lo=0.005, hi=1.0)
+        tool["body"] = body
+    tools["taping_tool"]["tape_width"] = get(tools["taping_tool"], "tape_width", "robot.tools.taping_tool",
+                                             float, default=0.05, lo=0.005, hi=0.5)
+    sg = tools["spray_gun"]
+    sg["spray_half_angle"] = get(sg, "spray_half_angle", "robot.tools.spray_gun", float, default=0.35,
+                                 lo=0.01, hi=1.4)
+    sg["standoff"] = get(sg, "standoff", "robot.tools.spray_gun", float, default=0.3, lo=0.02, hi=2.0)
+    sd = tools["sander"]
+    sd["pad_radius"] = get(sd, "pad_radius", "robot.tools.sander", float, default=0.1, lo=0.005, hi=0.5)
+    comp = mapping(robot, "compressor", "robot", K["robot.compressor"])
+    cp = "robot.compressor"
+    _backend(comp, "protocol", cp, "compressor", "modbus_tcp")
+    get(comp, "host", cp, str)
+    comp["port"] = get(comp, "port", cp, int, lo=1, hi=65535)
+    comp["device_id"] = get(comp, "device_id", cp, int, default=1, lo=0, hi=247)
+    # the device's communication watchdog, s: valve closed, motor off when LOCEM's polls stop (modbus_compressor)
+    comp["watchdog_timeout"] = get(comp, "watchdog_timeout", cp, float, default=0.5, lo=0.05, hi=60.0)
+    comp["timeout"] = get(comp, "timeout", cp, float, default=0.5, lo=0.01)
+    comp["pressure_range"] = vec(comp, "pressure_range", cp, 2)
+    comp["max_setpoint"] = get(comp, "max_setpoint", cp, float, lo=0.1, hi=600.0)
+    csim = mapping(comp, "sim", cp, K["robot.compressor.sim"], default={})
+    for key, dflt in (("time_constant", 2.0), ("max_pressure", 10.0), ("valve_drop", 1.0),
+                      ("idle_current", 0.5), ("current_per_bar", 1.2), ("overpressure_limit", 9.0)):
+        csim[key] = get(csim, key, cp + ".sim", float, default=dflt, lo=0.0)
+    if csim["time_constant"] <= 0.0:
+        raise ConfigError("%r must be > 0" % csim["time_constant"], key="robot.compressor.sim.time_constant",
+                          allowed="> 0")
+    comp["sim"] = csim
+    sc = mapping(robot, "scanner", "robot", K["robot.scanner"])
+    _backend(sc, "backend", "robot.scanner", "scanner", "sim")
+    smount = mapping(sc, "mount", "robot.scanner", K["robot.scanner.mount"])
+    smount["xyz"] = vec(smount, "xyz", "robot.scanner.mount", 3)
+    smount["yaw"] = get(smount, "yaw", "robot.scanner.mount", float, default=0.0)
+    sc["range"] = get(sc, "range", "robot.scanner", float, lo=0.1, hi=100.0)
+    sc["fov"] = get(sc, "fov", "robot.scanner", float, lo=0.01, hi=2 * math.pi)
+    return data

@@ -1,0 +1,47 @@
+"""The one robot-file loader: the bridges, the simulator, the pre-flight and the main job read a robot file through
+locem_bridge.robot_file.load_robot, so a bad file is the same one line whoever loads it, in each caller's own
+error type."""
+import os
+
+import pytest
+import yaml
+
+from locem_bridge.bridges.config import load_robot_config
+from locem_bridge.bridges.errors import BridgeConfigError
+from locem_bridge.common.config_errors import ConfigError
+from locem_bridge.config_check import check_files
+from locem_bridge.robot_file import RobotFileError, default_robot_path, load_robot
+from locem_bridge.sim import config as sim_config
+from locem_bridge.sim.errors import SimConfigError
+
+
+def _bad_copy(tmp_path, mutate):
+    with open(default_robot_path()) as handle:
+        data = yaml.safe_load(handle)
+    mutate(data)
+    eds = os.path.join(os.path.dirname(default_robot_path()), "cia402_drive.eds")
+    (tmp_path / "cia402_drive.eds").write_bytes(open(eds, "rb").read())
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
+def test_every_layer_refuses_a_bad_robot_file_with_the_same_line_in_its_own_error_type(tmp_path):
+    path = _bad_copy(tmp_path, lambda d: d["robot"]["compressor"].update(port=70000))
+    line = "%s: robot.compressor.port: 70000 is out of range (allowed: <= 65535)" % path
+    for loader, error in ((load_robot, RobotFileError), (sim_config.load_robot, SimConfigError),
+                          (load_robot_config, BridgeConfigError), (lambda p: check_files(robot=p), ConfigError)):
+        with pytest.raises(error) as caught:
+            loader(path)
+        assert str(caught.value) == line and isinstance(caught.value, ConfigError)
+
+
+def test_overrides_are_checked_with_the_file_and_named_as_their_source(tmp_path):
+    path = _bad_copy(tmp_path, lambda d: None)
+    with pytest.raises(SimConfigError) as caught:
+        sim_config.load_robot(path, {"base": {"drives": {"can": {"interface": "pcan"}}}})
+    assert str(caught.value) == ("%s (with overrides): robot.base.drives.can.interface: 'pcan' is not allowed "
+                                 "(allowed: virtual, udp_multicast, socketcan)" % path)
+    robot = load_robot(path, {"compressor": {"port": 5021}})["robot"]
+    assert robot["compressor"]["port"] == 5021 and robot["base"]["eds"] == str(tmp_path / "cia402_drive.eds")
+    assert load_robot_config(path, {"compressor": {"port": 5021}})["compressor"] == robot["compressor"]
