@@ -29,6 +29,8 @@ import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple
 
+from ..common.can_bus import bus_name
+
 #: the UR controller's fixed port names in the order of :attr:`DeviceAddresses.ur_ports`
 UR_PORT_NAMES = ("dashboard", "script", "rtde")
 
@@ -67,9 +69,7 @@ class DeviceAddresses:
                 "can": self.can_text()}
 
     def can_text(self) -> str:
-        if self.can_interface == "udp_multicast":
-            return "udp_multicast %s:%d" % (self.can_channel, self.can_port)
-        return "%s %s" % (self.can_interface, self.can_channel)
+        return bus_name(self.overrides()["base"]["drives"]["can"])     # as the bus's own errors name it
 
     def describe(self) -> str:
         """``UR 127.0.0.2:29999/30003/30004, Modbus 127.0.0.2:5020, CAN udp_multicast 239.74.163.3:43114``."""

@@ -13,6 +13,7 @@ import sys
 import threading
 from typing import List, Optional
 
+from ..common.can_bus import CAN_INTERFACES
 from ..robot_file import default_robot_path
 from .config import default_site_path, load_robot, load_site
 from .errors import SimError
@@ -27,7 +28,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument("--gui", action="store_true", help="open the PyBullet GUI")
     ap.add_argument("--host", help="loopback address for the UR and Modbus stand-ins (e.g. 127.0.0.2)")
     ap.add_argument("--modbus-port", type=int, help="Modbus TCP port of the compressor")
-    ap.add_argument("--can-interface", choices=("virtual", "udp_multicast", "socketcan"))
+    ap.add_argument("--can-interface", choices=CAN_INTERFACES)
     ap.add_argument("--can-channel", help="CAN channel (multicast group, socketcan device, virtual name)")
     ap.add_argument("--can-port", type=int, help="UDP port of the udp_multicast CAN bus")
     ap.add_argument("--no-ur", action="store_true", help="run without the UR controller stand-in")
