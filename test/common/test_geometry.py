@@ -7,7 +7,7 @@ import pytest
 
 from locem_bridge.common.geometry import (angle_between, invert, matrix_to_pose, matrix_to_quat, matrix_to_rotvec,
                                           pose_to_matrix, quat_to_rotvec, rotvec_to_matrix, rotvec_to_quat,
-                                          rpy_to_matrix, wrap_angle)
+                                          rotation_z_along, rpy_to_matrix, wrap_angle)
 
 ROTVECS = [[0, 0, 0], [0.1, -0.2, 0.3], [0, math.pi, 0], [2.2214, -2.2214, 0], [0, 0, -3.1], [1e-13, 0, 0]]
 
@@ -53,3 +53,13 @@ def test_poses_transforms_and_the_angle_between_two_orientations():
     assert np.allclose(matrix_to_pose(t), pose, atol=1e-9)
     assert angle_between(pose, [0, 0, 0, 0.0, 3.0, 0.0]) == pytest.approx(0.0, abs=1e-6)
     assert angle_between([0, 0, 0, 0, 0, 0], [0, 0, 0, 0, 0, 0.4]) == pytest.approx(0.4)
+
+
+@pytest.mark.parametrize("z_axis", [[0, 1, 0], [0.3, -0.8, 0.2], [0, 0, 1], [0, 0, -2.0], [-1, 0, 0]])
+def test_a_frame_along_an_axis_keeps_its_x_axis_horizontal(z_axis):
+    r = rotation_z_along(z_axis)
+    assert np.allclose(r.T.dot(r), np.eye(3), atol=1e-12) and np.linalg.det(r) == pytest.approx(1.0)
+    assert np.allclose(r[:, 2], np.asarray(z_axis, float) / np.linalg.norm(z_axis))
+    assert abs(r[2, 0]) < 1e-12                                        # x horizontal
+    with pytest.raises(ValueError, match="must not be zero"):
+        rotation_z_along([0, 0, 0])

@@ -12,7 +12,7 @@ from typing import List, Sequence, Tuple
 
 import numpy as np
 
-from locem_bridge.common.geometry import rpy_to_matrix, transform
+from locem_bridge.common.geometry import rotation_z_along, rpy_to_matrix, transform
 
 
 def planar(x: float, y: float, yaw: float) -> np.ndarray:
@@ -29,16 +29,9 @@ def arm_base_in_footprint(mount_xyz: Sequence[float], mount_rpy: Sequence[float]
 def tool_frame_facing(point: Sequence[float], normal: Sequence[float]) -> np.ndarray:
     """A TCP frame at ``point`` whose z axis points INTO the surface (against ``normal``), x axis horizontal."""
     n = np.asarray(normal, dtype=float)
-    norm = float(np.linalg.norm(n))
-    if norm < 1e-9:
+    if float(np.linalg.norm(n)) < 1e-9:
         raise ValueError("the surface normal must not be zero")
-    z = -n / norm
-    x = np.cross([0.0, 0.0, 1.0], z)
-    if np.linalg.norm(x) < 1e-6:
-        x = np.array([1.0, 0.0, 0.0])
-    x = x / np.linalg.norm(x)
-    y = np.cross(z, x)
-    return transform(np.column_stack([x, y, z]), point)
+    return transform(rotation_z_along(-n), point)
 
 
 def distance(a: Sequence[float], b: Sequence[float]) -> float:

@@ -97,6 +97,22 @@ def matrix_to_quat(m: np.ndarray) -> Quaternion:
     return (q[0], q[1], q[2], q[3])
 
 
+def rotation_z_along(z_axis: Sequence[float]) -> np.ndarray:
+    """Rotation matrix whose z axis points along ``z_axis`` and whose x axis is horizontal (the TCP frame a tool
+    takes against a wall; x along the world x axis when ``z_axis`` is vertical). A zero ``z_axis`` raises
+    ``ValueError``."""
+    z = np.asarray(z_axis, dtype=float)
+    norm = float(np.linalg.norm(z))
+    if norm < 1e-9:
+        raise ValueError("the z axis must not be zero, got %r" % (list(z_axis),))
+    z = z / norm
+    x = np.cross([0.0, 0.0, 1.0], z)
+    if np.linalg.norm(x) < 1e-6:
+        x = np.array([1.0, 0.0, 0.0])
+    x = x / np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
 def transform(rotation: np.ndarray, translation: Sequence[float]) -> np.ndarray:
     """4x4 transform of a rotation matrix and a translation."""
     t = np.eye(4)

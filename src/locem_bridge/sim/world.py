@@ -41,7 +41,7 @@ from .clock import SimClock
 from ..robot_file import TOOL_NAMES
 from .config import find_example_robot_data, resolve_arm_urdf  # noqa: F401 (re-exported)
 from .errors import SimConfigError, SimStateError
-from ..common.geometry import matrix_to_quat, quat_to_rotvec, rotvec_to_quat
+from ..common.geometry import matrix_to_quat, quat_to_rotvec, rotation_z_along, rotvec_to_quat
 from ..common.mecanum import MecanumKinematics
 from ..common.rate import FixedRate
 from .outcome import OutcomeRecorder
@@ -301,13 +301,7 @@ class World:
     def tcp_target_in_arm_base(self, position: Sequence[float], z_axis: Sequence[float]) -> List[float]:
         """UR pose ``[x, y, z, rx, ry, rz]`` (arm ``base`` frame) that puts the TCP at ``position`` (map) with its
         z axis along ``z_axis`` (map) and its x axis horizontal; for scripted passes through the UR stand-in."""
-        z = np.asarray(z_axis, dtype=float)
-        z = z / np.linalg.norm(z)
-        x = np.cross([0.0, 0.0, 1.0], z)
-        if np.linalg.norm(x) < 1e-6:
-            x = np.array([1.0, 0.0, 0.0])
-        x = x / np.linalg.norm(x)
-        rot = np.column_stack([x, np.cross(z, x), z])
+        rot = rotation_z_along(z_axis)
         p, q = self.arm_base_pose()
         ip, iq = pb.invertTransform(p, q)
         out_p, out_q = pb.multiplyTransforms(ip, iq, list(position), matrix_to_quat(rot))
@@ -324,14 +318,7 @@ class World:
                iterations: int = 8, tol: float = 1e-4) -> List[float]:
         """Joint positions that put the TCP (mounted tool) at ``position`` (map) with its z axis along ``z_axis``
         (x axis kept horizontal). For scripted passes and tests; the arm source still decides what happens."""
-        z = np.asarray(z_axis, dtype=float)
-        z = z / np.linalg.norm(z)
-        x = np.cross([0.0, 0.0, 1.0], z)
-        if np.linalg.norm(x) < 1e-6:
-            x = np.array([1.0, 0.0, 0.0])
-        x = x / np.linalg.norm(x)
-        y = np.cross(z, x)
-        rot = np.column_stack([x, y, z])
+        rot = rotation_z_along(z_axis)
         if self.mounted_tool is None:
             off, oq = [0.0, 0.0, 0.0], (0, 0, 0, 1)
         else:
