@@ -104,8 +104,9 @@ class Backend(abc.ABC):
     :class:`Compressor`, :class:`Base`) and set the attributes that interface annotates (in ``__init__``, from its
     ``robot.<kind>`` section). It **may** implement optional capability groups: ``OPTIONAL`` of the interface names
     each group and its methods; a backend lists the groups it implements in ``capabilities`` and overrides every
-    method of them. Callers ask :meth:`supports` before they use a group (never ``hasattr``); a method of a group
-    the backend does not declare raises :class:`~.errors.NotSupported` (``INVALID_COMMAND``).
+    method of them. Callers ask :meth:`supports` (or :meth:`require`) before they use a group, never ``hasattr``;
+    the interface's own versions of a group's methods raise :class:`~.errors.NotSupported` (``INVALID_COMMAND``),
+    so a backend without the group writes nothing for it.
     ``test/bridges/test_device_interfaces.py`` checks every backend of :mod:`.backends` against this.
 
     Errors of every method are :mod:`.errors` classes: :class:`~.errors.NotConnected` (``NOT_READY``) before the
