@@ -4,7 +4,7 @@ import time
 
 import pytest
 
-from locem_bridge.locem.codes import Code
+from locem_bridge.common.locem_codes import Code
 from locem_bridge.locem.core import LocemCore
 from locem_bridge.locem.dispatcher import DEFAULT_MAX_RUNNING
 from locem_bridge.locem.errors import InvalidArgument

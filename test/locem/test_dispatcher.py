@@ -3,7 +3,7 @@ import time
 
 import pytest
 
-from locem_bridge.locem.codes import Code
+from locem_bridge.common.locem_codes import Code
 from locem_bridge.locem.execution import ExecState
 from locem_bridge.locem.registry import Interface
 

@@ -10,7 +10,7 @@ import threading
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from locem_bridge.locem.codes import Code
+from locem_bridge.common.locem_codes import Code
 from locem_bridge.locem.core import LocemCore
 from locem_bridge.locem.errors import LocemError
 from locem_bridge.locem.registry import Arg, ArgType, CommandSpec, Interface

@@ -1,7 +1,7 @@
 """The procedure queue: order, states published on change only, pause/resume/cancel, STOP."""
 import pytest
 
-from locem_bridge.locem.codes import Code
+from locem_bridge.common.locem_codes import Code
 from locem_bridge.locem.errors import InvalidArgument, InvalidCommand
 from locem_bridge.locem.procedures import ProcedureState
 from locem_bridge.locem.registry import Interface

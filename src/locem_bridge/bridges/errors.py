@@ -22,7 +22,7 @@ class                      LOCEM code          raised when
 from typing import Optional
 
 from locem_bridge.common.config_errors import Allowed, ConfigError, allowed_text
-from locem_bridge.locem.codes import Code
+from locem_bridge.common.locem_codes import Code
 from locem_bridge.locem.errors import LocemError
 
 

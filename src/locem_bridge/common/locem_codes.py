@@ -1,4 +1,6 @@
-"""Result codes of every LOCEM command. Extend, never rename: other layers and scripts match on them."""
+"""Result codes of every LOCEM command: the one definition. LOCEM answers with them, HICEM checks every reply
+against them, the ROS adapters put them on the wire (``response.code``). Extend, never rename: other layers and
+scripts match on them."""
 
 from enum import Enum
 

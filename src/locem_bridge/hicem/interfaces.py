@@ -14,10 +14,9 @@ import hashlib
 import re
 from typing import Any, Dict, List, Optional
 
+from ..common.locem_codes import Code
 from .errors import LocemError, PemkreError
 
-LOCEM_CODES = ("OK", "INVALID_COMMAND", "INVALID_ARGUMENT", "BUSY", "TIMEOUT", "HARDWARE_ERROR", "ABORTED",
-               "NOT_READY")
 ACTION_TYPES = ("SCAN", "GET_TOOL", "VALIDATE_TAPE_LINE", "TAPE_LINE", "MANUAL_TAPING", "SPRAY_AREA",
                 "SAND_AREA", "GO_HOME", "RECOVER")
 TASK_STATUSES = ("in_progress", "succeeded", "failed")
@@ -208,9 +207,10 @@ def check_reply(reply: Any, command: str) -> LocemReply:
     """Accept only replies HICEM understands; raise :class:`LocemError` otherwise."""
     if not isinstance(reply, LocemReply):
         raise LocemError("LOCEM reply to %r is a %s, not a LocemReply" % (command, type(reply).__name__))
-    if reply.code not in LOCEM_CODES:
+    known = [c.value for c in Code]
+    if reply.code not in known:
         raise LocemError("LOCEM answered %r with the unexpected code %r (known: %s): %s" % (
-            command, reply.code, ", ".join(LOCEM_CODES), reply.message), reply.code)
+            command, reply.code, ", ".join(known), reply.message), reply.code)
     if reply.success != (reply.code == "OK"):
         raise LocemError("LOCEM reply to %r is inconsistent: success=%s with code %s" % (
             command, reply.success, reply.code), reply.code)

@@ -12,7 +12,7 @@ The ROS adapters in :mod:`locem_bridge.ros` expose the dispatcher as a service, 
 queue (:mod:`.procedures`), a subscriber and a publisher.
 """
 
-from .codes import Code
+from ..common.locem_codes import Code
 from .errors import (
     Aborted,
     Busy,

@@ -13,7 +13,7 @@ import sys
 from typing import Iterable, List, Optional
 
 from .catalogue import all_specs
-from .codes import Code
+from ..common.locem_codes import Code
 from .dispatcher import DEFAULT_MAX_RUNNING
 from .grammar import MAX_COMMAND_LENGTH
 from .registry import CommandSpec

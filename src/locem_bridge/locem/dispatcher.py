@@ -33,7 +33,7 @@ import time
 import traceback
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
-from .codes import Code
+from ..common.locem_codes import Code
 from .errors import Aborted, Busy, CommandTimeout, LocemError
 from .execution import CommandContext, CommandEvent, ExecState, Execution, Listener
 from .grammar import parse

@@ -6,7 +6,7 @@ is a bug and is reported as ``HARDWARE_ERROR`` with the exception text, never sw
 
 from typing import Optional
 
-from .codes import Code
+from ..common.locem_codes import Code
 
 
 class LocemError(Exception):

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, Callable, Dict, List, Optional
 
-from .codes import Code
+from ..common.locem_codes import Code
 from .errors import Aborted, CommandTimeout, InvalidArgument, LocemError
 from .registry import BoundCommand, Interface
 from .response import Response

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, Callable, Deque, Dict, List, Optional
 
-from .codes import Code
+from ..common.locem_codes import Code
 from .dispatcher import Dispatcher
 from .errors import Aborted, Busy, InvalidArgument, LocemError
 from .execution import CommandEvent, ExecState, Execution

@@ -4,7 +4,7 @@ import json
 from dataclasses import dataclass, field
 from typing import Any, Dict
 
-from .codes import Code
+from ..common.locem_codes import Code
 from .errors import LocemError
 
 
