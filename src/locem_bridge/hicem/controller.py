@@ -33,6 +33,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from py_trees.common import Status
 
+from ..common.task_status import FAILED, IN_PROGRESS, SUCCEEDED
 from .blackboard import Blackboard
 from .config import HicemParams
 from .datastore import DataManager
@@ -257,7 +258,7 @@ class HighLevelController:
             if act.get("phase") == "finished":
                 self._report_on_resume(na, act["outcome"], act["detail"])
             elif policy == "fail" or (policy != "rerun" and not self.library.has_tree(policy)):
-                self._report_on_resume(na, "failed", "interrupted: HICEM restarted during %s; not repeated "
+                self._report_on_resume(na, FAILED, "interrupted: HICEM restarted during %s; not repeated "
                                                      "(resume policy %s)" % (act["action_type"], policy))
             else:
                 tree = act["action_type"] if policy == "rerun" else policy
@@ -328,7 +329,7 @@ class HighLevelController:
             self.store.put(HHLC, "action", rec, source="HHLC")
             self._set_state(action_type=na.action_type, task=na.task, tree="", node="", phase="starting")
             try:
-                self._pemkre_call(self.pemkre.set_task_status, na.task, "in_progress", "")
+                self._pemkre_call(self.pemkre.set_task_status, na.task, IN_PROGRESS, "")
             except PemkreError as exc:
                 if not resumed:
                     raise
@@ -338,7 +339,7 @@ class HighLevelController:
                 # PEMKRE only accepts an outcome for a running task: in_progress first, then failed.
                 reason = "no behavior tree for action type '%s'; trees: %s" % (
                     na.action_type, ", ".join(self.library.tree_ids()))
-                self._report(na, "failed", reason)
+                self._report(na, FAILED, reason)
                 return self._finish_process("failed", reason)
             outcome, detail = self._run_tree(na, stats, tree_id)
             rec.update(phase="finished", outcome=outcome, detail=detail)
@@ -373,22 +374,22 @@ class HighLevelController:
                 halt_reason = self._stop_reason and ("stopped: %s" % self._stop_reason) or self._abort_reason
                 if halt_reason:
                     self._halt(tree, ctx)
-                    return "failed", halt_reason
+                    return FAILED, halt_reason
                 try:
                     status = tree.tick()
                 except Exception as exc:
                     self.log.exception("tick of %s raised", na.action_type)
                     self._halt(tree, ctx)
-                    return "failed", "internal error while ticking %s: %s" % (na.action_type, exc)
+                    return FAILED, "internal error while ticking %s: %s" % (na.action_type, exc)
                 stats.ticks += 1
                 self._set_state(node=tree.tip_name() or tree.root.name, path="/".join(tree.running_path()))
                 if status == Status.SUCCESS:
                     detail = bb.get_default("task_detail", "")
-                    return "succeeded", str(detail)
+                    return SUCCEEDED, str(detail)
                 if status == Status.FAILURE:
                     last = ctx.last_failure()
                     self._cancel_outstanding(ctx)
-                    return "failed", ("%s: %s" % last) if last else "tree %s failed" % tree_id
+                    return FAILED, ("%s: %s" % last) if last else "tree %s failed" % tree_id
                 tw = time.perf_counter()
                 self._wake.wait(period)
                 self._wake.clear()

@@ -19,7 +19,6 @@ from .errors import LocemError, PemkreError
 
 ACTION_TYPES = ("SCAN", "GET_TOOL", "VALIDATE_TAPE_LINE", "TAPE_LINE", "MANUAL_TAPING", "SPRAY_AREA",
                 "SAND_AREA", "GO_HOME", "RECOVER")
-TASK_STATUSES = ("in_progress", "succeeded", "failed")
 
 
 class LocemReply:

@@ -41,6 +41,7 @@ from rdflib import BNode, Graph, Literal, Namespace, URIRef
 from rdflib.namespace import RDF, XSD
 from rdflib.term import Node
 
+from ..common.task_status import TASK_STATUSES
 from .errors import (BindingError, ConditionError, InvalidParameterError, InvalidStatusError, OntologyError,
                      ProcessModelError, QueryError, TaskStateError, UnknownProcessError, UnknownQueryError,
                      UnknownTaskError)
@@ -73,7 +74,6 @@ _P_status = URIRef(str(PROC) + 'status')
 _P_taskCount = URIRef(str(PROC) + 'taskCount')
 
 META = Namespace(BASE + "meta#")
-TASK_STATUSES = ("in_progress", "succeeded", "failed")
 MAX_DETAIL_CHARS = 1_000_000
 _STORED_DETAIL_CHARS = 2000
 #: The deepest nesting of a JSON argument (options, SCAN results) PEMKRE takes; a SCAN result needs 4.

@@ -16,6 +16,7 @@ from rdflib import Graph, Literal, URIRef
 from rdflib.namespace import OWL, RDF, RDFS
 from rdflib.term import Node
 
+from ..common.task_status import TASK_STATUSES
 from .errors import OntologyError, OntologySyntaxError, ProcessModelError, QueryError
 from .store import PreparedQuery, TripleStore
 from .vocab import PREFIXES, PROC
@@ -377,7 +378,7 @@ def compile_model(g: Graph, store: TripleStore, prefixes: Mapping[str, str]) -> 
                                         "use ?%s" % (q, v, v))
         _check_projection(pq, variables, q)
         queries[name] = NamedQuery(q, name, pq, variables)
-    for needed in ("in_progress", "succeeded", "failed", "issued", "running", "ended"):
+    for needed in TASK_STATUSES + ("issued", "running", "ended"):
         if needed not in status_iri:
             raise ProcessModelError("status %r is not declared (proc:statusName) in the ontologies" % needed)
     return ProcessModel(processes, queries, task_types, status_iri, status_name, task_node_index)
