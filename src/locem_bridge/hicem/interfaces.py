@@ -17,8 +17,6 @@ from typing import Any, Dict, List, Optional
 from ..common.locem_codes import Code
 from .errors import LocemError, PemkreError
 
-ACTION_TYPES = ("SCAN", "GET_TOOL", "VALIDATE_TAPE_LINE", "TAPE_LINE", "MANUAL_TAPING", "SPRAY_AREA",
-                "SAND_AREA", "GO_HOME", "RECOVER")
 
 
 class LocemReply:
