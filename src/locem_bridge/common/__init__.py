@@ -11,6 +11,8 @@ Modules (each one concept):
 * :mod:`.geometry`       angle wrapping, rotation vectors / matrices / RPY / quaternions, rigid transforms
 * :mod:`.raster_progress` the progress text of a raster command (LOCEM's SPRAY_AREA feedback, HICEM's resume)
 * :mod:`.health`         health levels (OK, WARN, ERROR, STALE) and the grading of a device's health record
+* :mod:`.locem_codes`    LOCEM's answer codes (``OK``, ``INVALID_ARGUMENT``, ...)
+* :mod:`.task_status`    the task statuses HICEM reports to PEMKRE (``in_progress``, ``succeeded``, ``failed``)
 
 Anything that crosses layers (LOCEM codes, task statuses, the next-action record, health grading, geometry,
 CAN bus opening) belongs here, never copied into a layer. Modules here import only the standard library, numpy

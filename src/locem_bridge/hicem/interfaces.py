@@ -18,7 +18,6 @@ from ..common.locem_codes import Code
 from .errors import LocemError, PemkreError
 
 
-
 class LocemReply:
     """Final answer to one LOCEM command."""
     __slots__ = ("success", "code", "message", "result")
