@@ -21,7 +21,7 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional
 
-from locem_bridge.hicem.errors import PemkreError
+from locem_bridge.hicem.errors import PemkreCallError
 from locem_bridge.hicem.interfaces import CommandHandle, LocemClient, LocemReply, PemkreClient
 
 SITE = {
@@ -205,7 +205,7 @@ class PemkreDouble(PemkreClient):
         if options and "validateLines" in options:
             self.validate_lines = bool(options["validateLines"])
         if process_iri != self.PROCESS:
-            raise PemkreError("unknown process IRI %r" % process_iri)
+            raise PemkreCallError("unknown process IRI %r" % process_iri)
         self.s.update(started=True, failed=None, pending=[["SCAN", {}]] + [[a, {}] for a in self.extra_actions]
                       + [["GET_TOOL", {"tool": "taping_tool"}]])
         self._save()
@@ -245,14 +245,14 @@ class PemkreDouble(PemkreClient):
         self.calls.append(("set_task_status", task, status, detail))
         cur = self.s["current"]
         if cur is None or cur["task"] != task:
-            raise PemkreError("task %s is not the current task" % task)
+            raise PemkreCallError("task %s is not the current task" % task)
         if status == "in_progress":
             if cur["status"] != "offered":
-                raise PemkreError("task %s is already %s" % (task, cur["status"]))
+                raise PemkreCallError("task %s is already %s" % (task, cur["status"]))
             cur["status"] = "in_progress"
         elif status in ("succeeded", "failed"):
             if cur["status"] != "in_progress":
-                raise PemkreError("task %s is not running (it is %s)" % (task, cur["status"]))
+                raise PemkreCallError("task %s is not running (it is %s)" % (task, cur["status"]))
             cur["status"] = status
             self.s["statuses"].append([cur["type"], task, status, detail, cur["params"]])
             if status == "failed" and self.after_failure == "fail_process":
@@ -264,7 +264,7 @@ class PemkreDouble(PemkreClient):
                 self.s["home_done"] = True
             self.s["current"] = None
         else:
-            raise PemkreError("status %r not allowed" % status)
+            raise PemkreCallError("status %r not allowed" % status)
         self._save()
 
     def executed(self, action_type: Optional[str] = None) -> List[list]:

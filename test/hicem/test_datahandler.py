@@ -6,7 +6,7 @@ import pytest
 from hicem_doubles import SITE
 from locem_bridge.hicem.datahandler import DataHandler
 from locem_bridge.hicem.datastore import DataManager, MemoryStore, PruneRule, SqliteStore
-from locem_bridge.hicem.errors import PemkreError, ScanFormatError
+from locem_bridge.hicem.errors import PemkreCallError, ScanFormatError
 from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
 
 
@@ -19,7 +19,7 @@ class WorldSink:
 
     def report_world(self, update):
         if self.down:
-            raise PemkreError("PEMKRE unreachable")
+            raise PemkreCallError("PEMKRE unreachable")
         self.updates.append(update)
 
 

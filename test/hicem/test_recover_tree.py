@@ -20,7 +20,7 @@ from locem_bridge.hicem.blackboard import Blackboard
 from locem_bridge.hicem.config import DEFAULT_PARAMS_FILE
 from locem_bridge.hicem.datahandler import DataHandler
 from locem_bridge.hicem.datastore import DataManager
-from locem_bridge.hicem.errors import LocemError, TreeLoadError
+from locem_bridge.hicem.errors import LocemCallError, TreeLoadError
 from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
 from locem_bridge.hicem.interfaces import CommandHandle, LocemClient, LocemReply
 from locem_bridge.hicem.node_base import NodeContext
@@ -113,7 +113,7 @@ class RestartingLocem(LocemDouble):
         if self.absent > 0:
             self.absent -= 1
             self.log("(no LOCEM) " + command)
-            raise LocemError("LOCEM action server /locem/command_action is not available", "NOT_READY")
+            raise LocemCallError("LOCEM action server /locem/command_action is not available", "NOT_READY")
         if command == "STATUS" and self.not_ready > 0:
             self.not_ready -= 1
             self.fail_next["STATUS"] = LocemReply(False, "NOT_READY", "LOCEM is starting: devices to safe state")

@@ -15,7 +15,7 @@ pemkre = pytest.importorskip("locem_bridge.pemkre")
 from hicem_doubles import SITE, AutoOperator, Heartbeats, LocemDouble  # noqa: E402
 from hicem_rig import params  # noqa: E402
 from locem_bridge.hicem.executive import create_executive  # noqa: E402
-from locem_bridge.hicem.errors import LocemError  # noqa: E402
+from locem_bridge.hicem.errors import LocemCallError  # noqa: E402
 from locem_bridge.hicem.interfaces import LocemReply  # noqa: E402
 from locem_bridge.hicem.pemkre_local import EngineClient  # noqa: E402
 from locem_bridge.pemkre import PLB, PPR, compute_kpis  # noqa: E402
@@ -252,7 +252,7 @@ class RespawningLocem(LocemDouble):
     def send(self, command: str):
         if not self.alive():
             self.sent.append("(away) " + command)
-            raise LocemError("LOCEM action server /locem/command_action is not available", "NOT_READY")
+            raise LocemCallError("LOCEM action server /locem/command_action is not available", "NOT_READY")
         if command.startswith("SPRAY_AREA "):
             self.sprays += 1
             if self.sprays == self.kill_at:

@@ -24,8 +24,8 @@ HEM    HICEM Environment Monitor    :class:`.health.HealthMonitor` (called the h
 Main entry points: :func:`locem_bridge.hicem.executive.create_executive`,
 :class:`locem_bridge.hicem.xml_loader.TreeLibrary`, :class:`locem_bridge.hicem.controller.HighLevelController`.
 """
-from .errors import (ConfigError, ControllerError, DataStoreError, HealthError, HicemError, LocemError,
-                     OperatorError, PemkreError, PortError, ScanFormatError, TreeLoadError)
+from .errors import (ConfigError, ControllerError, DataStoreError, HealthError, HicemError, LocemCallError,
+                     OperatorError, PemkreCallError, PortError, ScanFormatError, TreeLoadError)
 
-__all__ = ["ConfigError", "ControllerError", "DataStoreError", "HealthError", "HicemError", "LocemError",
-           "OperatorError", "PemkreError", "PortError", "ScanFormatError", "TreeLoadError"]
+__all__ = ["ConfigError", "ControllerError", "DataStoreError", "HealthError", "HicemError", "LocemCallError",
+           "OperatorError", "PemkreCallError", "PortError", "ScanFormatError", "TreeLoadError"]

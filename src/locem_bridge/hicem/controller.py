@@ -37,7 +37,7 @@ from ..common.task_status import FAILED, IN_PROGRESS, SUCCEEDED
 from .blackboard import Blackboard
 from .config import HicemParams
 from .datastore import DataManager
-from .errors import ControllerError, HicemError, LocemError, PemkreError
+from .errors import ControllerError, HicemError, LocemCallError, PemkreCallError
 from .interfaces import NextAction, PemkreUnavailableError, check_reply, parse_next_action
 from .node_base import NodeContext
 from .operator import OperatorDesk
@@ -271,7 +271,7 @@ class HighLevelController:
         and before the HDICT update): a refusal is logged and the loop asks PEMKRE what comes next."""
         try:
             self._report(na, outcome, detail)
-        except PemkreError as exc:
+        except PemkreCallError as exc:
             self.log.warning("resume: PEMKRE did not take the %s outcome of %s (%s); asking it what is next",
                              outcome, na.task, exc)
             with self.store.transaction():
@@ -309,7 +309,7 @@ class HighLevelController:
                     return self._finish_process("failed", "PEMKRE keeps offering the completed task %s" % na.task)
                 try:
                     self._report(na, done["outcome"], done["detail"])
-                except PemkreError as exc:
+                except PemkreCallError as exc:
                     return self._finish_process("failed", "PEMKRE refused the stored outcome of %s: %s" % (
                         na.task, exc))
                 continue
@@ -330,7 +330,7 @@ class HighLevelController:
             self._set_state(action_type=na.action_type, task=na.task, tree="", node="", phase="starting")
             try:
                 self._pemkre_call(self.pemkre.set_task_status, na.task, IN_PROGRESS, "")
-            except PemkreError as exc:
+            except PemkreCallError as exc:
                 if not resumed:
                     raise
                 self.log.warning("resume: PEMKRE refused in_progress again (%s); continuing", exc)
@@ -460,7 +460,7 @@ class HighLevelController:
                 else:
                     h.cancel()
                     self.log.warning("safe command %s: no reply within %.1f s", cmd, self.params.safe_timeout_s)
-            except (LocemError, HicemError) as exc:
+            except (LocemCallError, HicemError) as exc:
                 self.log.warning("safe command %s failed: %s", cmd, exc)
 
     def _pemkre_call(self, fn: Callable[..., Any], *args: Any) -> Any:

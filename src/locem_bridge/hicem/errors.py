@@ -53,16 +53,18 @@ class OperatorError(HicemError):
     """Operator interaction failed: reply to a prompt that is not open, or an answer that is not allowed."""
 
 
-class LocemError(HicemError):
-    """A LOCEM command could not be sent or its reply was not understood."""
+class LocemCallError(HicemError):
+    """HICEM's call to LOCEM went wrong: a command could not be sent or its reply was not understood (LOCEM's own
+    refusals are :class:`locem_bridge.locem.errors.LocemError`, carried back as a reply code)."""
 
     def __init__(self, message: str, code: Optional[str] = None) -> None:
         self.code = code
         super().__init__(message)
 
 
-class PemkreError(HicemError):
-    """PEMKRE answered something HICEM cannot use (bad next-action shape, unknown status)."""
+class PemkreCallError(HicemError):
+    """HICEM's call to PEMKRE went wrong: PEMKRE refused it or answered something HICEM cannot use (bad
+    next-action shape, unknown status). PEMKRE's own errors are :class:`locem_bridge.pemkre.errors.PemkreError`."""
 
 
 class ControllerError(HicemError):

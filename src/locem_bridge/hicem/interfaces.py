@@ -5,7 +5,7 @@
   doubles. :class:`LocemReply` mirrors the service/action result (success, code, message, result JSON).
 - :class:`PemkreClient`: start_process / next_action / set_task_status / report_world (docs/contracts.md);
   :func:`status_request_id`: the request id a client sends with a status report; a client raises
-  :class:`PemkreUnavailableError` when PEMKRE is away (any other :class:`PemkreError` is a refusal).
+  :class:`PemkreUnavailableError` when PEMKRE is away (any other :class:`PemkreCallError` is a refusal).
 - :func:`parse_next_action`: validates a PEMKRE next-action answer and decodes its N-Triples parameters into
   the ``param_<name>`` values trees see.
 """
@@ -15,7 +15,7 @@ import re
 from typing import Any, Dict, List, Optional
 
 from ..common.locem_codes import Code
-from .errors import LocemError, PemkreError
+from .errors import LocemCallError, PemkreCallError
 
 
 class LocemReply:
@@ -53,7 +53,7 @@ class CommandHandle(abc.ABC):
 
 
 class LocemClient(abc.ABC):
-    """Sends command strings to LOCEM. ``send`` returns at once; raise :class:`LocemError` if it cannot."""
+    """Sends command strings to LOCEM. ``send`` returns at once; raise :class:`LocemCallError` if it cannot."""
 
     @abc.abstractmethod
     def send(self, command: str) -> CommandHandle: ...
@@ -79,7 +79,7 @@ class PemkreClient(abc.ABC):
         """New or changed world features, in the SCAN result shape of docs/contracts.md."""
 
 
-class PemkreUnavailableError(PemkreError):
+class PemkreUnavailableError(PemkreCallError):
     """PEMKRE did not answer within the client's deadline (not running, restarting): not the process's fault.
     The controller waits for PEMKRE and repeats the call instead of failing the process."""
 
@@ -159,10 +159,10 @@ def parse_parameters(task: str, ntriples: str) -> Dict[str, Any]:
             continue
         m = _TRIPLE.match(line)
         if not m:
-            raise PemkreError("parameters line %d is not an N-Triples triple: %r" % (n, line[:120]))
+            raise PemkreCallError("parameters line %d is not an N-Triples triple: %r" % (n, line[:120]))
         subj, pred, obj_iri, lit, dtype, _lang = m.groups()
         if subj != task:
-            raise PemkreError("parameters line %d: subject <%s> is not the task <%s>" % (n, subj, task))
+            raise PemkreCallError("parameters line %d: subject <%s> is not the task <%s>" % (n, subj, task))
         name = local_name(pred)
         if obj_iri is not None:
             value: Any = local_name(obj_iri)
@@ -170,46 +170,46 @@ def parse_parameters(task: str, ntriples: str) -> Dict[str, Any]:
             try:
                 value = _literal_value(_unescape(lit), dtype)
             except ValueError as exc:
-                raise PemkreError("parameters line %d: literal %r: %s" % (n, lit, exc))
+                raise PemkreCallError("parameters line %d: literal %r: %s" % (n, lit, exc))
         params[name] = value
     return params
 
 
 def parse_next_action(answer: Dict[str, Any], known_types: Optional[List[str]] = None) -> NextAction:
-    """Validate a next-action answer (docs/contracts.md); raises :class:`PemkreError` naming the problem.
+    """Validate a next-action answer (docs/contracts.md); raises :class:`PemkreCallError` naming the problem.
 
     An action type without a tree is *not* rejected here: the controller reports it to PEMKRE as a failure.
     """
     if not isinstance(answer, dict):
-        raise PemkreError("next_action answer must be an object, got %s" % type(answer).__name__)
+        raise PemkreCallError("next_action answer must be an object, got %s" % type(answer).__name__)
     status = answer.get("status")
     if status in ("ended", "failed"):
         return NextAction(status, detail=str(answer.get("detail", answer.get("message", ""))))
     if status != "action":
-        raise PemkreError("next_action status %r is not one of: action, ended, failed" % (status,))
+        raise PemkreCallError("next_action status %r is not one of: action, ended, failed" % (status,))
     at = answer.get("action_type")
     task = answer.get("task")
     if not isinstance(at, str) or not at:
-        raise PemkreError("next_action: 'action_type' missing or not a string")
+        raise PemkreCallError("next_action: 'action_type' missing or not a string")
     if not isinstance(task, str) or not task:
-        raise PemkreError("next_action: 'task' (the task instance IRI) missing or not a string")
+        raise PemkreCallError("next_action: 'task' (the task instance IRI) missing or not a string")
     nt = answer.get("parameters", "")
     if not isinstance(nt, str):
-        raise PemkreError("next_action: 'parameters' must be an N-Triples string")
+        raise PemkreCallError("next_action: 'parameters' must be an N-Triples string")
     return NextAction("action", at, task, parse_parameters(task, nt), nt)
 
 
 def check_reply(reply: Any, command: str) -> LocemReply:
-    """Accept only replies HICEM understands; raise :class:`LocemError` otherwise."""
+    """Accept only replies HICEM understands; raise :class:`LocemCallError` otherwise."""
     if not isinstance(reply, LocemReply):
-        raise LocemError("LOCEM reply to %r is a %s, not a LocemReply" % (command, type(reply).__name__))
+        raise LocemCallError("LOCEM reply to %r is a %s, not a LocemReply" % (command, type(reply).__name__))
     known = [c.value for c in Code]
     if reply.code not in known:
-        raise LocemError("LOCEM answered %r with the unexpected code %r (known: %s): %s" % (
+        raise LocemCallError("LOCEM answered %r with the unexpected code %r (known: %s): %s" % (
             command, reply.code, ", ".join(known), reply.message), reply.code)
     if reply.success != (reply.code == "OK"):
-        raise LocemError("LOCEM reply to %r is inconsistent: success=%s with code %s" % (
+        raise LocemCallError("LOCEM reply to %r is inconsistent: success=%s with code %s" % (
             command, reply.success, reply.code), reply.code)
     if not isinstance(reply.result, dict):
-        raise LocemError("LOCEM reply to %r: result must be a JSON object" % command, reply.code)
+        raise LocemCallError("LOCEM reply to %r: result must be a JSON object" % command, reply.code)
     return reply

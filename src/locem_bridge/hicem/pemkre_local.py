@@ -1,11 +1,11 @@
 """In-process PEMKRE client: drives a PEMKRE process engine object directly (no ROS), e.g. for a single-process
 run or integration tests. Duck-typed on the engine's methods (``start_process(iri, options)``,
 ``next_action()`` returning an object with status/action_type/task/parameters/message, ``set_task_status``,
-``update_world``), so HICEM does not import the semantic layer; any engine error becomes :class:`PemkreError`.
+``update_world``), so HICEM does not import the semantic layer; any engine error becomes :class:`PemkreCallError`.
 """
 from typing import Any, Dict, Optional
 
-from .errors import PemkreError
+from .errors import PemkreCallError
 from .interfaces import PemkreClient, status_request_id
 
 
@@ -16,10 +16,10 @@ class EngineClient(PemkreClient):
     def _call(self, what: str, fn: Any, *args: Any) -> Any:
         try:
             return fn(*args)
-        except PemkreError:
+        except PemkreCallError:
             raise
         except Exception as exc:  # the engine's own error hierarchy, whatever it is
-            raise PemkreError("PEMKRE %s: %s: %s" % (what, type(exc).__name__, exc))
+            raise PemkreCallError("PEMKRE %s: %s: %s" % (what, type(exc).__name__, exc))
 
     def start_process(self, process_iri: str, options: Optional[Dict[str, Any]] = None) -> str:
         # as the ROS client: a new start replaces a process left running by a stop before its first task

@@ -7,7 +7,7 @@ fills requests by field name, so it needs only these fields (a missing one is a 
   ``specific_process``; ``<pemkre>/next_action``: → ``status``, ``action_type``, ``task``, ``parameters``,
   ``message``; ``<pemkre>/set_task_status``: ``task``, ``status``, ``detail``;
   ``<pemkre>/update_world``: ``scan`` (SCAN result JSON text).
-A response with ``success`` false raises :class:`PemkreError` with PEMKRE's message at once.
+A response with ``success`` false raises :class:`PemkreCallError` with PEMKRE's message at once.
 
 Calls outlive a PEMKRE restart (respawned in about 2 s): while the service is away -- not registered, its
 registration left by a killed node (connection refused), or the connection dropped mid-call -- the call is sent
@@ -29,7 +29,7 @@ from typing import Any, Callable, Dict, Optional
 import rospy
 import rosservice
 
-from locem_bridge.hicem.errors import PemkreError
+from locem_bridge.hicem.errors import PemkreCallError
 from locem_bridge.hicem.interfaces import PemkreClient, PemkreUnavailableError, status_request_id
 
 #: rospy's ServiceException texts for a request that provably never left this node (no service to send it to)
@@ -78,7 +78,7 @@ class RosPemkreClient(PemkreClient):
             if k not in slots:
                 if v in ("", None) or k == "request_id":
                     continue      # an older PEMKRE without request ids: sent without it
-                raise PemkreError("PEMKRE service %s/%s has no request field '%s' (fields: %s)" % (
+                raise PemkreCallError("PEMKRE service %s/%s has no request field '%s' (fields: %s)" % (
                     self.ns, name, k, ", ".join(slots)))
             setattr(req, k, v)
         return req
@@ -94,12 +94,12 @@ class RosPemkreClient(PemkreClient):
                 raise _Away(text, sent=False) from None
             if any(s in text for s in _CUT):
                 raise _Away(text, sent=True) from None
-            raise PemkreError("PEMKRE %s failed: %s" % (name, exc)) from None
+            raise PemkreCallError("PEMKRE %s failed: %s" % (name, exc)) from None
         except rospy.exceptions.TransportException as exc:     # the socket died while sending
             raise _Away("connection lost while sending: %s" % exc, sent=True) from None
 
     def _call(self, name: str, idempotent: bool, what: str = "", **fields: Any) -> Any:
-        """One call, sent again while PEMKRE is away (see the module doc); PemkreError when it cannot be done."""
+        """One call, sent again while PEMKRE is away (see the module doc); PemkreCallError when it cannot be done."""
         t0 = time.monotonic()
         delay, attempts = self.backoff_s, 0
         while True:
@@ -111,7 +111,7 @@ class RosPemkreClient(PemkreClient):
             except _Away as away:
                 label = "%s%s" % (name, (" (%s)" % what) if what else "")
                 if away.sent and not idempotent:
-                    raise PemkreError("PEMKRE %s: the connection to %s was lost during the call (%s); not sent "
+                    raise PemkreCallError("PEMKRE %s: the connection to %s was lost during the call (%s); not sent "
                                       "again (not idempotent)" % (label, self.ns, away)) from None
                 if rospy.is_shutdown():
                     raise PemkreUnavailableError("PEMKRE %s: node shutting down while %s was away (%s)"
@@ -131,7 +131,7 @@ class RosPemkreClient(PemkreClient):
             self.retried.append((name, attempts, took))
             self._log("PEMKRE %s answered after %d attempts over %.1f s" % (name, attempts, took))
         if hasattr(resp, "success") and not resp.success:
-            raise PemkreError("PEMKRE %s refused: %s" % (name, getattr(resp, "message", "")))
+            raise PemkreCallError("PEMKRE %s refused: %s" % (name, getattr(resp, "message", "")))
         return resp
 
     def start_process(self, process_iri: str, options: Optional[Dict[str, Any]] = None) -> str:

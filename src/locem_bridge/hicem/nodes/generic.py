@@ -19,7 +19,7 @@ from typing import Any, List, Optional, Sequence
 from py_trees.common import Status
 
 from ...common.health import problems as device_problems
-from ..errors import HicemError, LocemError, PortError
+from ..errors import HicemError, LocemCallError, PortError
 from ..interfaces import check_reply
 from ..node_base import ConditionLeaf, Leaf
 from ..ports import TEMPLATE_FIELD, ANY, FLOAT, INT, JSON, STRING, STRING_LIST, input_port, output_port
@@ -157,7 +157,7 @@ class WaitForDevices(Leaf):
         self.reads += 1
         try:
             self._handle = self._locem.send("STATUS")
-        except LocemError as exc:
+        except LocemCallError as exc:
             self._handle = None
             self._why = "LOCEM does not answer (%s)" % exc
             return
@@ -249,7 +249,7 @@ class SendLocemCommand(Leaf):
         self._t0 = self.ctx.clock()
         try:
             self._handle = locem.send(self._cmd)
-        except LocemError as exc:
+        except LocemCallError as exc:
             self._handle = None
             self.set("code", exc.code or "NOT_SENT")
             self.set("message", str(exc))
@@ -272,7 +272,7 @@ class SendLocemCommand(Leaf):
         self.ctx.untrack(h)
         try:
             reply = check_reply(h.reply(), self._cmd)
-        except LocemError as exc:
+        except LocemCallError as exc:
             return self.fail(str(exc))
         self.set("code", reply.code)
         self.set("message", reply.message)
