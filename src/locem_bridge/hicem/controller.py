@@ -33,6 +33,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from py_trees.common import Status
 
+from ..common.next_action import ACTION
 from ..common.task_status import FAILED, IN_PROGRESS, SUCCEEDED
 from .blackboard import Blackboard
 from .config import HicemParams
@@ -252,8 +253,8 @@ class HighLevelController:
         act = self.store.value(HHLC, "action")
         self._send_safe_commands()
         if act is not None and act.get("phase") != "reported":
-            na = NextAction("action", act["action_type"], act["task"], act.get("parameters", {}),
-                            act.get("raw_parameters", ""))
+            na = NextAction(ACTION, task=act["task"], action_type=act["action_type"],
+                            parameters=act.get("raw_parameters", ""), values=act.get("parameters", {}))
             policy = self.params.resume_policy.get(act["action_type"], "fail")
             if act.get("phase") == "finished":
                 self._report_on_resume(na, act["outcome"], act["detail"])
@@ -298,9 +299,9 @@ class HighLevelController:
             except Exception as exc:
                 return self._finish_process("failed", "PEMKRE next_action: %s" % exc)
             if na.status == "ended":
-                return self._finish_process("ended", na.detail)
+                return self._finish_process("ended", na.message)
             if na.status == "failed":
-                return self._finish_process("failed", "PEMKRE reports the process failed: %s" % na.detail)
+                return self._finish_process("failed", "PEMKRE reports the process failed: %s" % na.message)
             done = self.store.value(TASKS, na.task)
             if done is not None:
                 # PEMKRE offers a task HICEM already completed (its status update was lost): re-report, don't redo.
@@ -324,8 +325,8 @@ class HighLevelController:
         t0 = time.perf_counter()
         try:
             # one durable record before PEMKRE hears of it: a crash from here on is found by resume()
-            rec = {"task": na.task, "action_type": na.action_type, "parameters": na.parameters,
-                   "raw_parameters": na.raw_parameters, "phase": "running"}
+            rec = {"task": na.task, "action_type": na.action_type, "parameters": na.params(),
+                   "raw_parameters": na.parameters, "phase": "running"}
             self.store.put(HHLC, "action", rec, source="HHLC")
             self._set_state(action_type=na.action_type, task=na.task, tree="", node="", phase="starting")
             try:

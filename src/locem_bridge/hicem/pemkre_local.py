@@ -1,10 +1,11 @@
 """In-process PEMKRE client: drives a PEMKRE process engine object directly (no ROS), e.g. for a single-process
 run or integration tests. Duck-typed on the engine's methods (``start_process(iri, options)``,
-``next_action()`` returning an object with status/action_type/task/parameters/message, ``set_task_status``,
+``next_action()`` returning the :class:`~locem_bridge.common.next_action.NextAction` record, ``set_task_status``,
 ``update_world``), so HICEM does not import the semantic layer; any engine error becomes :class:`PemkreCallError`.
 """
 from typing import Any, Dict, Optional
 
+from ..common.next_action import NextAction
 from .errors import PemkreCallError
 from .interfaces import PemkreClient, status_request_id
 
@@ -26,10 +27,8 @@ class EngineClient(PemkreClient):
         return str(self._call("start_process", lambda: self.engine.start_process(process_iri, options or {},
                                                                                  abort_running=True)))
 
-    def next_action(self) -> Dict[str, Any]:
-        a = self._call("next_action", self.engine.next_action)
-        return {"status": a.status, "action_type": a.action_type, "task": a.task, "parameters": a.parameters,
-                "detail": getattr(a, "message", "")}
+    def next_action(self) -> NextAction:
+        return self._call("next_action", self.engine.next_action)
 
     def set_task_status(self, task: str, status: str, detail: str = "") -> None:
         # with the ROS client's request id: a report repeated after HICEM's own restart is applied once

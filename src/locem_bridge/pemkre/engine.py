@@ -41,6 +41,7 @@ from rdflib import BNode, Graph, Literal, Namespace, URIRef
 from rdflib.namespace import RDF, XSD
 from rdflib.term import Node
 
+from ..common.next_action import NextAction
 from ..common.task_status import TASK_STATUSES
 from .errors import (BindingError, ConditionError, InvalidParameterError, InvalidStatusError, OntologyError,
                      ProcessModelError, QueryError, TaskStateError, UnknownProcessError, UnknownQueryError,
@@ -49,7 +50,7 @@ from .ontology import (AbstractProcess, FlowNode, ProcessModel, Transition, comp
                        load_files)
 from .reasoning import IncrementalReasoner, SchemaRules, bounded_closure, inferred_part
 from .store import (G_LOG, G_META, G_ONTOLOGY, G_SCHEMA_INFERRED, G_WORLD, ChangeSet, QueryResult, TripleStore)
-from .terms import check_iri, local_name, ntriples, parameters_from_ntriples, to_term
+from .terms import check_iri, local_name, parameter_document, to_term
 from .vocab import BASE, LOG, PROC, SITE
 from .world import scan_changes
 
@@ -85,23 +86,6 @@ _M_statusRequest = META.statusRequestId
 _M_startRequest = META.startRequestId
 #: Schema closures by ontology hash, shared by the engines of one process (a closure is never modified).
 _CLOSURE_CACHE: Dict[str, Graph] = {}
-
-
-@dataclass
-class NextAction:
-    """The answer of :meth:`ProcessEngine.next_action` (docs/contracts.md, "PEMKRE next action")."""
-
-    status: str                      # action | ended | failed
-    process: str = ""
-    task: str = ""
-    action_type: str = ""
-    parameters: str = ""             # N-Triples, subject = task
-    task_status: str = ""            # issued | in_progress (a repeated answer)
-    message: str = ""
-
-    def params(self) -> Dict[str, object]:
-        """``{name: local name or Python value}``, as HICEM puts them on its blackboard (``param_<name>``)."""
-        return parameters_from_ntriples(self.parameters) if self.parameters else {}
 
 
 @dataclass
@@ -491,7 +475,7 @@ class ProcessEngine:
         self._replace(cs, sp, _P_currentTask, task)
         self._replace(cs, sp, _P_taskCount, Literal(seq))
         self._commit(cs)
-        return NextAction("action", str(sp), str(task), tt.action_type, ntriples(sorted(params)), "issued")
+        return NextAction("action", str(sp), str(task), tt.action_type, parameter_document(task, sorted(params)), "issued")
 
     def _describe(self, task: URIRef, state: _State, tstatus: str) -> NextAction:
         proc_iri, node = self.model.task_node_index[state.node]
@@ -502,7 +486,7 @@ class ProcessEngine:
             v = self._v(task, prm.prop)
             if v is not None:
                 params.append((task, prm.prop, v))
-        return NextAction("action", str(state.sp), str(task), tt.action_type, ntriples(sorted(params)), tstatus)
+        return NextAction("action", str(state.sp), str(task), tt.action_type, parameter_document(task, sorted(params)), tstatus)
 
     def _end(self, state: _State, node: FlowNode) -> NextAction:
         now = self.clock()

@@ -1,18 +1,21 @@
 """Checking and converting the strings that cross the PEMKRE API: IRIs, N-Triples terms and documents.
 
-All parsing is done by a real RDF parser (pyoxigraph); nothing here builds query text.
+Terms from outside (bindings) are parsed by a real RDF parser (pyoxigraph); nothing here builds query text. The
+next action's parameter document is written by the one codec in :mod:`locem_bridge.common.next_action`, which
+also gives :func:`local_name`.
 """
 import math
 import re
-from typing import Dict, Iterable, Mapping, Optional, Tuple, Union
+from typing import Dict, Iterable, Mapping, Optional, Tuple
 
 import pyoxigraph as ox
 from rdflib import Literal, URIRef
 from rdflib.namespace import XSD
 from rdflib.term import Node
 
+from ..common.next_action import encode_parameters, iri_term, literal_term, local_name  # noqa: F401 (re-export)
 from .errors import InvalidParameterError, MalformedIriError
-from .oxigraph_store import from_ox, to_ox
+from .oxigraph_store import from_ox
 
 _SCHEME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:")
 _NT_S = "<urn:locem-bridge:s>"
@@ -36,11 +39,6 @@ def check_iri(value: object, what: str = "IRI") -> URIRef:
         raise MalformedIriError("%s %r is not a valid IRI: %s (spaces, quotes, <>{}|\\^` are not allowed)"
                                 % (what, value[:200], exc)) from None
     return URIRef(value)
-
-
-def local_name(iri: Union[str, URIRef]) -> str:
-    """The part after the last ``#`` or ``/`` (docs/contracts.md: the parameter name / feature id)."""
-    return re.split(r"[#/]", str(iri))[-1]
 
 
 def parse_term(text: str, what: str = "term") -> Node:
@@ -82,32 +80,19 @@ def to_term(value: object, what: str = "value") -> Node:
                                 % (what, type(value).__name__))
 
 
-def term_to_python(term: Node) -> object:
-    """docs/contracts.md: IRIs become their local name, literals their Python value."""
+def nt_term(term: Node, what: str = "parameter value") -> str:
+    """An IRI or literal as N-Triples text, written by the one parameter codec
+    (:mod:`locem_bridge.common.next_action`)."""
     if isinstance(term, URIRef):
-        return local_name(term)
+        return iri_term(str(term))
     if isinstance(term, Literal):
-        return term.toPython()
-    return str(term)
+        return literal_term(str(term), str(term.datatype) if term.datatype is not None else None, term.language)
+    raise InvalidParameterError("%s must be an IRI or a literal, got %r" % (what, term))
 
 
-def ntriples(triples: Iterable[Tuple[Node, Node, Node]]) -> str:
-    """An N-Triples document (one triple a line, terms serialized by pyoxigraph)."""
-    return "".join("%s %s %s .\n" % (to_ox(s), to_ox(p), to_ox(o)) for s, p, o in triples)
-
-
-def parse_ntriples(doc: str) -> list:
-    """Parse an N-Triples document into rdflib triples (for consumers and tests)."""
-    try:
-        return [(from_ox(t.subject), from_ox(t.predicate), from_ox(t.object))
-                for t in ox.parse(doc.encode("utf-8"), format=ox.RdfFormat.N_TRIPLES)]
-    except (SyntaxError, ValueError) as exc:
-        raise InvalidParameterError("not a valid N-Triples document: %s" % exc) from None
-
-
-def parameters_from_ntriples(doc: str) -> Dict[str, object]:
-    """docs/contracts.md mapping of a next-action parameter document to ``{name: value}``."""
-    return {local_name(p): term_to_python(o) for _, p, o in parse_ntriples(doc)}
+def parameter_document(task: URIRef, parameters: Iterable[Tuple[Node, Node, Node]]) -> str:
+    """The N-Triples parameter document of a next action (docs/contracts.md), one line per ``(task, p, o)``."""
+    return encode_parameters(str(task), [(str(p), nt_term(o)) for _, p, o in parameters])
 
 
 def bindings_from_strings(names: Iterable[str], values: Iterable[str]) -> Mapping[str, Node]:

@@ -29,6 +29,7 @@ from typing import Any, Callable, Dict, Optional
 import rospy
 import rosservice
 
+from locem_bridge.common.next_action import NextAction
 from locem_bridge.hicem.errors import PemkreCallError
 from locem_bridge.hicem.interfaces import PemkreClient, PemkreUnavailableError, status_request_id
 
@@ -150,10 +151,11 @@ class RosPemkreClient(PemkreClient):
                 return str(getattr(resp, f))
         return ""
 
-    def next_action(self) -> Dict[str, Any]:
+    def next_action(self) -> NextAction:
         r = self._call("next_action", True)
-        return {"status": r.status, "action_type": getattr(r, "action_type", ""), "task": getattr(r, "task", ""),
-                "parameters": getattr(r, "parameters", ""), "detail": getattr(r, "message", "")}
+        return NextAction(r.status, getattr(r, "process", ""), task=getattr(r, "task", ""), action_type=getattr(r, "action_type", ""),
+                          parameters=getattr(r, "parameters", ""), task_status=getattr(r, "task_status", ""),
+                          message=getattr(r, "message", ""))
 
     def set_task_status(self, task: str, status: str, detail: str = "") -> None:
         self._call("set_task_status", True, "%s %s" % (status, task), task=task, status=status, detail=detail,
