@@ -51,30 +51,30 @@ from .ontology import (AbstractProcess, FlowNode, ProcessModel, Transition, comp
 from .reasoning import IncrementalReasoner, SchemaRules, bounded_closure, inferred_part
 from .store import (G_LOG, G_META, G_ONTOLOGY, G_SCHEMA_INFERRED, G_WORLD, ChangeSet, QueryResult, TripleStore)
 from .terms import check_iri, local_name, parameter_document, to_term
-from .vocab import BASE, LOG, PROC, SITE
+from .vocab import LOG, META, PROC, SITE
 from .world import scan_changes
 
 _log = logging.getLogger(__name__)
 
-# Vocabulary terms as plain URIRefs: attribute access on a DefinedNamespace is slow on the per-decision path.
-_RDF_TYPE = URIRef(str(RDF) + "type")
-_P_ScanResultJson = URIRef(str(PROC) + 'ScanResultJson')
-_P_SpecificProcess = URIRef(str(PROC) + 'SpecificProcess')
-_P_currentNode = URIRef(str(PROC) + 'currentNode')
-_P_currentTask = URIRef(str(PROC) + 'currentTask')
-_P_detail = URIRef(str(PROC) + 'detail')
-_P_durationSeconds = URIRef(str(PROC) + 'durationSeconds')
-_P_endedAt = URIRef(str(PROC) + 'endedAt')
-_P_executes = URIRef(str(PROC) + 'executes')
-_P_issuedAt = URIRef(str(PROC) + 'issuedAt')
-_P_partOfProcess = URIRef(str(PROC) + 'partOfProcess')
-_P_realizes = URIRef(str(PROC) + 'realizes')
-_P_sequenceNumber = URIRef(str(PROC) + 'sequenceNumber')
-_P_startedAt = URIRef(str(PROC) + 'startedAt')
-_P_status = URIRef(str(PROC) + 'status')
-_P_taskCount = URIRef(str(PROC) + 'taskCount')
+# Vocabulary terms (pemkre/vocab.py) looked up once: attribute access on a DefinedNamespace is slow on the
+# per-decision path.
+_RDF_TYPE = RDF.type
+_P_ScanResultJson = PROC.ScanResultJson
+_P_SpecificProcess = PROC.SpecificProcess
+_P_currentNode = PROC.currentNode
+_P_currentTask = PROC.currentTask
+_P_detail = PROC.detail
+_P_durationSeconds = PROC.durationSeconds
+_P_endedAt = PROC.endedAt
+_P_executes = PROC.executes
+_P_issuedAt = PROC.issuedAt
+_P_partOfProcess = PROC.partOfProcess
+_P_realizes = PROC.realizes
+_P_sequenceNumber = PROC.sequenceNumber
+_P_startedAt = PROC.startedAt
+_P_status = PROC.status
+_P_taskCount = PROC.taskCount
 
-META = Namespace(BASE + "meta#")
 MAX_DETAIL_CHARS = 1_000_000
 _STORED_DETAIL_CHARS = 2000
 #: The deepest nesting of a JSON argument (options, SCAN results) PEMKRE takes; a SCAN result needs 4.

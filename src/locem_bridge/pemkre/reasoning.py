@@ -32,7 +32,7 @@ from .errors import ReasoningBoundError
 from .store import ASSERTED_GRAPHS, G_ABOX_INFERRED, G_SCHEMA_INFERRED, ChangeSet, Triple, TripleStore
 
 #: rdf:type as a plain URIRef (DefinedNamespace attribute access is slow on hot paths)
-RDF_TYPE = URIRef(str(RDF) + "type")
+RDF_TYPE = RDF.type
 DEFAULT_MAX_SECONDS = 60.0
 DEFAULT_MAX_TRIPLES = 2_000_000
 

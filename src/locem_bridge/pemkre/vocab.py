@@ -15,6 +15,8 @@ SITE = Namespace(BASE + "site/")
 LOG = Namespace(BASE + "log/")
 #: Named graphs the store keeps apart (asserted vs inferred, schema vs world vs log).
 GRAPHS = Namespace(BASE + "graph/")
+#: The engine's bookkeeping (request ids of status reports and process starts): not in any ontology.
+META = Namespace(BASE + "meta#")
 
 
 class PROC(DefinedNamespace):
