@@ -1,0 +1,106 @@
+"""One definition per contract: a meaning that crosses layers is written in its module under ``common/`` and
+nowhere else (issue 16). Every module of the package is parsed; a second copy anywhere fails, naming the file
+and line.
+
+To guard another contract, add a row to ``CONTRACTS``: where it lives, the names that define it, and the string
+values that, found together in one collection literal or one class body, are a copy of it.
+"""
+import ast
+import os
+from typing import FrozenSet, Iterator, List, NamedTuple, Tuple
+
+import pytest
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+PACKAGE = os.path.join(REPO, "src", "locem_bridge")
+
+
+class Contract(NamedTuple):
+    what: str
+    home: str                         # path under src/locem_bridge/, the one module allowed to define it
+    names: FrozenSet[str]             # assigned or class names that define it
+    values: FrozenSet[str] = frozenset()   # string values that define it, when ...
+    min_values: int = 0               # ... at least this many appear in one literal collection or class body
+
+
+CONTRACTS = [
+    Contract("LOCEM answer codes", "common/locem_codes.py", frozenset({"LOCEM_CODES", "Code"}),
+             frozenset({"OK", "INVALID_COMMAND", "INVALID_ARGUMENT", "BUSY", "TIMEOUT", "HARDWARE_ERROR",
+                        "ABORTED", "NOT_READY"}), 4),
+    Contract("task statuses", "common/task_status.py", frozenset({"TASK_STATUSES"}),
+             frozenset({"in_progress", "succeeded", "failed"}), 3),
+    Contract("next-action record", "common/next_action.py",
+             frozenset({"NextAction", "parse_parameters", "parameters_from_ntriples"})),
+]
+
+
+def modules() -> Iterator[Tuple[str, ast.AST]]:
+    for folder, dirs, files in os.walk(PACKAGE):
+        dirs[:] = [d for d in dirs if d != "__pycache__"]
+        for name in sorted(files):
+            if name.endswith(".py"):
+                path = os.path.join(folder, name)
+                with open(path, encoding="utf-8") as handle:
+                    yield os.path.relpath(path, PACKAGE).replace(os.sep, "/"), ast.parse(handle.read(), path)
+
+
+def _strings(nodes) -> List[str]:
+    return [n.value for n in nodes if isinstance(n, ast.Constant) and isinstance(n.value, str)]
+
+
+def definitions(tree: ast.AST, contract: Contract) -> List[Tuple[int, str]]:
+    """(line, what) for every place ``tree`` defines ``contract``."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.ClassDef, ast.FunctionDef)) and node.name in contract.names:
+            found.append((node.lineno, "defines %s" % node.name))
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            for t in targets:
+                if isinstance(t, ast.Name) and t.id in contract.names:
+                    found.append((node.lineno, "assigns %s" % t.id))
+        if not contract.min_values:
+            continue
+        if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+            held = set(_strings(node.elts)) & contract.values
+        elif isinstance(node, ast.Dict):
+            held = set(_strings([k for k in node.keys if k is not None])) & contract.values
+        elif isinstance(node, ast.ClassDef):
+            held = set(_strings([s.value for s in node.body if isinstance(s, (ast.Assign, ast.AnnAssign))
+                                 and s.value is not None])) & contract.values
+        else:
+            continue
+        if len(held) >= contract.min_values:
+            found.append((node.lineno, "writes %s" % ", ".join(sorted(held))))
+    return found
+
+
+TREES = dict(modules())
+
+
+@pytest.mark.parametrize("contract", CONTRACTS, ids=[c.what for c in CONTRACTS])
+def test_defined_once_in_common(contract):
+    assert contract.home.startswith("common/")
+    assert definitions(TREES[contract.home], contract), \
+        "%s: %s no longer defines it (move the row with it)" % (contract.what, contract.home)
+    copies = ["src/locem_bridge/%s:%d %s" % (path, line, what) for path, tree in sorted(TREES.items())
+              if path != contract.home for line, what in definitions(tree, contract)]
+    assert not copies, "%s are defined in %s; import them from there instead of:\n  %s" % (
+        contract.what, contract.home, "\n  ".join(copies))
+
+
+def test_a_copy_is_found():
+    """The check itself: each way of copying a contract is caught."""
+    copy = ast.parse("LOCEM_CODES = ('OK', 'BUSY')\n"
+                     "KNOWN = {'OK': 1, 'BUSY': 2, 'TIMEOUT': 3, 'ABORTED': 4}\n"
+                     "class Answer:\n    GOOD = 'OK'\n    BAD = 'INVALID_COMMAND'\n    LATE = 'TIMEOUT'\n"
+                     "    BUSY = 'BUSY'\n"
+                     "def report(s):\n    return s in ['in_progress', 'succeeded', 'failed']\n"
+                     "class NextAction:\n    pass\n")
+    by_what = {c.what: c for c in CONTRACTS}
+    codes, statuses, record = (by_what[w] for w in ("LOCEM answer codes", "task statuses", "next-action record"))
+    assert sorted({line for line, _ in definitions(copy, codes)}) == [1, 2, 3]
+    assert sorted({line for line, _ in definitions(copy, statuses)}) == [9]
+    assert sorted({line for line, _ in definitions(copy, record)}) == [10]
+    assert definitions(ast.parse("ok = code in (Code.OK, Code.BUSY)\nLAST = ('succeeded', 'failed')\n"),
+                       codes) == []
