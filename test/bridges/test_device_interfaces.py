@@ -15,7 +15,7 @@ from locem_bridge.bridges.commands_arm import ArmCommands
 from locem_bridge.bridges.errors import NotSupported
 from locem_bridge.bridges.interfaces import INTERFACES, Arm
 from locem_bridge.bridges.robot import build_robot
-from locem_bridge.locem.codes import Code
+from locem_bridge.common.locem_codes import Code
 
 from bridge_rigs import SHORT_WALL
 
