@@ -76,3 +76,42 @@ def test_raster_switch_predicts_the_same_way_over_several_stretches():
     changes = _run(lambda r: RasterSwitch(r, r, r.switch, stretches, reach=0.05, clock=r.clock))
     assert [on for on, _x in changes] == [True, False, True, False]
     assert np.allclose([x for _on, x in changes], [0.0, 0.3, 0.6, 0.9], atol=SPEED * PERIOD)
+
+
+def test_raster_progress_reports_the_length_worked_never_ahead_of_the_tool_and_each_stretch_end():
+    """Two stretches of 0.3 m that begin 1.0 m into a raster of 1.6 m (skip=1.0): the reports count from the
+    raster's start, follow the TCP while the tool is on (at least every PERIOD_S of the clock, never beyond where
+    the TCP truly is) and give each stretch's end when the tool switches off there."""
+    from locem_bridge.bridges.commands_wall import RasterProgress
+
+    class Ctx(Rig):
+        def __init__(self):
+            super().__init__()
+            self.reports = []
+
+        def on_cancel(self, callback):
+            pass
+
+        def report(self, progress, text=""):
+            self.reports.append((self.clock.t, progress, text))
+
+    rig = Ctx()
+    stretches = [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5])]
+    switch = RasterSwitch(rig, rig, rig.switch, stretches, reach=0.05, clock=rig.clock)
+    switch.switch_s = REQUEST
+    progress = RasterProgress(switch, rig, stretches, [1.0, 1.3], 1.6, reach=0.05, clock=rig.clock)
+    progress.report(0.5, "waypoint 1 of 4")                         # the arm's own progress is not passed on
+    while rig.x(rig.clock.t) < 1.2:
+        progress.sleep(PERIOD)
+    progress.finish()
+    metres = [float(text.split()[1]) for _t, _p, text in rig.reports]
+    assert all(text.startswith("raster ") and text.endswith(" of 1.600 m") for _t, _p, text in rig.reports)
+    assert metres == sorted(metres) and len(set(metres)) == len(metres)
+    assert [p for _t, p, _x in rig.reports] == pytest.approx([m / 1.6 for m in metres], abs=1e-3)
+    for t, _p, text in rig.reports:                                 # never ahead of the TCP
+        x = rig.x(t)
+        truth = 1.0 + min(max(x, 0.0), 0.3) + min(max(x - 0.6, 0.0), 0.3)
+        assert float(text.split()[1]) <= truth + 1e-3, (text, x)
+    assert 1.3 in metres and metres[-1] == 1.6                      # each stretch's end
+    during = [t for t, _p, text in rig.reports if 1.0 < float(text.split()[1]) < 1.3]
+    assert len(during) >= 2 and max(b - a for a, b in zip(during, during[1:])) <= RasterProgress.PERIOD_S + 2 * PERIOD
