@@ -83,6 +83,7 @@ def test_raster_progress_reports_the_length_worked_never_ahead_of_the_tool_and_e
     raster's start, follow the TCP while the tool is on (at least every PERIOD_S of the clock, never beyond where
     the TCP truly is) and give each stretch's end when the tool switches off there."""
     from locem_bridge.bridges.commands_wall import RasterProgress
+    from locem_bridge.common.raster_progress import parse_progress_text
 
     class Ctx(Rig):
         def __init__(self):
@@ -99,19 +100,29 @@ def test_raster_progress_reports_the_length_worked_never_ahead_of_the_tool_and_e
     stretches = [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5])]
     switch = RasterSwitch(rig, rig, rig.switch, stretches, reach=0.05, clock=rig.clock)
     switch.switch_s = REQUEST
-    progress = RasterProgress(switch, rig, stretches, [1.0, 1.3], 1.6, reach=0.05, clock=rig.clock)
+    hold = 0.05                    # s the spray would go on should LOCEM die: 10 cm at SPEED
+    progress = RasterProgress(switch, rig, stretches, [1.0, 1.3], 1.6, reach=0.05, hold_s=hold, clock=rig.clock)
     progress.report(0.5, "waypoint 1 of 4")                         # the arm's own progress is not passed on
     while rig.x(rig.clock.t) < 1.2:
         progress.sleep(PERIOD)
     progress.finish()
-    metres = [float(text.split()[1]) for _t, _p, text in rig.reports]
-    assert all(text.startswith("raster ") and text.endswith(" of 1.600 m") for _t, _p, text in rig.reports)
-    assert metres == sorted(metres) and len(set(metres)) == len(metres)
+    parsed = [parse_progress_text(text) for _t, _p, text in rig.reports]
+    assert None not in parsed and all(total == 1.6 for _d, total, _s in parsed)
+    metres = [done for done, _total, _s in parsed]
+    assert metres == sorted(metres)
     assert [p for _t, p, _x in rig.reports] == pytest.approx([m / 1.6 for m in metres], abs=1e-3)
-    for t, _p, text in rig.reports:                                 # never ahead of the TCP
-        x = rig.x(t)
-        truth = 1.0 + min(max(x, 0.0), 0.3) + min(max(x - 0.6, 0.0), 0.3)
-        assert float(text.split()[1]) <= truth + 1e-3, (text, x)
+
+    def truth(x):
+        return 1.0 + min(max(x, 0.0), 0.3) + min(max(x - 0.6, 0.0), 0.3)
+    for (t, _p, text), (done, _total, if_stopped) in zip(rig.reports, parsed):
+        assert done <= truth(rig.x(t)) + 1e-3, (text, rig.x(t))    # never ahead of the TCP
+        # should LOCEM die now, the valve stays open `hold` more: never beyond where the TCP then is, nor beyond
+        # the stretch (its end: LOCEM no longer there to switch off at the turn)
+        assert done <= if_stopped <= truth(rig.x(t + hold)) + 1e-3, (text, rig.x(t))
+        assert if_stopped <= (1.3 if done < 1.3 else 1.6) + 1e-9
+    ahead = [s - d for d, _t, s in parsed if 1.05 < d < 1.2]
+    assert ahead and min(ahead) >= SPEED * hold * 0.7, ahead        # and it does count the hold
     assert 1.3 in metres and metres[-1] == 1.6                      # each stretch's end
+    assert rig.reports[-1][2] == "raster 1.600 of 1.600 m"          # the tool off: no "if LOCEM stops" part
     during = [t for t, _p, text in rig.reports if 1.0 < float(text.split()[1]) < 1.3]
     assert len(during) >= 2 and max(b - a for a, b in zip(during, during[1:])) <= RasterProgress.PERIOD_S + 2 * PERIOD

@@ -223,6 +223,38 @@ def test_progress_is_recorded_as_the_feedback_arrives_only_forward_and_dropped_w
     assert store.value(PROGRESS, "spray/a") == {"done": [2]}       # the section's partial record is gone
 
 
+def _cut(feedback_texts, reply):
+    """A section's command reports ``feedback_texts`` (one per tick) and then ends with ``reply``; the recorded
+    progress of section 2."""
+    store = DataManager()
+    lib = TreeLibrary()
+    lib.load_string('<root BTCPP_format="4"><BehaviorTree ID="T">'
+                    '<RecordSectionProgress area_id="a" work="spray" index="2">'
+                    '<SendLocemCommand command="SPRAY_AREA 0 0 0 1 0 0 1 1 0 -1 0" timeout="100" feedback="{feedback}" '
+                    'code="{code}" message="{message}"/>'
+                    '</RecordSectionProgress></BehaviorTree></root>')
+    locem = LocemDouble(durations={"SPRAY_AREA": 60.0})
+    tree = lib.build("T", NodeContext(locem=locem, store=store), Blackboard())
+    for text in feedback_texts:
+        locem.feedback["SPRAY_AREA"] = text
+        assert tree.tick() == R
+    locem.handles[-1]._reply, locem.handles[-1].t_done = reply, 0.0
+    assert tree.tick() == F
+    return store.value(PROGRESS, "spray/a")["partial"]["2"]
+
+
+def test_a_section_cut_by_locem_going_away_is_recorded_where_the_spray_went_on_to_before_the_watchdog():
+    texts = ["raster 0.000 of 6.000 m (0.120 m if LOCEM stops now)", "raster 0.050 of 6.000 m (0.260 m if LOCEM "
+             "stops now)"]
+    lost = LocemReply(False, "ABORTED", "LOCEM action server /locem/command_action went away while running "
+                      "'SPRAY_AREA ...'; not sent again (LOCEM commands are not idempotent)")
+    # LOCEM died: the valve stayed open until the compressor's watchdog closed it, the arm went on meanwhile
+    assert _cut(texts, lost) == 0.26
+    # any other end (LOCEM closed the valve itself, the arm stopped): the point measured
+    assert _cut(texts, LocemReply(False, "HARDWARE_ERROR", "compressor: link down")) == 0.05
+    assert _cut(texts, LocemReply(False, "ABORTED", "cancelled")) == 0.05
+
+
 def test_section_resume_gives_the_recorded_point_less_the_back_off():
     store = DataManager()
     store.put(PROGRESS, "spray/a", {"done": [0], "partial": {"1": 2.5}}, source="test")

@@ -279,13 +279,18 @@ class RasterProgress(HookedWaiter):
     part included; :mod:`locem_bridge.common.raster_progress`) from the arm's measured TCP while the tool is on, at
     most every ``PERIOD_S`` and whenever a stretch is finished (the tool switched off at its end). The arm's own
     motion progress ("waypoint 3 of 24") is replaced by it. The measured TCP lags the tool, so the reported length
-    never runs ahead of the part actually worked."""
+    never runs ahead of the part actually worked.
+
+    ``hold_s``: how long the spray goes on for sure should LOCEM die now (the compressor's watchdog keeps the valve
+    open for its timeout less one poll; the arm's controller goes on along its path meanwhile). While the tool is
+    on, each report adds the point the TCP reaches in that time at its measured speed along the stretch (at most
+    the stretch's end): where a retry after LOCEM's death can go on without a gap."""
 
     #: s of wall time between two reports while the tool is on (20 Hz)
     PERIOD_S = 0.05
 
     def __init__(self, switch: LaneSwitch, arm: Arm, stretches: Sequence[Sequence[Sequence[float]]],
-                 starts_m: Sequence[float], total_m: float, reach: float,
+                 starts_m: Sequence[float], total_m: float, reach: float, hold_s: float = 0.0,
                  clock: Callable[[], float] = time.monotonic) -> None:
         """``stretches``: each worked stretch's start and end (arm base frame), ``starts_m`` where each begins in
         metres of the raster, ``total_m`` the raster's whole worked length; ``reach``: distance from a stretch's
@@ -301,19 +306,37 @@ class RasterProgress(HookedWaiter):
         self._was_on = False
         self._last_report = -1e9
         self._reported = -1.0
+        self._reported_ahead = 0.0
         self.done_m = self._starts[0] if self._starts else 0.0
+        self._hold_s = max(0.0, hold_s)
+        self.if_stopped_m: Optional[float] = None         # None while the tool is off
+        self._sample: Optional[Tuple[int, float, float]] = None    # (stretch, stamp, m) of the last TCP sample
+        self._speeds: List[float] = []                    # m/s along the stretch, the last few samples
 
-    def _on_stretch(self) -> Optional[Tuple[int, float]]:
-        """(stretch index, fraction 0..1 along it) of the measured TCP, or None when it is on none."""
-        tcp = self._arm.cached_state().get("tcp")
+    def _on_stretch(self) -> Optional[Tuple[int, float, float]]:
+        """(stretch index, fraction 0..1 along it, sample stamp) of the measured TCP, or None when it is on none."""
+        state = self._arm.cached_state()
+        tcp = state.get("tcp")
         if not tcp:
             return None
         p = np.asarray(tcp[:3], dtype=float)
         for i, (a, ab) in enumerate(self._lines):
             f = float((p - a).dot(ab)) / max(float(ab.dot(ab)), 1e-12)
             if -0.05 <= f <= 1.05 and float(np.linalg.norm(p - a - ab * f)) <= self._reach:
-                return i, min(1.0, max(0.0, f))
+                stamp = state.get("stamp")
+                return i, min(1.0, max(0.0, f)), float(stamp) if stamp is not None else self._clock()
         return None
+
+    def _reach_if_stopped(self, lane: int, metres: float, stamp: float) -> float:
+        """The raster point the TCP passes ``hold_s`` after this sample at its slowest recent speed (within the
+        stretch)."""
+        last = self._sample
+        if last is not None and last[0] == lane and stamp > last[1]:
+            self._speeds = (self._speeds + [max(0.0, (metres - last[2]) / (stamp - last[1]))])[-3:]
+        if last is None or stamp > last[1] or last[0] != lane:
+            self._sample = (lane, stamp, metres)
+        speed = min(self._speeds) if len(self._speeds) >= 2 else 0.0
+        return min(metres + speed * self._hold_s, self._end_of(lane)) if speed > 0 else metres
 
     def _end_of(self, i: int) -> float:
         return self._starts[i] + float(np.linalg.norm(self._lines[i][1]))
@@ -324,26 +347,36 @@ class RasterProgress(HookedWaiter):
         if on:
             where = self._on_stretch()
             if where is not None:
-                self._lane = where[0]
-                self._advance(self._starts[where[0]] + where[1] * float(np.linalg.norm(self._lines[where[0]][1])))
+                lane, f, stamp = where
+                if lane != self._lane:
+                    self._speeds = []
+                self._lane = lane
+                metres = self._starts[lane] + f * float(np.linalg.norm(self._lines[lane][1]))
+                self._advance(metres)
+                ahead = self._reach_if_stopped(lane, metres, stamp)
+                self.if_stopped_m = max(ahead, self.done_m, self.if_stopped_m or 0.0)
         elif self._was_on and self._lane is not None:
             self._advance(self._end_of(self._lane))      # switched off by position: the TCP passed the end
+            self.if_stopped_m = None
             finished = True
         self._was_on = on
         now = self._clock()
-        if self.done_m > self._reported and (finished or now - self._last_report >= self.PERIOD_S):
+        if (self.done_m > self._reported or (self.if_stopped_m or 0.0) > self._reported_ahead) and (
+                finished or now - self._last_report >= self.PERIOD_S):
             self._report(now)
 
     def _advance(self, done_m: float) -> None:
         self.done_m = max(self.done_m, min(done_m, self._total))
 
     def _report(self, now: float) -> None:
-        self._last_report, self._reported = now, self.done_m
-        super().report(self.done_m / self._total if self._total > 0 else 1.0, progress_text(self.done_m, self._total))
+        self._last_report, self._reported, self._reported_ahead = now, self.done_m, self.if_stopped_m or 0.0
+        super().report(self.done_m / self._total if self._total > 0 else 1.0,
+                       progress_text(self.done_m, self._total, self.if_stopped_m))
 
     def finish(self) -> None:
         """After the motion ended normally: it ends beyond the last stretch, whose end is reported."""
         self._advance(self._end_of(len(self._lines) - 1))
+        self.if_stopped_m = None
         if self.done_m > self._reported:
             self._report(self._clock())
 
@@ -573,13 +606,14 @@ class WallCommands:
 
     def _raster(self, ctx: Any, tool: str, origin: Sequence[float], u: Sequence[float], width: float,
                 height: float, normal: Sequence[float], spacing: float, speed: float, offset: float,
-                run_in: float, skip: float = 0.0) -> Dict[str, Any]:
+                run_in: float, skip: float = 0.0, hold_s: float = 0.0) -> Dict[str, Any]:
         """Horizontal lanes from the area's bottom to its top, alternating direction. Each lane is one straight
         move that starts ``run-up`` before the worked stretch [-run_in, width + run_in] and ends as far after
         it (the distance the arm needs to reach ``speed`` at ``LANE_ACCEL``); the tool is on only over the
         worked stretch (:class:`LaneSwitch`). ``skip``: metres of the raster's worked length (the stretches end
         to end) left out from its start, so the first lane worked may start part way, with its own run-up.
-        Progress (:class:`RasterProgress`): the worked length done, counted from the raster's start."""
+        Progress (:class:`RasterProgress`): the worked length done, counted from the raster's start; ``hold_s``:
+        how long the tool stays on should LOCEM die (see there)."""
         arm = self._need("arm")
         n = self._unit(normal, "normal")
         uu = self._unit(u, "u")
@@ -595,7 +629,7 @@ class WallCommands:
                     "duration_s": round(time.monotonic() - start, 3)}
         runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN
         if arm.supports(Arm.PATH) and len(lanes) > 1:
-            out = self._raster_path(ctx, tool, o, uu, up, n, heights, lanes, total_m, speed, offset)
+            out = self._raster_path(ctx, tool, o, uu, up, n, heights, lanes, total_m, speed, offset, hold_s)
         else:
             s1 = 0.0
             for i, (k, t, w0, w1, start_m) in enumerate(lanes):
@@ -612,7 +646,7 @@ class WallCommands:
                                   runup / span, 1.0 - runup / span)
                 stretch = (self.to_arm(o + uu * w0 + up * t + n * offset, n),
                            self.to_arm(o + uu * w1 + up * t + n * offset, n))
-                progress = RasterProgress(lane, arm, [stretch], [start_m], total_m, reach=0.05)
+                progress = RasterProgress(lane, arm, [stretch], [start_m], total_m, reach=0.05, hold_s=hold_s)
                 try:
                     arm.move_linear(progress, pb, speed, LANE_ACCEL)
                 finally:
@@ -629,7 +663,7 @@ class WallCommands:
 
     def _raster_path(self, ctx: Any, tool: str, o: np.ndarray, uu: np.ndarray, up: np.ndarray, n: np.ndarray,
                      heights: Sequence[float], lanes: Sequence[Tuple[int, float, float, float, float]],
-                     total_m: float, speed: float, offset: float) -> Dict[str, Any]:
+                     total_m: float, speed: float, offset: float, hold_s: float = 0.0) -> Dict[str, Any]:
         """The serpentine as ONE blended controller path (MOVE_PATH semantics): each lane's ends, run-up
         included, are waypoints; the turns between lanes are rounded (blend within the run-up, so the worked
         stretches are straight and at speed); the tool is switched by position (:class:`RasterSwitch`)."""
@@ -651,7 +685,7 @@ class WallCommands:
         poses = [self.to_arm(p, n) for p in points[1:]]
         blends = [blend] * (len(poses) - 1) + [0.0]          # every turn blended, the path ends at rest
         switch = RasterSwitch(ctx, arm, lambda on: self._switch(tool, on), stretches, reach=0.25 * spacing)
-        progress = RasterProgress(switch, arm, stretches, starts, total_m, reach=0.25 * spacing)
+        progress = RasterProgress(switch, arm, stretches, starts, total_m, reach=0.25 * spacing, hold_s=hold_s)
         try:
             arm.move_path(progress, poses, speed, LANE_ACCEL, blends)
         finally:
@@ -687,8 +721,12 @@ class WallCommands:
             comp.set_motor(True)
             comp.set_setpoint(pressure)
             wait_for_pressure(comp, guarded, pressure, 0.2, timeout=30.0)
+            # should LOCEM die, the compressor's watchdog keeps the valve open for its timeout less one poll
+            # (none: open until the stretch's end, the most the report then claims)
+            hold_s = (max(0.0, comp.watchdog_timeout - 1.0 / comp.poll_rate) if comp.watchdog_timeout > 0
+                      else float("inf"))
             out = self._raster(guarded, "spray_gun", [ox, oy, oz], [ux, uy, uz], width, height, [nx, ny, nz],
-                               spacing, speed, standoff, run_in=run_in, skip=skip)
+                               spacing, speed, standoff, run_in=run_in, skip=skip, hold_s=hold_s)
         finally:
             self._switch_off_safely("spray_gun")
         return out

@@ -319,6 +319,9 @@ class Compressor(Backend):
     max_setpoint: float
     #: Hz, how often the backend polls the device (the period :meth:`cached` is refreshed at)
     poll_rate: float
+    #: s, the device's communication watchdog: with no request for this long it closes the valve and stops the
+    #: motor by itself (``robot.compressor.watchdog_timeout``; 0 = none)
+    watchdog_timeout: float
 
     @abc.abstractmethod
     def read(self) -> Dict[str, Any]:

@@ -53,6 +53,16 @@ class CommandHandle(abc.ABC):
         return None
 
 
+#: what a LOCEM client's reply message says (code ABORTED) when LOCEM went away while the command ran (it died):
+#: the device did not stop by LOCEM's hand but by its own watchdog (e.g. the spray valve stays open for a while)
+LOCEM_LOST = "went away while running"
+
+
+def locem_lost(code: str, message: str) -> bool:
+    """True for the reply of a command whose LOCEM went away while it ran (see :data:`LOCEM_LOST`)."""
+    return code == "ABORTED" and LOCEM_LOST in (message or "")
+
+
 class LocemClient(abc.ABC):
     """Sends command strings to LOCEM. ``send`` returns at once; raise :class:`LocemCallError` if it cannot."""
 

@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 
 from locem_bridge.common.health import grade, problems
 from locem_bridge.hicem.errors import HicemError
-from locem_bridge.hicem.interfaces import CommandHandle, LocemClient, LocemReply
+from locem_bridge.hicem.interfaces import LOCEM_LOST, CommandHandle, LocemClient, LocemReply
 from locem_bridge.msg import CommandAction, CommandGoal, Status
 from locem_bridge.srv import Command
 
@@ -83,9 +83,9 @@ class _Goal(CommandHandle):
         if self._lost_at is None:
             self._lost_at = now
         elif now - self._lost_at >= LOST_GRACE_S:
-            self._unsent = LocemReply(False, "ABORTED", "LOCEM action server %s went away while running %r; not "
-                                      "sent again (LOCEM commands are not idempotent)" % (self._client.name,
-                                                                                         self.command))
+            self._unsent = LocemReply(False, "ABORTED", "LOCEM action server %s %s %r; not sent again (LOCEM "
+                                      "commands are not idempotent)" % (self._client.name, LOCEM_LOST,
+                                                                        self.command))
 
     def reply(self) -> Optional[LocemReply]:
         if not self.done():

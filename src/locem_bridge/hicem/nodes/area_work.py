@@ -14,7 +14,9 @@ Part of a section: a section cut while it runs (LOCEM killed mid-spray, a link l
 its start, a second coat on its first part. ``RecordSectionProgress`` (a decorator around the section's command)
 keeps the command's progress feedback -- the raster's worked length done, ``raster <m> of <m> m``
 (:mod:`locem_bridge.common.raster_progress`) -- in the same entry as it arrives, ``{"done": [...], "partial":
-{"<index>": metres}}``; ``SectionResume`` gives the retried section's ``skip`` (SPRAY_AREA ``skip=``) from it, so
+{"<index>": metres}}`` (after LOCEM died mid-command: the point the spray reached for sure before the
+compressor's watchdog closed the valve, which the feedback gives too); ``SectionResume`` gives the retried
+section's ``skip`` (SPRAY_AREA ``skip=``) from it, so
 the work goes on at the point reached; ``RecordSectionDone`` drops the section's partial record.
 
 Manual work: a section LOCEM refuses because the arm cannot reach it from its base pose (``LeaveSectionManual``
@@ -31,6 +33,7 @@ from py_trees.common import Status
 
 from locem_bridge.common.raster_progress import parse_progress_text
 from locem_bridge.hicem.controls import _Decorator
+from locem_bridge.hicem.interfaces import locem_lost
 
 from ..errors import PortError
 from ..node_base import Leaf
@@ -153,39 +156,51 @@ class RecordSectionProgress(_Decorator):
                    "each of its ticks, the last one included, records the command's progress feedback -- the "
                    "raster's worked length done, 'raster <m> of <m> m' -- for section `index` of (work, area_id) in "
                    "the data store collection 'progress' when it went further than recorded, so a section cut "
-                   "while it runs is resumed at that point (SectionResume). Other feedback texts are ignored; "
-                   "the result is the child's.")
+                   "while it runs is resumed at that point (SectionResume). When the command failed because LOCEM "
+                   "went away (it died: the spray valve closes only by the compressor's watchdog), the point the "
+                   "last feedback gave for that case ('(<m> m if LOCEM stops now)') is recorded instead. Other "
+                   "feedback texts are ignored; the result is the child's.")
     PORTS = (
         AREA_ID, WORK,
         input_port("index", INT, None, "", "the running section's index"),
         input_port("feedback", STRING, "{feedback}", "", "the command's latest feedback text (SendLocemCommand's "
                    "feedback port; GuardedCommand writes it to {feedback})"),
+        input_port("code", STRING, "{code}", "", "the command's reply code (GuardedCommand's code)"),
+        input_port("message", STRING, "{message}", "", "the command's reply message (GuardedCommand's message)"),
     )
 
     def tick(self):  # type: ignore[override]
         if self.status != Status.RUNNING:
             self._recorded: Optional[float] = None
+            self._if_stopped = 0.0
             self.initialise()
         for node in self.decorated.tick():
             yield node
-        self._record()
         s = self.decorated.status
+        self._record(lost=s == Status.FAILURE and self._lost())
         if s == Status.RUNNING:
             self.status = Status.RUNNING
         else:
             self.stop(s)
         yield self
 
-    def _record(self) -> None:
+    def _port(self, name: str) -> Optional[str]:
         try:
-            text = self.ports.get("feedback")
-        except PortError:                 # nothing sent yet (the guard failed first): no feedback
-            return
-        parsed = parse_progress_text(text or "")
-        if parsed is None or parsed[0] <= 0.0:
-            return
-        done_m = parsed[0]
-        if self._recorded is not None and done_m <= self._recorded + 1e-6:
+            return self.ports.get(name)
+        except PortError:                 # nothing sent yet (the guard failed first): no such entry
+            return None
+
+    def _lost(self) -> bool:
+        return locem_lost(self._port("code") or "", self._port("message") or "")
+
+    def _record(self, lost: bool) -> None:
+        parsed = parse_progress_text(self._port("feedback") or "")
+        if parsed is not None:
+            self._if_stopped = max(self._if_stopped, parsed[2])
+        done_m = parsed[0] if parsed is not None else 0.0
+        if lost:                          # the valve stayed open until the compressor's watchdog closed it
+            done_m = max(done_m, self._if_stopped)
+        if done_m <= 0.0 or (self._recorded is not None and done_m <= self._recorded + 1e-6):
             return
         store = self.ctx.require("store", self.name)
         work, area, index = _check_work(self), self.ports.get("area_id"), int(self.ports.get("index"))
@@ -197,6 +212,9 @@ class RecordSectionProgress(_Decorator):
                 record["partial"] = partial
                 store.put(PROGRESS, progress_key(work, area), record, source="tree")
         self._recorded = done_m
+        if lost:
+            self.ctx.log.info("%s of %s, section %d cut by LOCEM going away: sprayed to %.3f m of its raster",
+                              work, area, index + 1, done_m)
 
     def get(self, port: str) -> Any:          # _check_work reads the work port through this
         return self.ports.get(port)
@@ -205,10 +223,10 @@ class RecordSectionProgress(_Decorator):
 class SectionResume(Leaf):
     DESCRIPTION = ("Where a section's work goes on: `skip` = the raster length recorded done for section `index` of "
                    "(work, area_id) by RecordSectionProgress (0 when none), less `back_off`, for the command's "
-                   "skip= argument (SPRAY_AREA). The recorded point is the arm's measured TCP while the tool was "
-                   "on, which lags the tool, and the tool stays on a little after a cut (the compressor's watchdog "
-                   "closes the valve up to 0.5 s after LOCEM died): the part beyond the point is already worked, "
-                   "so no back-off is needed to avoid a gap (default 0); a positive one buys a longer overlap.")
+                   "skip= argument (SPRAY_AREA). The recorded point lags the spray (the arm's measured TCP while "
+                   "the valve was open; after LOCEM died, the least the spray reached before the compressor's "
+                   "watchdog closed the valve), so no back-off is needed to avoid a gap (default 0); a positive "
+                   "one buys a longer overlap.")
     PORTS = (
         AREA_ID, WORK,
         input_port("index", INT, None, "", "the section's index"),
