@@ -273,6 +273,9 @@ class RasterSwitch(LaneSwitch):
             self.on = want
 
 
+JUMP_M = 0.1
+
+
 class RasterProgress(HookedWaiter):
     """A waiter around a raster's tool switch (:class:`LaneSwitch`, :class:`RasterSwitch`; every wait goes on to
     it) that reports the raster's progress: the worked length done (m, counted from the raster's start, a skipped
@@ -286,7 +289,8 @@ class RasterProgress(HookedWaiter):
     on, each report adds the point the TCP reaches in that time at its measured speed along the stretch (at most
     the stretch's end): where a retry after LOCEM's death can go on without a gap."""
 
-    #: s of wall time between two reports while the tool is on (20 Hz)
+    #: s of wall time between two reports while the tool is on (20 Hz); sooner when the point the spray reaches
+    #: should LOCEM die moved more than JUMP_M (the first speed measured on a stretch)
     PERIOD_S = 0.05
 
     def __init__(self, switch: LaneSwitch, arm: Arm, stretches: Sequence[Sequence[Sequence[float]]],
@@ -361,8 +365,9 @@ class RasterProgress(HookedWaiter):
             finished = True
         self._was_on = on
         now = self._clock()
-        if (self.done_m > self._reported or (self.if_stopped_m or 0.0) > self._reported_ahead) and (
-                finished or now - self._last_report >= self.PERIOD_S):
+        ahead = self.if_stopped_m or 0.0
+        if (self.done_m > self._reported or ahead > self._reported_ahead) and (
+                finished or now - self._last_report >= self.PERIOD_S or ahead - self._reported_ahead > JUMP_M):
             self._report(now)
 
     def _advance(self, done_m: float) -> None:
