@@ -31,6 +31,10 @@ CONTRACTS = [
              frozenset({"in_progress", "succeeded", "failed"}), 3),
     Contract("next-action record", "common/next_action.py",
              frozenset({"NextAction", "parse_parameters", "parameters_from_ntriples"})),
+    Contract("health levels and the grading of a device's health", "common/health.py",
+             frozenset({"LEVELS", "LEVEL_NAMES", "DIAG_LEVELS", "grade", "health_level", "HEALTH_OK", "HEALTH_WARN",
+                        "HEALTH_ERROR"}),
+             frozenset({"OK", "WARN", "ERROR", "STALE"}), 3),
 ]
 
 
@@ -56,7 +60,7 @@ def definitions(tree: ast.AST, contract: Contract) -> List[Tuple[int, str]]:
             found.append((node.lineno, "defines %s" % node.name))
         elif isinstance(node, (ast.Assign, ast.AnnAssign)):
             targets = node.targets if isinstance(node, ast.Assign) else [node.target]
-            for t in targets:
+            for t in [e for t in targets for e in (t.elts if isinstance(t, ast.Tuple) else [t])]:
                 if isinstance(t, ast.Name) and t.id in contract.names:
                     found.append((node.lineno, "assigns %s" % t.id))
         if not contract.min_values:
@@ -65,6 +69,7 @@ def definitions(tree: ast.AST, contract: Contract) -> List[Tuple[int, str]]:
             held = set(_strings(node.elts)) & contract.values
         elif isinstance(node, ast.Dict):
             held = set(_strings([k for k in node.keys if k is not None])) & contract.values
+            held = max(held, set(_strings(node.values)) & contract.values, key=len)
         elif isinstance(node, ast.ClassDef):
             held = set(_strings([s.value for s in node.body if isinstance(s, (ast.Assign, ast.AnnAssign))
                                  and s.value is not None])) & contract.values
@@ -96,11 +101,17 @@ def test_a_copy_is_found():
                      "class Answer:\n    GOOD = 'OK'\n    BAD = 'INVALID_COMMAND'\n    LATE = 'TIMEOUT'\n"
                      "    BUSY = 'BUSY'\n"
                      "def report(s):\n    return s in ['in_progress', 'succeeded', 'failed']\n"
-                     "class NextAction:\n    pass\n")
+                     "class NextAction:\n    pass\n"
+                     "NAMES = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}\n"
+                     "def grade(record):\n    return 0\n"
+                     "HEALTH_OK, HEALTH_ERROR = 0, 2\n")
     by_what = {c.what: c for c in CONTRACTS}
-    codes, statuses, record = (by_what[w] for w in ("LOCEM answer codes", "task statuses", "next-action record"))
+    codes, statuses, record, health = (by_what[w] for w in ("LOCEM answer codes", "task statuses",
+                                                            "next-action record",
+                                                            "health levels and the grading of a device's health"))
     assert sorted({line for line, _ in definitions(copy, codes)}) == [1, 2, 3]
     assert sorted({line for line, _ in definitions(copy, statuses)}) == [9]
     assert sorted({line for line, _ in definitions(copy, record)}) == [10]
+    assert sorted({line for line, _ in definitions(copy, health)}) == [12, 13, 15]
     assert definitions(ast.parse("ok = code in (Code.OK, Code.BUSY)\nLAST = ('succeeded', 'failed')\n"),
                        codes) == []
