@@ -79,3 +79,22 @@ def test_importing_the_module_does_not_load_python_can():
                          env=dict(os.environ, PYTHONPATH=SRC), stdout=subprocess.PIPE, universal_newlines=True,
                          check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_no_module_outside_common_opens_a_can_bus_of_its_own():
+    """One way to open the bus: a python-can ``Bus(...)`` or a ``BusABC`` subclass elsewhere in the package is a
+    second opener (with its own interface list and echo handling) and fails here."""
+    import ast
+    package = os.path.join(SRC, "locem_bridge")
+    offenders = []
+    for folder, _, files in os.walk(package):
+        for name in files:
+            path = os.path.join(folder, name)
+            if not name.endswith(".py") or path == os.path.join(package, "common", "can_bus.py"):
+                continue
+            for node in ast.walk(ast.parse(open(path, encoding="utf-8").read(), path)):
+                called = node.func if isinstance(node, ast.Call) else None
+                if isinstance(called, ast.Attribute) and called.attr == "Bus" or \
+                        isinstance(node, ast.ClassDef) and any("BusABC" in ast.dump(b) for b in node.bases):
+                    offenders.append("%s:%d" % (os.path.relpath(path, SRC), node.lineno))
+    assert not offenders, "CAN buses opened outside locem_bridge.common.can_bus: %s" % ", ".join(offenders)

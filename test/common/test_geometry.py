@@ -63,3 +63,27 @@ def test_a_frame_along_an_axis_keeps_its_x_axis_horizontal(z_axis):
     assert abs(r[2, 0]) < 1e-12                                        # x horizontal
     with pytest.raises(ValueError, match="must not be zero"):
         rotation_z_along([0, 0, 0])
+
+
+def test_no_module_outside_common_wraps_angles_or_converts_rotations_again():
+    """The angle and rotation helpers have one definition: a function of that name elsewhere, or the wrapping
+    idiom written out, fails here."""
+    import ast
+    import os
+    import re
+    src = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "src")
+    names = {"wrap_angle", "rotvec_to_matrix", "matrix_to_rotvec", "rpy_to_matrix", "rotvec_to_quat",
+             "quat_to_rotvec", "matrix_to_quat", "rotation_z_along", "pose_to_matrix", "matrix_to_pose", "invert"}
+    idiom = re.compile(r"%\s*\(?\s*2(\.0)?\s*\*\s*(math|np)\.pi|atan2\((math|np)\.sin\(")
+    offenders = []
+    for folder, _, files in os.walk(os.path.join(src, "locem_bridge")):
+        for name in files:
+            path = os.path.join(folder, name)
+            if not name.endswith(".py") or path.endswith(os.path.join("common", "geometry.py")):
+                continue
+            text = open(path, encoding="utf-8").read()
+            offenders += ["%s:%d def %s" % (os.path.relpath(path, src), n.lineno, n.name)
+                          for n in ast.walk(ast.parse(text, path))
+                          if isinstance(n, ast.FunctionDef) and n.name.lstrip("_") in names]
+            offenders += ["%s: %s" % (os.path.relpath(path, src), m.group(0)) for m in idiom.finditer(text)]
+    assert not offenders, "angle / rotation helpers defined outside locem_bridge.common.geometry: %s" % offenders
