@@ -35,6 +35,13 @@ CONTRACTS = [
              frozenset({"LEVELS", "LEVEL_NAMES", "DIAG_LEVELS", "grade", "health_level", "HEALTH_OK", "HEALTH_WARN",
                         "HEALTH_ERROR"}),
              frozenset({"OK", "WARN", "ERROR", "STALE"}), 3),
+    Contract("angle and rotation helpers", "common/geometry.py",
+             frozenset({"wrap_angle", "rotvec_to_matrix", "matrix_to_rotvec", "rpy_to_matrix", "rotvec_to_quat",
+                        "quat_to_rotvec", "matrix_to_quat", "rotation_z_along", "pose_to_matrix", "matrix_to_pose",
+                        "angle_between"})),
+    Contract("opening the base's CAN bus", "common/can_bus.py",
+             frozenset({"CAN_INTERFACES", "SHARED_INTERFACES", "open_bus", "bus_kwargs", "OwnEchoFilterBus"}),
+             frozenset({"virtual", "udp_multicast", "socketcan"}), 3),
 ]
 
 
