@@ -16,6 +16,7 @@ from typing import Any, Callable, Dict, Mapping, Optional, Sequence
 from .common.can_bus import CAN_INTERFACES
 from .common.config_errors import ConfigError
 from .common.config_keys import deep_merge, get, item, load_mapping, mapping, only, vec
+from .common.paths import checkout_root
 
 TOOL_NAMES = ("taping_tool", "spray_gun", "sander")
 # The ports ur_rtde dials: its RTDEControlInterface / RTDEReceiveInterface / RTDEIOInterface take a host and no
@@ -73,7 +74,7 @@ class RobotFileError(ConfigError):
 
 def default_robot_path(root: str = "") -> str:
     """Path of ``config/robots/rbkairos_ur10e.yaml`` in the package folder ``root`` (default: the source tree)."""
-    root = root or os.path.abspath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
+    root = root or checkout_root()
     return os.path.join(root, "config", "robots", "rbkairos_ur10e.yaml")
 
 

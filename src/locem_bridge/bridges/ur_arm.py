@@ -40,7 +40,6 @@ which an operator sends after removing the cause; nothing clears it automaticall
 import json
 import logging
 import math
-import os
 import queue
 import subprocess
 import sys
@@ -53,6 +52,7 @@ from locem_bridge.locem.errors import Aborted
 from .config import need
 from .errors import BadRequest, DeviceFault, LinkDown, MotionTimeout, NotConnected, SafetyStop
 from locem_bridge.common.geometry import angle_between, rotvec_to_matrix
+from locem_bridge.common.paths import child_env
 from .geometry import distance
 from .interfaces import Arm, Health, Waiter
 
@@ -112,9 +112,7 @@ class UrRtdeArm(Arm):
 
     # -- worker process ----------------------------------------------------------------------------------
     def _spawn(self) -> None:
-        src = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-        env = dict(os.environ)
-        env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        env = child_env()
         proc = subprocess.Popen([sys.executable, "-u", "-m", "locem_bridge.bridges.ur_worker", "--host", self.host,
                                  "--frequency", repr(self.frequency), "--watchdog", repr(self.watchdog_hz)], stdin=subprocess.PIPE,
                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,

@@ -12,11 +12,12 @@ from typing import Any, Dict, List
 
 from .datastore import PruneRule
 from ..common.config_errors import read_yaml
+from ..common.paths import checkout_root
 from .errors import ConfigError
 from .health import ModuleSpec
 from .registry import DEFAULT_NODE_MODULES, NODE_MODULES_KEY, NodeRegistry, default_registry
 
-_PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+_PACKAGE_DIR = checkout_root()
 DEFAULT_PARAMS_FILE = os.path.join(_PACKAGE_DIR, "config", "hicem", "plasterboard.yaml")
 DEFAULT_TREES_DIR = os.path.join(_PACKAGE_DIR, "trees")
 

@@ -14,11 +14,12 @@ from typing import Iterable, List, Optional
 
 from .catalogue import all_specs
 from ..common.locem_codes import Code
+from ..common.paths import checkout_root
 from .dispatcher import DEFAULT_MAX_RUNNING
 from .grammar import MAX_COMMAND_LENGTH
 from .registry import CommandSpec
 
-DEFAULT_PATH = os.path.join(os.path.dirname(__file__), "..", "..", "..", "docs", "locem_api.md")
+DEFAULT_PATH = os.path.join(checkout_root(), "docs", "locem_api.md")
 
 _CODE_DOCS = {code: (code.__doc__ or "") for code in Code}
 

@@ -30,11 +30,10 @@ good state and the same call can be repeated.
 import datetime
 import json
 import logging
-import re
 import secrets
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from rdflib import BNode, Graph, Literal, Namespace, URIRef

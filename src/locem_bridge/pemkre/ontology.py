@@ -13,9 +13,10 @@ from dataclasses import dataclass, field
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 from rdflib import Graph, Literal, URIRef
-from rdflib.namespace import OWL, RDF, RDFS
+from rdflib.namespace import OWL, RDF
 from rdflib.term import Node
 
+from ..common.paths import shipped_dir
 from ..common.task_status import TASK_STATUSES
 from .errors import OntologyError, OntologySyntaxError, ProcessModelError, QueryError
 from .store import PreparedQuery, TripleStore
@@ -30,11 +31,9 @@ def default_ontology_dir() -> str:
     env = os.environ.get("LOCEM_BRIDGE_ONTOLOGIES")
     if env:
         return env
-    here = os.path.dirname(os.path.abspath(__file__))
-    for cand in (os.path.join(here, "..", "..", "..", "ontologies"),
-                 os.path.join(here, "..", "..", "..", "share", "locem_bridge", "ontologies")):
-        if os.path.isdir(cand):
-            return os.path.normpath(cand)
+    found = shipped_dir("ontologies")
+    if os.path.isdir(found):
+        return found
     raise OntologyError("no ontologies folder found; set LOCEM_BRIDGE_ONTOLOGIES or pass the file paths")
 
 

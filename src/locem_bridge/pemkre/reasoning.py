@@ -534,7 +534,6 @@ class IncrementalReasoner:
 
         Cost grows with the world; used after an ontology change and as the fallback for transitive properties.
         """
-        from .store import G_LOG, G_WORLD
 
         budget = _Budget(self.max_seconds if max_seconds is None else max_seconds,
                          self.max_triples if max_triples is None else max_triples, self.clock)

@@ -10,8 +10,9 @@
 
 rospy is imported on first use, so a command-line tool may find the package folder without loading ROS.
 """
-import os
 from typing import Any, List
+
+from locem_bridge.common.paths import checkout_root
 
 _TRUE = ("true", "1", "yes", "on")
 _FALSE = ("false", "0", "no", "off")
@@ -63,4 +64,4 @@ def package_share() -> str:
         import rospkg
         return str(rospkg.RosPack().get_path("locem_bridge"))
     except Exception:  # noqa: BLE001 - no ROS package path (rospkg missing or the package not found): the checkout
-        return os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+        return checkout_root()

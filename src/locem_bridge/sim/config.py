@@ -18,6 +18,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 from .. import robot_file
 from ..common.config_errors import ConfigError
 from ..common.config_keys import get, load_mapping, only, vec
+from ..common.paths import checkout_root
 from .errors import SimConfigError
 
 FEATURE_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
@@ -37,9 +38,8 @@ SITE_KEYS: Dict[str, Sequence[str]] = {
                            "spray_target_thickness"),
 }
 def repo_root() -> str:
-    """Return the package source checkout root (the folder holding ``config/``), best effort."""
-    here = os.path.dirname(os.path.abspath(__file__))
-    return os.path.abspath(os.path.join(here, "..", "..", ".."))
+    """The package source checkout root (the folder holding ``config/``): :func:`common.paths.checkout_root`."""
+    return checkout_root()
 
 
 def default_site_path(root: str = "") -> str:

@@ -24,7 +24,6 @@ ends the process; idempotent).
 from __future__ import annotations
 
 import json
-import os
 import select
 import signal
 import subprocess
@@ -34,6 +33,7 @@ import time
 from typing import Any, Dict, List, Optional
 
 from ...common.can_bus import SHARED_INTERFACES, CanBusError, open_bus
+from ...common.paths import child_env
 from ..errors import DeviceStandInError
 
 HEARTBEAT_COB_RANGE = (0x701, 0x77F)
@@ -78,9 +78,7 @@ class HeartbeatProcess:
     def start(self, timeout: float = 20.0) -> None:
         if self._proc is not None:
             raise DeviceStandInError("heartbeat process already started")
-        pkg_parent = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-        env = dict(os.environ)
-        env["PYTHONPATH"] = pkg_parent + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        env = child_env()
         cfg = {k: self.can_cfg[k] for k in ("interface", "channel", "port") if k in self.can_cfg}
         self._proc = subprocess.Popen([sys.executable, "-m", "locem_bridge.sim.can.heartbeat", json.dumps(cfg)],
                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, text=True, bufsize=1)

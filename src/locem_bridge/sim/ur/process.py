@@ -17,6 +17,7 @@ import sys
 import threading
 from typing import Any, List, Optional, Sequence
 
+from ...common.paths import child_env
 from .errors import UrStandInError
 
 #: methods of UrControllerStandIn callable through the pipe
@@ -94,9 +95,7 @@ class StandInProcess:
         self._lock = threading.Lock()
 
     def start(self) -> "StandInProcess":
-        src = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
-        env = dict(os.environ)
-        env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        env = child_env()
         cmd = [sys.executable, "-m", "locem_bridge.sim.ur", "--address", self.address, "--time-scale",
                repr(float(self.time_scale)), "--model", self.model, "--stdio", "--log-level", self.log_level]
         if self.q0 is not None:
