@@ -314,32 +314,38 @@ class RasterProgress(HookedWaiter):
         self.done_m = self._starts[0] if self._starts else 0.0
         self._hold_s = max(0.0, hold_s)
         self.if_stopped_m: Optional[float] = None         # None while the tool is off
-        self._sample: Optional[Tuple[int, float, float]] = None    # (stretch, stamp, m) of the last TCP sample
-        self._speeds: List[float] = []                    # m/s along the stretch, the last few samples
+        self._sample: Optional[Tuple[float, np.ndarray]] = None    # (stamp, position) of the last TCP sample
+        self._velocities: List[np.ndarray] = []           # m/s, between the last few samples
 
-    def _on_stretch(self) -> Optional[Tuple[int, float, float]]:
-        """(stretch index, fraction 0..1 along it, sample stamp) of the measured TCP, or None when it is on none."""
+    def _sample_tcp(self) -> Optional[np.ndarray]:
+        """The measured TCP position; keeps its velocity over the last few new samples (run-up included)."""
         state = self._arm.cached_state()
         tcp = state.get("tcp")
         if not tcp:
             return None
         p = np.asarray(tcp[:3], dtype=float)
+        stamp = float(state["stamp"]) if state.get("stamp") is not None else self._clock()
+        if self._sample is not None and stamp > self._sample[0]:
+            self._velocities = (self._velocities + [(p - self._sample[1]) / (stamp - self._sample[0])])[-3:]
+        if self._sample is None or stamp > self._sample[0]:
+            self._sample = (stamp, p)
+        return p
+
+    def _on_stretch(self, p: np.ndarray) -> Optional[Tuple[int, float]]:
+        """(stretch index, fraction 0..1 along it) of the TCP ``p`` while the tool is on (before a stretch's start
+        it counts as at the start: the tool switches on a little ahead of the measured TCP), or None."""
         for i, (a, ab) in enumerate(self._lines):
             f = float((p - a).dot(ab)) / max(float(ab.dot(ab)), 1e-12)
-            if -0.05 <= f <= 1.05 and float(np.linalg.norm(p - a - ab * f)) <= self._reach:
-                stamp = state.get("stamp")
-                return i, min(1.0, max(0.0, f)), float(stamp) if stamp is not None else self._clock()
+            if -0.5 <= f <= 1.05 and float(np.linalg.norm(p - a - ab * f)) <= self._reach:
+                return i, min(1.0, max(0.0, f))
         return None
 
-    def _reach_if_stopped(self, lane: int, metres: float, stamp: float) -> float:
-        """The raster point the TCP passes ``hold_s`` after this sample at its slowest recent speed (within the
-        stretch)."""
-        last = self._sample
-        if last is not None and last[0] == lane and stamp > last[1]:
-            self._speeds = (self._speeds + [max(0.0, (metres - last[2]) / (stamp - last[1]))])[-3:]
-        if last is None or stamp > last[1] or last[0] != lane:
-            self._sample = (lane, stamp, metres)
-        speed = min(self._speeds) if len(self._speeds) >= 2 else 0.0
+    def _reach_if_stopped(self, lane: int, metres: float) -> float:
+        """The raster point the TCP passes ``hold_s`` from now at its slowest recent speed along the stretch (at
+        most the stretch's end)."""
+        ab = self._lines[lane][1]
+        direction = ab / max(float(np.linalg.norm(ab)), 1e-12)
+        speed = max(0.0, min(float(v.dot(direction)) for v in self._velocities)) if self._velocities else 0.0
         return min(metres + speed * self._hold_s, self._end_of(lane)) if speed > 0 else metres
 
     def _end_of(self, i: int) -> float:
@@ -348,16 +354,15 @@ class RasterProgress(HookedWaiter):
     def _after_wait(self) -> None:
         on = bool(self._switch.on)
         finished = False
-        if on:
-            where = self._on_stretch()
+        p = self._sample_tcp()
+        if on and p is not None:
+            where = self._on_stretch(p)
             if where is not None:
-                lane, f, stamp = where
-                if lane != self._lane:
-                    self._speeds = []
+                lane, f = where
                 self._lane = lane
                 metres = self._starts[lane] + f * float(np.linalg.norm(self._lines[lane][1]))
                 self._advance(metres)
-                ahead = self._reach_if_stopped(lane, metres, stamp)
+                ahead = self._reach_if_stopped(lane, metres)
                 self.if_stopped_m = max(ahead, self.done_m, self.if_stopped_m or 0.0)
         elif self._was_on and self._lane is not None:
             self._advance(self._end_of(self._lane))      # switched off by position: the TCP passed the end
