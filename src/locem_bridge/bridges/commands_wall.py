@@ -316,6 +316,10 @@ class RasterProgress(HookedWaiter):
         self.if_stopped_m: Optional[float] = None         # None while the tool is off
         self._sample: Optional[Tuple[float, np.ndarray]] = None    # (stamp, position) of the last TCP sample
         self._velocities: List[np.ndarray] = []           # m/s, between the last few samples
+        # report just before the switch opens the valve (its request on the way): a LOCEM killed right after the
+        # valve opened has already told where the spray will get to
+        raw = switch._raw_switch
+        switch._raw_switch = lambda on: (self._before_switch(on), raw(on))[1]
 
     def _sample_tcp(self) -> Optional[np.ndarray]:
         """The measured TCP position; keeps its velocity over the last few new samples (run-up included)."""
@@ -337,8 +341,17 @@ class RasterProgress(HookedWaiter):
         for i, (a, ab) in enumerate(self._lines):
             f = float((p - a).dot(ab)) / max(float(ab.dot(ab)), 1e-12)
             if -0.5 <= f <= 1.05 and float(np.linalg.norm(p - a - ab * f)) <= self._reach:
-                return i, min(1.0, max(0.0, f))
+                return i, f
         return None
+
+    def _at(self, lane: int, f: float) -> None:
+        """The measured TCP at fraction ``f`` (unclamped) of stretch ``lane`` with the tool on: done and the point
+        the spray reaches should LOCEM die now."""
+        self._lane = lane
+        length = float(np.linalg.norm(self._lines[lane][1]))
+        self._advance(self._starts[lane] + min(1.0, max(0.0, f)) * length)
+        ahead = self._reach_if_stopped(lane, self._starts[lane] + f * length)
+        self.if_stopped_m = max(min(ahead, self._end_of(lane)), self.done_m, self.if_stopped_m or 0.0)
 
     def _reach_if_stopped(self, lane: int, metres: float) -> float:
         """The raster point the TCP passes ``hold_s`` from now at its slowest recent speed along the stretch (at
@@ -347,6 +360,14 @@ class RasterProgress(HookedWaiter):
         direction = ab / max(float(np.linalg.norm(ab)), 1e-12)
         speed = max(0.0, min(float(v.dot(direction)) for v in self._velocities)) if self._velocities else 0.0
         return min(metres + speed * self._hold_s, self._end_of(lane)) if speed > 0 else metres
+
+    def _before_switch(self, on: bool) -> None:
+        p = self._sample_tcp()
+        where = self._on_stretch(p) if on and p is not None else None
+        if where is None:
+            return
+        self._at(*where)
+        self._report(self._clock())
 
     def _end_of(self, i: int) -> float:
         return self._starts[i] + float(np.linalg.norm(self._lines[i][1]))
@@ -358,12 +379,7 @@ class RasterProgress(HookedWaiter):
         if on and p is not None:
             where = self._on_stretch(p)
             if where is not None:
-                lane, f = where
-                self._lane = lane
-                metres = self._starts[lane] + f * float(np.linalg.norm(self._lines[lane][1]))
-                self._advance(metres)
-                ahead = self._reach_if_stopped(lane, metres)
-                self.if_stopped_m = max(ahead, self.done_m, self.if_stopped_m or 0.0)
+                self._at(*where)
         elif self._was_on and self._lane is not None:
             self._advance(self._end_of(self._lane))      # switched off by position: the TCP passed the end
             self.if_stopped_m = None
