@@ -267,3 +267,12 @@ def test_section_resume_gives_the_recorded_point_less_the_back_off():
     tree, _ = _leaf_tree('<SectionResume area_id="a" work="spray" index="1" back_off="-0.1" skip="{s}"/>', store)
     assert tree.tick() == F
     assert "back_off must be >= 0 m, got -0.1" in tree.ctx.last_failure()[1]
+
+
+def test_the_controllers_timed_handle_passes_the_feedback_on():
+    # the executive wraps every LOCEM handle to time it; the progress feedback must reach the trees through it
+    from locem_bridge.hicem.controller import _TimedHandle
+    locem = LocemDouble(durations={"SPRAY_AREA": 60.0})
+    locem.feedback["SPRAY_AREA"] = "raster 0.500 of 6.000 m"
+    assert _TimedHandle(locem.send("SPRAY_AREA 0 0 0 1 0 0 1 1 0 -1 0"), lambda: None).feedback() == \
+        "raster 0.500 of 6.000 m"

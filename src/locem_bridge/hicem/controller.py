@@ -107,6 +107,11 @@ class _TimedHandle:
     def cancel(self) -> None:
         self._timed(self.inner.cancel)
 
+    def feedback(self) -> Optional[str]:
+        """The inner handle's latest progress feedback (trees record it, e.g. SPRAY_AREA's section progress)."""
+        feedback = getattr(self.inner, "feedback", None)
+        return feedback() if feedback is not None else None
+
 
 class HighLevelController:
     def __init__(self, pemkre: Any, locem: Any, library: TreeLibrary, store: DataManager, params: HicemParams,
