@@ -134,17 +134,10 @@ class JobLocemKillTest(unittest.TestCase):
 
     def test_4_job_resumed_and_meets_the_outcome_goals(self):
         self.assertIsNotNone(self.sanding_end, "sanding never ended")
-        # Every goal but the thickness CV (0.165..0.185 measured against the goal 0.15): the suite kills LOCEM
-        # within tens of ms of the valve opening on the first lane, and in these runs HICEM held no progress for
-        # the cut section (SPRAY_AREA's feedback, RecordSectionProgress), so it was sprayed again from its start
-        # (skip=0) and its first ~0.9 m of lanes got a second coat. The resume itself (skip=, the point the spray
-        # reaches before the compressor's watchdog closes the valve) is tested in test/bridges/test_spray_skip.py,
-        # test_lane_switch.py and test/hicem/test_section_progress.py. Coverage, the other goals and the job's end
-        # hold.
-        failures = outcome_goal_failures(self.report, self.asked)
-        self.assertEqual([], [f for f in failures if not f.startswith("spray thickness CV")], failures)
+        # the thickness CV included: the section the kill cut goes on where the spray stopped (SPRAY_AREA's progress
+        # feedback kept by HICEM, skip= on the retry), not from its start
         print("spray thickness CV after the kill: %.3f" % self.report["outcome"]["spray_thickness_cv"])
-
+        self.assertEqual([], outcome_goal_failures(self.report, self.asked))
 
 if __name__ == "__main__":
     rostest.rosrun(PKG, "job_locem_kill", JobLocemKillTest)
