@@ -116,13 +116,13 @@ class PemkreCrashTest(unittest.TestCase):
         client.report_world(SCAN2)      # runs after the other test: joints of its own
         client.start_process(TAPING, {"validateLines": False})
         a = client.next_action()
-        self.assertEqual(a["action_type"], "GET_TOOL")
-        client.set_task_status(a["task"], "in_progress")
-        client.set_task_status(a["task"], "succeeded")
+        self.assertEqual(a.action_type, "GET_TOOL")
+        client.set_task_status(a.task, "in_progress")
+        client.set_task_status(a.task, "succeeded")
         tape = client.next_action()
-        self.assertEqual(tape["action_type"], "TAPE_LINE")
-        client.set_task_status(tape["task"], "in_progress")
-        for call, args in (("set_task_status", (tape["task"], "succeeded")), ("next_action", ())):
+        self.assertEqual(tape.action_type, "TAPE_LINE")
+        client.set_task_status(tape.task, "in_progress")
+        for call, args in (("set_task_status", (tape.task, "succeeded")), ("next_action", ())):
             pid = node_pid()
             os.kill(pid, signal.SIGSTOP)
             outcome = {}
@@ -150,17 +150,17 @@ class PemkreCrashTest(unittest.TestCase):
             self.assertGreaterEqual(attempts, 2)
             self.assertGreater(outcome["took"], 1.0)          # in flight from before the kill until after it
         # the succeeded report reached the respawned PEMKRE once: the next action is the second joint
-        self.assertEqual(outcome["result"]["action_type"], "TAPE_LINE")
-        self.assertNotEqual(outcome["result"]["task"], tape["task"])
+        self.assertEqual(outcome["result"].action_type, "TAPE_LINE")
+        self.assertNotEqual(outcome["result"].task, tape.task)
         start, nxt, status, query, world = proxies()
         log = json.loads(query("task_log", [], []).results)["results"]["bindings"]
-        mine = [r for r in log if r["task"]["value"] == tape["task"]]
+        mine = [r for r in log if r["task"]["value"] == tape.task]
         self.assertEqual([r["status"]["value"] for r in mine], ["succeeded"])
         # the same report sent again (a HICEM that restarted before recording the answer) changes nothing
-        again = status(tape["task"], "succeeded", "", "hicem-x")
+        again = status(tape.task, "succeeded", "", "hicem-x")
         self.assertFalse(again.success)          # a new id: PEMKRE refuses it as the task is no longer running
-        client.set_task_status(tape["task"], "succeeded")          # the client's own id: already applied, OK
-        self.assertEqual(nxt("").task, outcome["result"]["task"])
+        client.set_task_status(tape.task, "succeeded")          # the client's own id: already applied, OK
+        self.assertEqual(nxt("").task, outcome["result"].task)
 
     def test_kill_dash_nine_mid_task_and_after_an_acknowledged_status(self):
         start, nxt, status, query, world = proxies()
