@@ -205,9 +205,16 @@ class LaneSwitch(HookedWaiter):
         self._last: Optional[Tuple[float, np.ndarray]] = None     # (stamp, TCP position) of the previous sample
         self._velocity = np.zeros(3)
         self.switch_s = 0.0                                        # running average of a switch request (s)
+        self._before: List[Callable[[bool], None]] = []
+
+    def before_switch(self, callback: Callable[[bool], None]) -> None:
+        """Run ``callback(on)`` right before every switch request (e.g. a progress report as the valve opens)."""
+        self._before.append(callback)
 
     def _switch(self, on: bool) -> None:
         t0 = self._clock()
+        for callback in self._before:
+            callback(on)
         self._raw_switch(on)
         took = max(0.0, self._clock() - t0)
         self.switch_s = took if self.switch_s == 0.0 else 0.7 * self.switch_s + 0.3 * took
@@ -318,8 +325,7 @@ class RasterProgress(HookedWaiter):
         self._velocities: List[np.ndarray] = []           # m/s, between the last few samples
         # report just before the switch opens the valve (its request on the way): a LOCEM killed right after the
         # valve opened has already told where the spray will get to
-        raw = switch._raw_switch
-        switch._raw_switch = lambda on: (self._before_switch(on), raw(on))[1]
+        switch.before_switch(self._before_switch)
 
     def _sample_tcp(self) -> Optional[np.ndarray]:
         """The measured TCP position; keeps its velocity over the last few new samples (run-up included)."""
