@@ -66,9 +66,9 @@ def test_scan_noise_stays_within_configured_sigma(site_cfg, robot_cfg):
 
 
 def test_site_without_joints_scans_walls_and_areas_only(robot_cfg):
-    from locem_bridge.sim.config import repo_root
+    from locem_bridge.common.paths import checkout_root
     import os
-    site = Site(load_site(os.path.join(repo_root(), "config", "sites", "no_joints.yaml")))
+    site = Site(load_site(os.path.join(checkout_root(), "config", "sites", "no_joints.yaml")))
     out = WallScanner(site, robot_cfg["robot"]["scanner"]).scan(site.robot_start)
     assert out["joints"] == []
     assert [w["id"] for w in out["walls"]] == ["wall_1"]

@@ -37,14 +37,11 @@ SITE_KEYS: Dict[str, Sequence[str]] = {
     "simulation.outcome": ("grid", "tape_lateral_tolerance", "contact_tolerance", "spray_rate",
                            "spray_target_thickness"),
 }
-def repo_root() -> str:
-    """The package source checkout root (the folder holding ``config/``): :func:`common.paths.checkout_root`."""
-    return checkout_root()
 
 
 def default_site_path(root: str = "") -> str:
     """Path of ``config/sites/default.yaml`` in the package folder ``root`` (default: the source tree)."""
-    return os.path.join(root or repo_root(), "config", "sites", "default.yaml")
+    return os.path.join(root or checkout_root(), "config", "sites", "default.yaml")
 
 
 def _feature_id(value: Any, full: str) -> str:
