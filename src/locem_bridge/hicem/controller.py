@@ -39,7 +39,7 @@ from .blackboard import Blackboard
 from .config import HicemParams
 from .datastore import DataManager
 from .errors import ControllerError, HicemError, LocemCallError, PemkreCallError
-from .interfaces import NextAction, PemkreUnavailableError, check_reply, parse_next_action
+from .interfaces import CommandHandle, LocemReply, NextAction, PemkreUnavailableError, check_reply, parse_next_action
 from .node_base import NodeContext
 from .operator import OperatorDesk
 from .xml_loader import BuiltTree, TreeLibrary
@@ -83,10 +83,12 @@ class _TimedLocem:
                 s.locem_s += time.perf_counter() - t
 
 
-class _TimedHandle:
-    def __init__(self, inner: Any, stats_ref: Callable[[], Optional[ActionStats]]) -> None:
+class _TimedHandle(CommandHandle):
+    """A LOCEM command handle that adds the time spent in its calls to the running action's statistics."""
+
+    def __init__(self, inner: CommandHandle, stats_ref: Callable[[], Optional[ActionStats]]) -> None:
         self.inner = inner
-        self.command = getattr(inner, "command", "")
+        self.command = inner.command
         self._stats = stats_ref
 
     def _timed(self, fn: Callable[[], Any]) -> Any:
@@ -101,7 +103,7 @@ class _TimedHandle:
     def done(self) -> bool:
         return self._timed(self.inner.done)
 
-    def reply(self) -> Any:
+    def reply(self) -> Optional[LocemReply]:
         return self._timed(self.inner.reply)
 
     def cancel(self) -> None:
@@ -109,8 +111,7 @@ class _TimedHandle:
 
     def feedback(self) -> Optional[str]:
         """The inner handle's latest progress feedback (trees record it, e.g. SPRAY_AREA's section progress)."""
-        feedback = getattr(self.inner, "feedback", None)
-        return feedback() if feedback is not None else None
+        return self.inner.feedback()
 
 
 class HighLevelController:

@@ -261,8 +261,7 @@ class SendLocemCommand(Leaf):
 
     def on_tick(self) -> Status:
         h = self._handle
-        feedback = getattr(h, "feedback", None)          # a handle without feedback (not a CommandHandle): none
-        self.set("feedback", (feedback() if feedback is not None else None) or "")
+        self.set("feedback", h.feedback() or "")
         if not h.done():
             if self.ctx.clock() - self._t0 > self._limit:
                 h.cancel()
