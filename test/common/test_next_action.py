@@ -62,6 +62,19 @@ def test_the_record_round_trips_through_its_plain_object_form():
     assert (ended.status, ended.message) == ("ended", "all lines taped")
 
 
+def test_the_matched_skill_travels_with_the_answer_and_an_old_answer_names_none():
+    doc = encode_parameters(TASK, [(P + "tool", iri_term("urn:x#spray_gun"))])
+    na = NextAction.from_answer({"status": "action", "task": TASK, "action_type": "GET_TOOL", "parameters": doc,
+                                 "skill": "CHANGE_TOOL", "skill_kind": "basic"})
+    assert (na.skill, na.skill_kind, na.params()) == ("CHANGE_TOOL", "basic", {"tool": "spray_gun"})
+    assert NextAction.from_answer(na.as_answer()) == na
+    tree = NextAction.from_answer(dict(na.as_answer(), skill="GET_TOOL", skill_kind="composite"))
+    assert (tree.skill, tree.skill_kind) == ("GET_TOOL", "composite")
+    old = NextAction.from_answer({"status": "action", "task": TASK, "action_type": "GET_TOOL", "parameters": doc})
+    assert (old.skill, old.skill_kind) == ("", "")
+    assert NextAction.from_answer(dict(na.as_answer(), skill=None, skill_kind=None)).skill_kind == ""
+
+
 @pytest.mark.parametrize("answer,msg", [
     ([], "must be an object, got list"),
     ({"status": "maybe"}, "status 'maybe' is not one of: action, ended, failed"),
@@ -74,6 +87,14 @@ def test_the_record_round_trips_through_its_plain_object_form():
      "subject <urn:other> is not the task"),
     ({"status": "action", "action_type": "SCAN", "task": TASK,
       "parameters": '<%s> <urn:p#ok> "maybe"^^<%sboolean> .' % (TASK, XSD)}, "bad xsd:boolean"),
+    ({"status": "action", "action_type": "SCAN", "task": TASK, "skill": "SCAN", "skill_kind": "atomic"},
+     "skill_kind 'atomic' is not one of: composite, basic"),
+    ({"status": "action", "action_type": "SCAN", "task": TASK, "skill": "SCAN"}, "'skill' and 'skill_kind' go together"),
+    ({"status": "action", "action_type": "SCAN", "task": TASK, "skill_kind": "basic"}, "go together"),
+    ({"status": "action", "action_type": "SCAN", "task": TASK, "skill": 3, "skill_kind": "basic"},
+     "'skill' and 'skill_kind' must be strings"),
+    ({"status": "action", "action_type": "SCAN", "task": TASK, "skill": "SCAN now", "skill_kind": "basic"},
+     "without whitespace"),
 ])
 def test_bad_answers_are_refused_naming_the_problem(answer, msg):
     with pytest.raises(NextActionError) as err:

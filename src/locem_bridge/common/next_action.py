@@ -1,11 +1,13 @@
 """The PEMKRE -> HICEM next-action answer: the one record and its one N-Triples parameter codec.
 
 docs/contracts.md, "PEMKRE next action": ``status`` is ``action``, ``ended`` or ``failed``; with ``action`` the
-answer names the ``action_type``, the ``task`` (the task instance IRI) and its ``parameters``, an N-Triples
-document whose triples have the task as subject. A predicate's local name (after the last ``#`` or ``/``) is the
-parameter name, the object an IRI (its local name is the value: a feature id, a tool name) or a literal (its
-Python value). PEMKRE's engine writes the answer (:func:`encode_parameters`), the ROS adapters carry its fields,
-HICEM checks it (:meth:`NextAction.from_answer`) and puts the parameters on its blackboard as ``param_<name>``.
+answer names the ``action_type``, the matched ``skill`` and its ``skill_kind`` (``composite``: HICEM runs that
+tree; ``basic``: one LOCEM command; both empty: the tree is the action type), the ``task`` (the task instance IRI)
+and its ``parameters``, an N-Triples document whose triples have the task as subject. A predicate's local name
+(after the last ``#`` or ``/``) is the parameter name, the object an IRI (its local name is the value: a feature
+id, a tool name) or a literal (its Python value). PEMKRE's engine writes the answer (:func:`encode_parameters`),
+the ROS adapters carry its fields, HICEM checks it (:meth:`NextAction.from_answer`) and puts the parameters on
+its blackboard as ``param_<name>``.
 
 Standard library only: HICEM reads the parameters without an RDF library. PEMKRE turns its RDF terms into the
 N-Triples text :func:`iri_term` / :func:`literal_term` write (canonical N-Triples, as pyoxigraph writes it).
@@ -21,6 +23,13 @@ ENDED = "ended"
 FAILED = "failed"
 """The process failed (``message``: why)."""
 ANSWER_STATUSES: Tuple[str, ...] = (ACTION, ENDED, FAILED)
+
+COMPOSITE = "composite"
+"""``skill_kind``: the skill is an action tree (``skill`` = its tree ID)."""
+BASIC = "basic"
+"""``skill_kind``: the skill is one LOCEM command (``skill`` = the command name)."""
+SKILL_KINDS: Tuple[str, ...] = (COMPOSITE, BASIC)
+"""The kinds a matched skill may have; ``""`` (no skill named) = the tree is the action type."""
 
 XSD = "http://www.w3.org/2001/XMLSchema#"
 
@@ -146,6 +155,8 @@ class NextAction:
     parameters: str = ""             # N-Triples, subject = task (action)
     task_status: str = ""            # issued | in_progress (a repeated answer)
     message: str = ""                # the outcome (ended) or the reason (failed)
+    skill: str = ""                  # the matched skill: a tree ID (composite) or LOCEM command name (basic)
+    skill_kind: str = ""             # composite | basic | "" (no skill named: the tree is the action type)
     #: the decoded parameters, when the holder has them already (checked answers, HICEM's stored action)
     values: Optional[Dict[str, Any]] = field(default=None, repr=False, compare=False)
 
@@ -162,14 +173,17 @@ class NextAction:
     def as_answer(self) -> Dict[str, Any]:
         """The answer as a plain object (the shape :meth:`from_answer` reads)."""
         return {"status": self.status, "process": self.process, "task": self.task, "action_type": self.action_type,
-                "parameters": self.parameters, "task_status": self.task_status, "message": self.message}
+                "parameters": self.parameters, "task_status": self.task_status, "message": self.message,
+                "skill": self.skill, "skill_kind": self.skill_kind}
 
     @classmethod
     def from_answer(cls, answer: Any) -> "NextAction":
         """Check an answer (a :class:`NextAction` or its plain-object form; ``detail`` is accepted for
         ``message``) and decode its parameters; :class:`NextActionError` names the first problem.
 
-        An action type nobody runs is not rejected here: HICEM reports it to PEMKRE as a failure.
+        An action type (or skill) nobody runs is not rejected here: HICEM reports it to PEMKRE as a failure.
+        ``skill`` and ``skill_kind`` are optional (absent or ``""``: the tree is the action type); a kind must be
+        one of :data:`SKILL_KINDS` and name a skill, a skill must have a kind.
         """
         if isinstance(answer, NextAction):
             answer = answer.as_answer()
@@ -191,5 +205,17 @@ class NextAction:
         nt = answer.get("parameters", "")
         if not isinstance(nt, str):
             raise NextActionError("next_action: 'parameters' must be an N-Triples string")
-        return cls(ACTION, process, task, at, nt, str(answer.get("task_status") or ""), message,
+        skill, kind = answer.get("skill") or "", answer.get("skill_kind") or ""
+        if not isinstance(skill, str) or not isinstance(kind, str):
+            raise NextActionError("next_action: 'skill' and 'skill_kind' must be strings")
+        if kind and kind not in SKILL_KINDS:
+            raise NextActionError("next_action: skill_kind %r is not one of: %s (or empty: the tree is the action "
+                                  "type)" % (kind, ", ".join(SKILL_KINDS)))
+        if bool(skill) != bool(kind):
+            raise NextActionError("next_action: 'skill' and 'skill_kind' go together (got skill %r, skill_kind %r)"
+                                  % (skill, kind))
+        if skill and (skill != skill.strip() or any(c.isspace() for c in skill)):
+            raise NextActionError("next_action: skill %r must be a tree ID or command name without whitespace"
+                                  % skill)
+        return cls(ACTION, process, task, at, nt, str(answer.get("task_status") or ""), message, skill, kind,
                    values=decode_parameters(task, nt))

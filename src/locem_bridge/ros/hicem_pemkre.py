@@ -5,8 +5,8 @@ fills requests by field name, so it needs only these fields (a missing one is a 
 
 - ``<pemkre>/start_process``: request ``process`` (+ ``options``, JSON text, if present) → ``process`` or
   ``specific_process``; ``<pemkre>/next_action``: → ``status``, ``action_type``, ``task``, ``parameters``,
-  ``message``; ``<pemkre>/set_task_status``: ``task``, ``status``, ``detail``;
-  ``<pemkre>/update_world``: ``scan`` (SCAN result JSON text).
+  ``message`` (+ ``skill``, ``skill_kind`` if present); ``<pemkre>/set_task_status``: ``task``, ``status``,
+  ``detail``; ``<pemkre>/update_world``: ``scan`` (SCAN result JSON text).
 A response with ``success`` false raises :class:`PemkreCallError` with PEMKRE's message at once.
 
 Calls outlive a PEMKRE restart (respawned in about 2 s): while the service is away -- not registered, its
@@ -155,7 +155,8 @@ class RosPemkreClient(PemkreClient):
         r = self._call("next_action", True)
         return NextAction(r.status, getattr(r, "process", ""), task=getattr(r, "task", ""), action_type=getattr(r, "action_type", ""),
                           parameters=getattr(r, "parameters", ""), task_status=getattr(r, "task_status", ""),
-                          message=getattr(r, "message", ""))
+                          message=getattr(r, "message", ""), skill=getattr(r, "skill", ""),
+                          skill_kind=getattr(r, "skill_kind", ""))
 
     def set_task_status(self, task: str, status: str, detail: str = "") -> None:
         self._call("set_task_status", True, "%s %s" % (status, task), task=task, status=status, detail=detail,

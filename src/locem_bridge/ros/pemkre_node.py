@@ -103,6 +103,7 @@ class PemkreNode:
         resp.status, resp.process, resp.task = a.status, a.process, a.task
         resp.action_type, resp.parameters, resp.task_status, resp.message = \
             a.action_type, a.parameters, a.task_status, a.message
+        resp.skill, resp.skill_kind = a.skill, a.skill_kind
 
     def _status(self, req: Any, resp: Any) -> None:
         assert self.engine is not None
