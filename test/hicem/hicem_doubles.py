@@ -14,6 +14,8 @@
   behaves like the real PEMKRE taping process (no failure transition: the next ``next_action`` answers
   ``failed`` with ``task <iri> (TYPE) failed: <detail>``). A test whose expectation depends on what happens
   after a failed task passes ``after_failure`` explicitly, or uses the real engine (test_with_pemkre_engine.py).
+  ``skills`` (action type -> (skill, skill_kind)) makes its answers name the matched skill, as PEMKRE with a
+  resource model does.
 """
 import json
 import os
@@ -115,7 +117,8 @@ class LocemDouble(LocemClient):
         pos = [w for w in words[1:] if "=" not in w]
         spec = GRAMMAR[name]
         if spec == "word":
-            return None if len(pos) == 1 else LocemReply(False, "INVALID_ARGUMENT", "%s takes one name" % name)
+            named = len(pos) + len([w for w in words[1:] if "=" in w])    # LOCEM binds an argument by keyword too
+            return None if named == 1 else LocemReply(False, "INVALID_ARGUMENT", "%s takes one name" % name)
         if len(pos) != spec:
             return LocemReply(False, "INVALID_ARGUMENT", "%s takes %s arguments, got %d" % (name, spec, len(pos)))
         for key, value in [w.split("=", 1) for w in words[1:] if "=" in w]:
@@ -177,10 +180,12 @@ class PemkreDouble(PemkreClient):
     AFTER_FAILURE = ("continue", "fail_process")
 
     def __init__(self, state_path: Optional[str] = None, validate_lines: bool = True,
-                 extra_actions: Optional[List[str]] = None, after_failure: str = "continue") -> None:
+                 extra_actions: Optional[List[str]] = None, after_failure: str = "continue",
+                 skills: Optional[Dict[str, Any]] = None) -> None:
         if after_failure not in self.AFTER_FAILURE:
             raise ValueError("after_failure must be one of %s, got %r" % (", ".join(self.AFTER_FAILURE), after_failure))
         self.after_failure = after_failure
+        self.skills = dict(skills or {})
         self.state_path = state_path
         self.validate_lines = validate_lines
         self.extra_actions = extra_actions or []
@@ -228,8 +233,7 @@ class PemkreDouble(PemkreClient):
             return {"status": "failed", "detail": self.s["failed"]}
         cur = self.s["current"]
         if cur is not None and cur["status"] in ("offered", "in_progress"):
-            return {"status": "action", "action_type": cur["type"], "task": cur["task"],
-                    "parameters": nt(cur["task"], cur["params"])}
+            return self._answer(cur["type"], cur["task"], cur["params"])
         if not self.s["pending"]:
             if self.s.get("home_done"):
                 return {"status": "ended"}
@@ -239,7 +243,12 @@ class PemkreDouble(PemkreClient):
         task = "http://example.org/run#task_%d" % self.s["seq"]
         self.s["current"] = {"type": at, "task": task, "params": params, "status": "offered"}
         self._save()
-        return {"status": "action", "action_type": at, "task": task, "parameters": nt(task, params)}
+        return self._answer(at, task, params)
+
+    def _answer(self, at: str, task: str, params: Dict[str, Any]) -> Dict[str, Any]:
+        skill, kind = self.skills.get(at, ("", ""))
+        return {"status": "action", "action_type": at, "task": task, "parameters": nt(task, params),
+                "skill": skill, "skill_kind": kind}
 
     def set_task_status(self, task: str, status: str, detail: str = "") -> None:
         self.calls.append(("set_task_status", task, status, detail))

@@ -2,12 +2,13 @@
 ``ros/hicem_node`` adapts it).
 
 Lifecycle of one process (:meth:`HighLevelController.start_process`, worker thread, or :meth:`run_process`,
-blocking): PEMKRE ``start_process`` → loop { ``next_action`` → pick the tree whose BehaviorTree ID is the
-action type → HDICT record ``phase=running`` → ``set_task_status(in_progress)`` → tick the tree every ``hhlc.tick_period_s`` until SUCCESS/FAILURE → ``phase=finished`` (outcome stored) →
+blocking): PEMKRE ``start_process`` → loop { ``next_action`` → pick the tree (:func:`tree_for`: the matched
+composite skill's tree, :data:`BASIC_SKILL_TREE` for a basic skill, else the tree whose BehaviorTree ID is the
+action type) → HDICT record ``phase=running`` → ``set_task_status(in_progress)`` → tick the tree every ``hhlc.tick_period_s`` until SUCCESS/FAILURE → ``phase=finished`` (outcome stored) →
 ``set_task_status(succeeded|failed, detail)`` → ``phase=reported`` } until PEMKRE answers ``ended``/``failed``.
 
 - The tree gets a fresh blackboard: ``cfg.*`` (HICEM parameters), ``param_<name>`` (PEMKRE parameters),
-  ``task`` and ``action_type``. ``task_detail`` written by the tree becomes the status detail; on failure the
+  ``task``, ``action_type``, ``skill`` and ``skill_kind`` (the matched skill; empty when PEMKRE names none). ``task_detail`` written by the tree becomes the status detail; on failure the
   detail is the reason recorded by the failing node.
 - :meth:`stop`: the running tree is halted (its LOCEM commands are cancelled, its prompts withdrawn), the
   safe commands (``locem.safe_commands``) are sent, the task is reported failed ``stopped: <reason>``, the
@@ -22,7 +23,7 @@ action type → HDICT record ``phase=running`` → ``set_task_status(in_progress
   by ``hhlc.resume_policy``: ``rerun`` its tree, ``fail`` it ("interrupted ..."), or run a recovery tree (e.g.
   RESUME_TAPE_LINE: the operator finishes the joint by hand). Completed tasks are never run again (a task
   already reported is re-reported from the HDICT, not executed).
-- :meth:`state` / state listeners: process, action type, task, tree, running node, phase.
+- :meth:`state` / state listeners: process, action type, task, skill, tree, running node, phase.
 Threads: one worker runs the loop and ticks trees; stop/abort/operator replies come from other threads and
 only set flags or touch the thread-safe OperatorDesk.
 """
@@ -33,7 +34,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from py_trees.common import Status
 
-from ..common.next_action import ACTION
+from ..common.next_action import ACTION, BASIC, COMPOSITE
 from ..common.task_status import FAILED, IN_PROGRESS, SUCCEEDED
 from .blackboard import Blackboard
 from .config import HicemParams
@@ -47,6 +48,25 @@ from .xml_loader import BuiltTree, TreeLibrary
 LOG = logging.getLogger("locem_bridge.hicem.controller")
 HHLC = "hhlc"
 TASKS = "tasks"
+BASIC_SKILL_TREE = "BASIC_SKILL"
+"""The shipped generic tree (trees/BASIC_SKILL.xml) that runs a basic skill: one LOCEM command."""
+
+
+def tree_for(na: NextAction) -> str:
+    """The tree that realizes a next action: the composite skill's tree, the generic basic-skill tree, or (no
+    skill named: an older PEMKRE, no resource model) the tree of the action type."""
+    if na.skill_kind == COMPOSITE:
+        return na.skill
+    if na.skill_kind == BASIC:
+        return BASIC_SKILL_TREE
+    return na.action_type
+
+
+def _what(na: NextAction) -> str:
+    """How a missing tree is named: the skill when PEMKRE matched one, else the action type."""
+    if na.skill_kind:
+        return "%s skill '%s' (action type %s)" % (na.skill_kind, na.skill, na.action_type)
+    return "action type '%s'" % na.action_type
 
 
 class ActionStats:
@@ -137,7 +157,7 @@ class HighLevelController:
         self._thread: Optional[threading.Thread] = None
         self._listeners: List[Callable[[Dict[str, Any]], None]] = []
         self._state: Dict[str, Any] = {"process": "", "specific_process": "", "action_type": "", "task": "",
-                                       "tree": "", "node": "", "path": "", "phase": "idle", "detail": ""}
+                                       "skill": "", "tree": "", "node": "", "path": "", "phase": "idle", "detail": ""}
         self._tree: Optional[BuiltTree] = None
         self._current_stats: Optional[ActionStats] = None
         self.stats: List[ActionStats] = []
@@ -228,8 +248,8 @@ class HighLevelController:
     def run_process(self, process_iri: str, options: Optional[Dict[str, Any]] = None) -> str:
         """Run a process to its end in the calling thread; returns the final phase (ended/failed/stopped)."""
         self._stop_reason = None
-        self._set_state(process=process_iri, phase="starting", detail="", action_type="", task="", tree="",
-                        node="")
+        self._set_state(process=process_iri, phase="starting", detail="", action_type="", task="", skill="",
+                        tree="", node="")
         try:
             specific = self._pemkre_call(self.pemkre.start_process, process_iri, options)
         except Exception as exc:  # nothing started yet: just report
@@ -260,7 +280,8 @@ class HighLevelController:
         self._send_safe_commands()
         if act is not None and act.get("phase") != "reported":
             na = NextAction(ACTION, task=act["task"], action_type=act["action_type"],
-                            parameters=act.get("raw_parameters", ""), values=act.get("parameters", {}))
+                            parameters=act.get("raw_parameters", ""), skill=act.get("skill", ""),
+                            skill_kind=act.get("skill_kind", ""), values=act.get("parameters", {}))
             policy = self.params.resume_policy.get(act["action_type"], "fail")
             if act.get("phase") == "finished":
                 self._report_on_resume(na, act["outcome"], act["detail"])
@@ -268,7 +289,7 @@ class HighLevelController:
                 self._report_on_resume(na, FAILED, "interrupted: HICEM restarted during %s; not repeated "
                                                      "(resume policy %s)" % (act["action_type"], policy))
             else:
-                tree = act["action_type"] if policy == "rerun" else policy
+                tree = tree_for(na) if policy == "rerun" else policy
                 self.log.info("resume: running %s for the interrupted %s %s", tree, act["action_type"], act["task"])
                 return self._execute(na, resumed=True, tree_id=tree)
         return None
@@ -282,11 +303,11 @@ class HighLevelController:
             self.log.warning("resume: PEMKRE did not take the %s outcome of %s (%s); asking it what is next",
                              outcome, na.task, exc)
             with self.store.transaction():
-                self.store.put(TASKS, na.task, {"action_type": na.action_type, "outcome": outcome,
-                                                "detail": detail}, source="HHLC")
-                self.store.put(HHLC, "action", {"task": na.task, "action_type": na.action_type,
-                                                "phase": "reported", "outcome": outcome, "detail": detail},
-                               source="HHLC")
+                self.store.put(TASKS, na.task, {"action_type": na.action_type, "skill": na.skill,
+                                                "outcome": outcome, "detail": detail}, source="HHLC")
+                self.store.put(HHLC, "action", {"task": na.task, "action_type": na.action_type, "skill": na.skill,
+                                                "skill_kind": na.skill_kind, "phase": "reported",
+                                                "outcome": outcome, "detail": detail}, source="HHLC")
 
     def _loop(self) -> str:
         repeats: Dict[str, int] = {}
@@ -295,7 +316,7 @@ class HighLevelController:
                 return self._finish_process("stopped", self._stop_reason)
             if not self._wait_for_health():
                 return self._finish_process("stopped", self._stop_reason or "stop requested")
-            self._set_state(phase="asking", action_type="", task="", tree="", node="", path="")
+            self._set_state(phase="asking", action_type="", task="", skill="", tree="", node="", path="")
             try:
                 self.store.prune()  # outdated entries go between actions, never under a running tree
             except HicemError:
@@ -332,20 +353,21 @@ class HighLevelController:
         try:
             # one durable record before PEMKRE hears of it: a crash from here on is found by resume()
             rec = {"task": na.task, "action_type": na.action_type, "parameters": na.params(),
-                   "raw_parameters": na.parameters, "phase": "running"}
+                   "raw_parameters": na.parameters, "skill": na.skill, "skill_kind": na.skill_kind,
+                   "phase": "running"}
             self.store.put(HHLC, "action", rec, source="HHLC")
-            self._set_state(action_type=na.action_type, task=na.task, tree="", node="", phase="starting")
+            self._set_state(action_type=na.action_type, task=na.task, skill=na.skill, tree="", node="",
+                            phase="starting")
             try:
                 self._pemkre_call(self.pemkre.set_task_status, na.task, IN_PROGRESS, "")
             except PemkreCallError as exc:
                 if not resumed:
                     raise
                 self.log.warning("resume: PEMKRE refused in_progress again (%s); continuing", exc)
-            tree_id = tree_id or na.action_type
+            tree_id = tree_id or tree_for(na)
             if not self.library.has_tree(tree_id):
                 # PEMKRE only accepts an outcome for a running task: in_progress first, then failed.
-                reason = "no behavior tree for action type '%s'; trees: %s" % (
-                    na.action_type, ", ".join(self.library.tree_ids()))
+                reason = "no behavior tree for %s; trees: %s" % (_what(na), ", ".join(self.library.tree_ids()))
                 self._report(na, FAILED, reason)
                 return self._finish_process("failed", reason)
             outcome, detail = self._run_tree(na, stats, tree_id)
@@ -371,6 +393,8 @@ class HighLevelController:
         bb.update(na.blackboard_entries())
         bb.set("task", na.task)
         bb.set("action_type", na.action_type)
+        bb.set("skill", na.skill)
+        bb.set("skill_kind", na.skill_kind)
         tree = self.library.build(tree_id, ctx, bb)
         self._abort_reason = None
         self._tree = tree
@@ -420,9 +444,10 @@ class HighLevelController:
         self._set_state(phase="reporting", detail=detail)
         self._pemkre_call(self.pemkre.set_task_status, na.task, outcome, detail)
         with self.store.transaction():
-            self.store.put(TASKS, na.task, {"action_type": na.action_type, "outcome": outcome, "detail": detail},
-                           source="HHLC")
-            rec = self.store.value(HHLC, "action") or {"task": na.task, "action_type": na.action_type}
+            self.store.put(TASKS, na.task, {"action_type": na.action_type, "skill": na.skill, "outcome": outcome,
+                                            "detail": detail}, source="HHLC")
+            rec = self.store.value(HHLC, "action") or {"task": na.task, "action_type": na.action_type,
+                                                       "skill": na.skill, "skill_kind": na.skill_kind}
             rec.update(phase="reported", outcome=outcome, detail=detail)
             self.store.put(HHLC, "action", rec, source="HHLC")
 

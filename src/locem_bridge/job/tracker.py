@@ -64,7 +64,7 @@ class JobTracker:
         self.say("%s starting %s" % (self._tag(), step.name))
 
     def on_state(self, state: Mapping[str, Any]) -> None:
-        """A ``/hicem/state`` message (process, phase, action_type, task, node, detail) as a dict."""
+        """A ``/hicem/state`` message (process, phase, action_type, task, skill, node, detail) as a dict."""
         if self.current is None or state.get("process") != self.steps[self.current].iri:
             return
         task = state.get("task", "")
@@ -88,7 +88,9 @@ class JobTracker:
                 self._last_action = action
             n = (self._joint_index if action in LINE_ACTIONS else
                  self._area_index if action in AREA_ACTIONS else len(seen))
-            self.say("%s %s%s" % (self._tag(), action, self._count(action, n)))
+            skill = str(state.get("skill") or "")
+            self.say("%s %s%s%s" % (self._tag(), action, " (skill %s)" % skill if skill and skill != action else "",
+                                    self._count(action, n)))
         if state.get("phase") == "reporting" and action in AREA_ACTIONS:
             for part in parse_manual_work(str(state.get("detail", ""))):
                 part = dict(part, work=AREA_WORK[action])

@@ -93,7 +93,8 @@ class HicemNode:
     def _publish_state(self, st: Dict[str, Any]) -> None:
         msg = HicemState()
         msg.header.stamp = rospy.Time.now()
-        for f in ("process", "specific_process", "phase", "action_type", "task", "tree", "node", "path", "detail"):
+        for f in ("process", "specific_process", "phase", "action_type", "task", "skill", "tree", "node", "path",
+                  "detail"):
             setattr(msg, f, str(st.get(f, "")))
         msg.prompts = json.dumps([{"id": p.id, "kind": p.kind, "text": p.text, "choices": list(p.choices)}
                                   for p in self.ex.operator.open_prompts()])

@@ -279,7 +279,8 @@ def main() -> None:
                                  shutdown_reason=lambda: shutdown.get("reason", "ROS shutdown"))
     rospy.Subscriber("hicem/state", HicemState, sequencer.on_state)
     rospy.Subscriber("hicem/state", HicemState, lambda m: tracker.on_state(
-        {"process": m.process, "phase": m.phase, "action_type": m.action_type, "task": m.task, "detail": m.detail}))
+        {"process": m.process, "phase": m.phase, "action_type": m.action_type, "task": m.task,
+         "skill": getattr(m, "skill", ""), "detail": m.detail}))
     rospy.Subscriber("hicem/prompts", HicemPrompt, lambda m: tracker.on_prompt(
         {"event": m.event, "kind": m.kind, "text": m.text, "answer": m.answer}))
     started = time.time()

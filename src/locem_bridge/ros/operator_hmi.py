@@ -58,7 +58,8 @@ from locem_bridge.ros.calls import timed
 from locem_bridge.ros.params import as_list, package_share, param
 from locem_bridge.ros.startup import config_guard
 
-STATE_FIELDS = ("process", "specific_process", "phase", "action_type", "task", "tree", "node", "path", "detail")
+STATE_FIELDS = ("process", "specific_process", "phase", "action_type", "task", "skill", "tree", "node", "path",
+                "detail")
 MODES = ("web", "auto", "both")
 
 

@@ -2,7 +2,7 @@
 
 Health and devices: CheckHealth (the HEM's view), CheckDevicesUp (devices back after a failure, from LOCEM's
 STATUS), WaitForDevices (STATUS until they are, bounded), CheckSafetyStop (a latched safety stop in STATUS).
-LOCEM: SendLocemCommand. Data store (HDM/HDICT through the HDH): ReadDataStore, WriteDataStore, IngestScan,
+LOCEM: SendLocemCommand, ComposeSkillCommand (a basic skill's command from the task parameters). Data store (HDM/HDICT through the HDH): ReadDataStore, WriteDataStore, IngestScan,
 MarkFeature. Operator and flow: WaitForOperator, Log, CheckEqual, SelectEntry.
 
 No node holds a number of its own: distances, speeds, offsets and timeouts arrive through ports, fed from the
@@ -287,6 +287,57 @@ class SendLocemCommand(Leaf):
             self.ctx.untrack(h)
 
 
+_WORD = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+_PARAM_PREFIX = "param_"
+
+
+def compose_skill_command(skill: str, params: "dict") -> str:
+    """``NAME name=value ...``: the LOCEM command of a basic skill (``skill``: the command name) with the task's
+    parameters as keyword arguments, sorted by name (LOCEM binds keywords to any declared argument).
+
+    Values: IRIs arrive as their local names (the next-action codec), numbers in plain decimal, booleans
+    ``true``/``false``; a value that is empty, contains whitespace, a quote or a template brace, a list, or a
+    name that is not an identifier is refused (:class:`HicemError` naming it): one parameter is one command word.
+    """
+    if not isinstance(skill, str) or not _WORD.match(skill):
+        raise HicemError("basic skill name %r is not a LOCEM command name ([A-Za-z][A-Za-z0-9_]*); the next "
+                         "action must name the command in 'skill'" % (skill,))
+    words = [skill.upper()]
+    for name in sorted(params):
+        value = params[name]
+        if not _WORD.match(name):
+            raise HicemError("parameter name %r of %s is not an identifier ([A-Za-z][A-Za-z0-9_]*)" % (name, skill))
+        if isinstance(value, (list, tuple, dict)) or value is None:
+            raise HicemError("parameter '%s' of %s is a %s; a command argument must be one word"
+                             % (name, skill, type(value).__name__))
+        text = format_value(value, name)
+        bad = [c for c in text if c in "\"'{}"]
+        if bad:
+            raise HicemError("parameter '%s' of %s = %r contains %r; a command argument must be one word without "
+                             "quotes or braces" % (name, skill, text, bad[0]))
+        words.append("%s=%s" % (name, text))
+    return " ".join(words)
+
+
+class ComposeSkillCommand(Leaf):
+    DESCRIPTION = ("Composes the LOCEM command of a basic skill: the command name (the next action's skill) "
+                   "followed by every task parameter (blackboard param_<name> entries) as name=value, sorted by "
+                   "name; IRIs as their local names. FAILURE naming the value that cannot be one command word "
+                   "(empty, whitespace, quotes, braces, a list) or a skill that is not a command name.")
+    PORTS = (
+        input_port("skill", STRING, "{skill}", "", "LOCEM command name of the basic skill"),
+        input_port("omit", STRING_LIST, "", "", "parameter names not sent (e.g. ones only PEMKRE uses)"),
+        output_port("command", STRING, None, "", "the composed command, e.g. 'CHANGE_TOOL tool=spray_gun'"),
+    )
+
+    def on_tick(self) -> Status:
+        omit = set(self.get("omit") or ())
+        params = {k[len(_PARAM_PREFIX):]: v for k, v in self.ports.blackboard.root.items()
+                  if k.startswith(_PARAM_PREFIX) and k[len(_PARAM_PREFIX):] not in omit}
+        self.set("command", compose_skill_command(self.get("skill"), params))
+        return Status.SUCCESS
+
+
 class ReadDataStore(Leaf):
     DESCRIPTION = "Copies collection/key (optionally one field of it) from the data store to value; FAILURE if absent."
     PORTS = (
@@ -449,5 +500,5 @@ class MarkFeature(Leaf):
         return Status.SUCCESS
 
 
-LIBRARY = (CheckHealth, CheckDevicesUp, WaitForDevices, CheckSafetyStop, SendLocemCommand, ReadDataStore,
-           WriteDataStore, WaitForOperator, Log, CheckEqual, SelectEntry, IngestScan, MarkFeature)
+LIBRARY = (CheckHealth, CheckDevicesUp, WaitForDevices, CheckSafetyStop, SendLocemCommand, ComposeSkillCommand,
+           ReadDataStore, WriteDataStore, WaitForOperator, Log, CheckEqual, SelectEntry, IngestScan, MarkFeature)
