@@ -102,3 +102,14 @@ def test_area_sections_left_for_manual_work_are_collected_from_the_reported_deta
     assert t.manual_areas == [
         {"work": "spray", "area": "wall_1_area_2", "section": 3, "along": [1.2, 1.8], "height": [0.0, 2.5]},
         {"work": "spray", "area": "wall_1_area_2", "section": 4, "along": [1.8, 2.0], "height": [0.0, 2.5]}]
+
+
+def test_a_task_realized_by_another_skill_names_it_in_its_progress_line():
+    t, lines, _clock = tracker()
+    t.begin(0)
+    for s in [dict(state("urn:p#Taping", "running", "GET_TOOL", "t1"), skill="CHANGE_TOOL"),
+              dict(state("urn:p#Taping", "running", "TAPE_LINE", "t2"), skill="TAPE_LINE"),
+              dict(state("urn:p#Taping", "running", "GO_HOME", "t3"), skill="")]:
+        t.on_state(s)
+    assert lines[1:] == ["[1/2 taping] GET_TOOL (skill CHANGE_TOOL)", "[1/2 taping] TAPE_LINE, joint 1 of 3",
+                         "[1/2 taping] GO_HOME"]
