@@ -58,11 +58,12 @@ _MOTION_RESULT = (("q", "joint positions at the end, rad"), ("tcp_pose", "TCP po
 MOVE_J = CommandSpec(
     "MOVE_J", "Move the arm to joint positions (synchronised joint motion).", args=_joints() + _speed_j(),
     resources=_ARM, category=CATEGORY, pausable=False, result=_MOTION_RESULT,
-    deadline=lambda v: joint_travel_bound(v["speed"], v["accel"]))
+    deadline=lambda v: joint_travel_bound(v["speed"], v["accel"]), capability="sk:cap_MoveArm")
 MOVE_L = CommandSpec(
     "MOVE_L", "Move the TCP in a straight line to a pose in the arm base frame.", args=_pose("target") + _speed_l(),
     resources=_ARM, category=CATEGORY, result=_MOTION_RESULT,
-    deadline=lambda v: 2.0 * REACH / v["speed"] + 2.0 * v["speed"] / v["accel"] + MOTION_MARGIN_S + 1.0)
+    deadline=lambda v: 2.0 * REACH / v["speed"] + 2.0 * v["speed"] / v["accel"] + MOTION_MARGIN_S + 1.0,
+    capability="sk:cap_MoveArmLinear")
 
 
 def _path_deadline(v: Mapping[str, Any]) -> float:
@@ -89,12 +90,12 @@ MOVE_PATH = CommandSpec(
     + _speed_l() + (Arg.number("blend", "m", 0.0, MAX_BLEND, "blend radius at the interior waypoints (0 = stop at "
                                                               "each)", default=0.0, keyword_only=True),),
     resources=_ARM, category=CATEGORY, result=_MOTION_RESULT + (("waypoints", "waypoints in the path"),),
-    deadline=_path_deadline)
+    deadline=_path_deadline, capability="sk:cap_MoveArmPath")
 MOVE_HOME = CommandSpec(
     "MOVE_HOME", "Move the arm to a named joint pose of the robot configuration (default home).",
     args=(Arg.word("pose", "named pose of robot.arm.named_poses", default="home"),) + _speed_j(),
     resources=_ARM, category=CATEGORY, result=_MOTION_RESULT,
-    deadline=lambda v: joint_travel_bound(v["speed"], v["accel"]))
+    deadline=lambda v: joint_travel_bound(v["speed"], v["accel"]), capability="sk:cap_ArmToNamedPose")
 STOP_ARM = CommandSpec(
     "STOP_ARM", "Stop the arm now (the running arm command ends ABORTED); never BUSY.", category=CATEGORY,
     timeout=3.0, preemptive=True, inline=True, result=(("stopped", "true"),))
@@ -106,19 +107,22 @@ GET_TCP_POSE = CommandSpec(
     inline=True, query=True, result=(("pose", "[x, y, z, rx, ry, rz], m and rad"),))
 SET_TCP = CommandSpec(
     "SET_TCP", "Set the TCP offset from the flange.", args=_pose("TCP offset"), resources=_ARM, category=CATEGORY,
-    timeout=3.0, result=(("tcp", "the offset set"),))
+    timeout=3.0, result=(("tcp", "the offset set"),), capability="sk:cap_SetTcp")
 SET_PAYLOAD = CommandSpec(
     "SET_PAYLOAD", "Set the payload mass and centre of gravity (flange frame).",
     args=(Arg.number("mass", "kg", 0.0, 12.5, "payload mass"), Arg.number("cx", "m", -0.5, 0.5, "centre of gravity x"),
           Arg.number("cy", "m", -0.5, 0.5, "centre of gravity y"), Arg.number("cz", "m", -0.5, 0.5, "centre of gravity z")),
-    resources=_ARM, category=CATEGORY, timeout=3.0, result=(("mass", "kg"), ("cog", "m")))
+    resources=_ARM, category=CATEGORY, timeout=3.0, result=(("mass", "kg"), ("cog", "m")),
+    capability="sk:cap_SetPayload")
 TOOL_OUTPUT = CommandSpec(
     "TOOL_OUTPUT", "Switch a standard digital output of the arm controller (tool power, taping, sander).",
     args=(Arg.integer("index", 0, 7, "standard digital output DO0..DO7"), Arg.flag("state", "on (true) or off")),
-    resources=frozenset({"tool"}), category=CATEGORY, timeout=3.0, result=(("outputs", "DO0..DO7 after the change"),))
+    resources=frozenset({"tool"}), category=CATEGORY, timeout=3.0, result=(("outputs", "DO0..DO7 after the change"),),
+    capability="sk:cap_SwitchToolOutput")
 RESET_ARM = CommandSpec(
     "RESET_ARM", "Operator reset after a protective or emergency stop whose cause is removed.", resources=_ARM,
-    category=CATEGORY, timeout=30.0, result=(("cleared", "the latched safety stop"), ("steps", "recovery steps")))
+    category=CATEGORY, timeout=30.0, result=(("cleared", "the latched safety stop"), ("steps", "recovery steps")),
+    capability="sk:cap_ResetArm")
 
 SPECS = (MOVE_J, MOVE_L, MOVE_PATH, MOVE_HOME, STOP_ARM, GET_JOINTS, GET_TCP_POSE, SET_TCP, SET_PAYLOAD,
          TOOL_OUTPUT, RESET_ARM)

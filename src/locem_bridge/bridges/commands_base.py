@@ -38,17 +38,19 @@ GOTO = CommandSpec(
           Arg.number("y", "m", -MAP_EXTENT, MAP_EXTENT, "goal y in map"),
           Arg.number("theta", "rad", -2 * PI, 2 * PI, "goal heading in map")) + _goal_args(),
     resources=_BASE, category=CATEGORY, result=_POSE_RESULT, timeout=_goto_deadline({"speed": 0.01}),
-    deadline=_goto_deadline)
+    deadline=_goto_deadline, capability="sk:cap_DriveBase")
 GOTO_TAG = CommandSpec(
     "GOTO_TAG", "Drive the base to a named pose of the configuration (robot.base.named_poses / ~named_poses).",
     args=(Arg.word("name", "named base pose"),) + _goal_args(), resources=_BASE, category=CATEGORY,
-    result=_POSE_RESULT, timeout=_goto_deadline({"speed": 0.01}), deadline=_goto_deadline)
+    result=_POSE_RESULT, timeout=_goto_deadline({"speed": 0.01}), deadline=_goto_deadline,
+    capability="sk:cap_DriveBaseToNamedPose")
 MOVE_BASE_REL = CommandSpec(
     "MOVE_BASE_REL", "Move the base relative to its current pose (dx, dy in the base frame, dtheta).",
     args=(Arg.number("dx", "m", -10.0, 10.0, "forward"), Arg.number("dy", "m", -10.0, 10.0, "to the left"),
           Arg.number("dtheta", "rad", -2 * PI, 2 * PI, "turn, counter-clockwise")) + _goal_args(),
     resources=_BASE, category=CATEGORY, result=_POSE_RESULT,
-    deadline=lambda v: (abs(v["dx"]) + abs(v["dy"])) / v["speed"] + abs(v["dtheta"]) / 0.5 + 15.0)
+    deadline=lambda v: (abs(v["dx"]) + abs(v["dy"])) / v["speed"] + abs(v["dtheta"]) / 0.5 + 15.0,
+    capability="sk:cap_MoveBaseRelative")
 STOP_BASE = CommandSpec(
     "STOP_BASE", "Stop the base now (the running base command ends ABORTED); never BUSY.", category=CATEGORY,
     timeout=2.0, preemptive=True, inline=True, result=(("stopped", "true"),))
@@ -60,11 +62,13 @@ SET_POSE = CommandSpec(
     args=(Arg.number("x", "m", -MAP_EXTENT, MAP_EXTENT, "x in map"),
           Arg.number("y", "m", -MAP_EXTENT, MAP_EXTENT, "y in map"),
           Arg.number("theta", "rad", -2 * PI, 2 * PI, "heading in map")),
-    resources=_BASE, category=CATEGORY, timeout=1.0, result=(("pose", "the pose set"),))
+    resources=_BASE, category=CATEGORY, timeout=1.0, result=(("pose", "the pose set"),),
+    capability="sk:cap_SetBasePose")
 
 RESET_BASE = CommandSpec(
     "RESET_BASE", "Operator reset after a drive fault: fault reset and enable the drives again (nothing moves).",
-    resources=_BASE, category=CATEGORY, timeout=20.0, result=(("cleared", "the latched fault"),))
+    resources=_BASE, category=CATEGORY, timeout=20.0, result=(("cleared", "the latched fault"),),
+    capability="sk:cap_ResetBase")
 
 SPECS = (GOTO, GOTO_TAG, MOVE_BASE_REL, STOP_BASE, GET_POSE, SET_POSE, RESET_BASE)
 

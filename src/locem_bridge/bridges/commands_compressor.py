@@ -20,10 +20,11 @@ MAX_SETPOINT_BAR = 10.0
 
 COMPRESSOR_ON = CommandSpec(
     "COMPRESSOR_ON", "Start the compressor motor (checks that it runs).", resources=_RES, category=CATEGORY,
-    timeout=5.0, result=(("motor_running", "true once the motor runs"), ("pressure", "measured pressure, bar")))
+    timeout=5.0, result=(("motor_running", "true once the motor runs"), ("pressure", "measured pressure, bar")),
+    capability="sk:cap_RunCompressor")
 COMPRESSOR_OFF = CommandSpec(
     "COMPRESSOR_OFF", "Close the spray valve and stop the compressor motor.", resources=_RES, category=CATEGORY,
-    timeout=5.0, result=(("motor_running", "false"),))
+    timeout=5.0, result=(("motor_running", "false"),), capability="sk:cap_StopCompressor")
 SET_PRESSURE = CommandSpec(
     "SET_PRESSURE", "Set the pressure set-point; by default wait until the pressure is within tolerance.",
     args=(Arg.number("pressure", "bar", 0.0, MAX_SETPOINT_BAR, "pressure set-point"),
@@ -32,7 +33,7 @@ SET_PRESSURE = CommandSpec(
                      keyword_only=True)),
     resources=_RES, category=CATEGORY, timeout=60.0,
     result=(("pressure", "measured pressure at the end, bar"), ("setpoint", "set-point, bar"),
-            ("waited_s", "seconds until within tolerance")))
+            ("waited_s", "seconds until within tolerance")), capability="sk:cap_SetPressure")
 GET_PRESSURE = CommandSpec(
     "GET_PRESSURE", "Read the compressor now: pressure, set-point, motor, valve, fault.", category=CATEGORY,
     timeout=2.0, inline=True, query=True,
@@ -41,10 +42,11 @@ GET_PRESSURE = CommandSpec(
             ("in_range", "pressure inside the working band"), ("fault", "none, overpressure, motor overload")))
 SPRAY_ON = CommandSpec(
     "SPRAY_ON", "Open the spray valve (only while the pressure is inside the working band).",
-    resources=_RES, category=CATEGORY, timeout=3.0, result=(("valve_open", "true"), ("pressure", "bar")))
+    resources=_RES, category=CATEGORY, timeout=3.0, result=(("valve_open", "true"), ("pressure", "bar")),
+    capability="sk:cap_SwitchSpray")
 SPRAY_OFF = CommandSpec(
     "SPRAY_OFF", "Close the spray valve.", resources=_RES, category=CATEGORY, timeout=3.0,
-    result=(("valve_open", "false"),))
+    result=(("valve_open", "false"),), capability="sk:cap_SwitchSpray")
 
 SPECS = (COMPRESSOR_ON, COMPRESSOR_OFF, SET_PRESSURE, GET_PRESSURE, SPRAY_ON, SPRAY_OFF)
 

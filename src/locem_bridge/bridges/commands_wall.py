@@ -71,16 +71,18 @@ SCAN = CommandSpec(
     "SCAN", "Detect the wall joints and areas visible from the current base pose (docs/contracts.md shape).",
     resources=frozenset({"scanner"}), category=CATEGORY, timeout=10.0,
     result=(("stamp", "time of the scan"), ("walls", "walls seen"), ("joints", "joint lines: start, end, kind"),
-            ("areas", "wall areas: origin, u, width, height")))
+            ("areas", "wall areas: origin, u, width, height")), capability="sk:cap_DetectWallFeatures")
 MOUNT_TOOL = CommandSpec(
     "MOUNT_TOOL", "Make the operator-mounted tool active: TCP offset and payload from the robot configuration.",
     args=(Arg.choice("tool", TOOLS, "the tool the operator mounted"),), resources=frozenset({"arm", "tool"}),
-    category=CATEGORY, timeout=5.0, result=(("tool", "active tool"), ("tcp", "TCP offset"), ("mass", "kg")))
+    category=CATEGORY, timeout=5.0, result=(("tool", "active tool"), ("tcp", "TCP offset"), ("mass", "kg")),
+    capability="sk:cap_MountToolByOperator")
 APPLY_TAPE_START = CommandSpec(
     "APPLY_TAPE_START", "Bring the taping tool in front of a line's start for the operator to judge (tool off).",
     args=_LINE_ARGS + _normal() + (Arg.number("approach", "m", 0.0, 0.5, "distance in front of the wall", default=0.05,
                               keyword_only=True),),
-    resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=60.0, result=(("tcp_pose", "arm base frame"),))
+    resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=60.0, result=(("tcp_pose", "arm base frame"),),
+    capability="plb:cap_ShowTapeLineStart")
 APPLY_TAPE = CommandSpec(
     "APPLY_TAPE", "Tape a joint line: approach its start, taping tool on, follow the line, tool off, retract.",
     args=APPLY_TAPE_START.args[:9] + (
@@ -89,7 +91,7 @@ APPLY_TAPE = CommandSpec(
                    keyword_only=True),
         Arg.number("approach", "m", 0.01, 0.5, "approach / retract distance", default=0.05, keyword_only=True)),
     resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=120.0, result=_WORK_RESULT,
-    deadline=lambda v: _line_len(v) / v["speed"] + 60.0)
+    deadline=lambda v: _line_len(v) / v["speed"] + 60.0, capability="plb:cap_ApplyTapeStroke")
 _AREA_ARGS = _point("o", "area origin") + (
     Arg.number("ux", "", -1.0, 1.0, "along-wall unit vector x"), Arg.number("uy", "", -1.0, 1.0, "along-wall unit vector y"),
     Arg.number("uz", "", -1.0, 1.0, "along-wall unit vector z"),
@@ -111,7 +113,7 @@ SPRAY_AREA = CommandSpec(
                    "<m> m'", default=0.0, keyword_only=True)),
     resources=frozenset({"arm", "tool", "compressor"}), category=CATEGORY, timeout=600.0, result=_WORK_RESULT
     + (("lanes", "lanes sprayed (a lane begun part way counts)"), ("skipped_m", "raster length left out (skip)")),
-    deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0)
+    deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0, capability="plb:cap_SprayRaster")
 SAND_AREA = CommandSpec(
     "SAND_AREA", "Sand an area in horizontal raster lanes in contact with the wall, sander on only on the lanes.",
     args=_AREA_ARGS + _normal() + (
@@ -123,14 +125,16 @@ SAND_AREA = CommandSpec(
                    "the set-point along the tool axis while the lanes run (needs a controller with force control; "
                    "the UR stand-in needs contact surfaces)", default="position", keyword_only=True)),
     resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=600.0, result=_WORK_RESULT
-    + (("lanes", "lanes sanded"),), deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0)
+    + (("lanes", "lanes sanded"),), deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0,
+    capability="plb:cap_SandRaster")
 WALL_READY = CommandSpec(
     "WALL_READY", "Arm to the named pose 'wall_ready' (tool facing forward, links close to the base) to drive along "
     "walls: from a wall pose first a straight retract to the pose's TCP point, then the joint move.",
-    resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=60.0, result=(("q", "joint positions"),))
+    resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=60.0, result=(("q", "joint positions"),),
+    capability="sk:cap_ArmToWallReady")
 HOME = CommandSpec(
     "HOME", "Process outputs off, arm to its home pose.", resources=frozenset({"arm", "tool"}), category=CATEGORY,
-    timeout=60.0, result=(("q", "joint positions"),))
+    timeout=60.0, result=(("q", "joint positions"),), capability="sk:cap_ArmHome")
 
 SPECS = (SCAN, MOUNT_TOOL, APPLY_TAPE_START, APPLY_TAPE, SPRAY_AREA, SAND_AREA, WALL_READY, HOME)
 

@@ -61,6 +61,8 @@ def render(specs: Iterable[CommandSpec]) -> str:
             category = spec.category
             out += ["", "## %s commands" % category.capitalize()]
         out += ["", "### %s" % spec.name, "", spec.summary, "", "Usage: `%s`" % spec.usage, ""]
+        if spec.capability:
+            out += ["Realizes the capability `%s` (a basic skill of the resource model)." % spec.capability, ""]
         if spec.args:
             out += ["| argument | type | unit | allowed | default | meaning |", "| --- | --- | --- | --- | --- | --- |"]
             for arg in spec.args:

@@ -47,6 +47,7 @@ _INTEGER = re.compile(r"[+-]?[0-9]+\Z")
 _TRUE = {"true", "1", "on", "yes"}
 _FALSE = {"false", "0", "off", "no"}
 _STRING = re.compile(r"[A-Za-z0-9_.:/#\-]+\Z")
+_CAPABILITY = re.compile(r"([A-Za-z][A-Za-z0-9_-]*:)?[A-Za-z_][A-Za-z0-9_]*\Z")
 _COMMAND_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}\Z")
 
 
@@ -202,7 +203,10 @@ class CommandSpec:
     the values (e.g. from path length and speed). ``preemptive`` commands (``STOP``) are never ``BUSY``.
     ``inline`` commands are quick queries answered in the caller's thread. ``query`` commands only read state:
     they change nothing, so their (successful) runs are not published as state changes. ``pausable`` commands
-    honour pause/resume through their context.
+    honour pause/resume through their context. ``capability`` names the capability the command realizes as a basic
+    skill (an ``sk:Capability`` of ``ontologies/``, as a prefixed name: ``sk:cap_DriveBase``, ``plb:cap_SprayRaster``;
+    a bare local name is looked up in ``sk:`` then ``plb:``); empty when it realizes none (queries, stops). The
+    resource model (:mod:`locem_bridge.skills`) reads it.
     """
 
     name: str
@@ -219,10 +223,14 @@ class CommandSpec:
     query: bool = False
     claims: Optional[Callable[[Mapping[str, Any]], FrozenSet[str]]] = field(default=None, compare=False)
     deadline: Optional[Callable[[Mapping[str, Any]], float]] = field(default=None, compare=False)
+    capability: str = ""
 
     def __post_init__(self) -> None:
         if not re.match(r"[A-Z][A-Z0-9_]*\Z", self.name):
             raise ValueError("command names are upper-case identifiers: %r" % self.name)
+        if self.capability and not _CAPABILITY.match(self.capability):
+            raise ValueError("%s: capability must be a prefixed name like sk:cap_DriveBase, got %r"
+                             % (self.name, self.capability))
         names = [a.name for a in self.args]
         if len(set(names)) != len(names):
             raise ValueError("%s declares an argument twice" % self.name)
@@ -263,6 +271,7 @@ class CommandSpec:
             "pausable": self.pausable,
             "preemptive": self.preemptive,
             "query": self.query,
+            **({"capability": self.capability} if self.capability else {}),
         }
 
 

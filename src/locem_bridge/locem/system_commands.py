@@ -40,8 +40,7 @@ STOP = CommandSpec(
     timeout=5.0, preemptive=True, inline=True,
     result=(("stopped", "ids of the commands that were cancelled"),
             ("still_running", "ids whose handlers had not returned when STOP answered"),
-            ("hook_errors", "device stops that failed")),
-)
+            ("hook_errors", "device stops that failed")), capability="sk:cap_StopAll")
 WAIT = CommandSpec(
     "WAIT", "Wait for a time; cancelable and pausable (pause time does not count).",
     args=(Arg.number("seconds", "s", 0.0, MAX_WAIT_S, "time to wait"),
@@ -50,8 +49,7 @@ WAIT = CommandSpec(
     timeout=MAX_WAIT_S + 5.0, pausable=True,
     claims=lambda values: frozenset() if values["hold"] == "none" else frozenset({values["hold"]}),
     deadline=lambda values: float(values["seconds"]) + 5.0,
-    result=(("waited_s", "seconds waited, pauses excluded"),),
-)
+    result=(("waited_s", "seconds waited, pauses excluded"),), capability="sk:cap_Wait")
 
 SPECS = (HELP, STATUS, STOP, WAIT)
 

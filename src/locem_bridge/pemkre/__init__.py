@@ -16,7 +16,7 @@ from .journal_store import JournaledStore
 from .oxigraph_store import OxigraphStore
 from .rdflib_store import RdflibStore
 from .store import QueryResult, TripleStore
-from .vocab import PLB, PPR, PROC
+from .vocab import PLB, PPR, PROC, SK
 
 __all__ = ["NextAction", "ProcessEngine", "TaskStatusReport", "PemkreError", "compute_kpis", "export_kpis",
-           "JournaledStore", "OxigraphStore", "RdflibStore", "QueryResult", "TripleStore", "PLB", "PPR", "PROC"]
+           "JournaledStore", "OxigraphStore", "RdflibStore", "QueryResult", "TripleStore", "PLB", "PPR", "PROC", "SK"]

@@ -177,6 +177,20 @@ class PLB(DefinedNamespace):
     TapeLineTask: URIRef
     TapingProcess: URIRef
     ValidateTapeLineTask: URIRef
+    cap_ApplyTapeStroke: URIRef
+    cap_GetTool: URIRef
+    cap_GoHome: URIRef
+    cap_ManualTaping: URIRef
+    cap_Recover: URIRef
+    cap_ResumeTapeLine: URIRef
+    cap_SandArea: URIRef
+    cap_SandRaster: URIRef
+    cap_ScanWalls: URIRef
+    cap_ShowTapeLineStart: URIRef
+    cap_SprayArea: URIRef
+    cap_SprayRaster: URIRef
+    cap_TapeJoint: URIRef
+    cap_ValidateTapeLine: URIRef
     area: URIRef
     effect_areaSanded: URIRef
     effect_areaSprayed: URIRef
@@ -303,6 +317,150 @@ class PLB(DefinedNamespace):
     validateLines: URIRef
 
 
+class SK(DefinedNamespace):
+    """Skills and capabilities: skills, parameters, interfaces, the Part 10 state machine, devices, tools, templates (ontologies/skill.ttl)."""
+
+    _fail = True
+    _NS = Namespace("https://locem-bridge.example.org/ont/skill#")
+
+    Arm: URIRef
+    BaseKinematics: URIRef
+    BasicSkill: URIRef
+    Capability: URIRef
+    CompositeSkill: URIRef
+    Compressor: URIRef
+    Constraint: URIRef
+    Device: URIRef
+    DifferentialDrive: URIRef
+    Frame: URIRef
+    Halt: URIRef
+    Halted: URIRef
+    HaltedToReady: URIRef
+    Lift: URIRef
+    Mecanum: URIRef
+    MobileBase: URIRef
+    Postcondition: URIRef
+    Precondition: URIRef
+    ProgramStateMachine: URIRef
+    Ready: URIRef
+    ReadyToHalted: URIRef
+    ReadyToRunning: URIRef
+    Reset: URIRef
+    Resume: URIRef
+    RosActionInterface: URIRef
+    RosServiceInterface: URIRef
+    Running: URIRef
+    RunningToHalted: URIRef
+    RunningToReady: URIRef
+    RunningToSuspended: URIRef
+    Scanner: URIRef
+    Skill: URIRef
+    SkillInterface: URIRef
+    SkillMethod: URIRef
+    SkillParameter: URIRef
+    Start: URIRef
+    State: URIRef
+    StateMachine: URIRef
+    StateTransition: URIRef
+    Suspend: URIRef
+    Suspended: URIRef
+    SuspendedToHalted: URIRef
+    SuspendedToReady: URIRef
+    SuspendedToRunning: URIRef
+    TaskTemplate: URIRef
+    TemplateStep: URIRef
+    ToolChanger: URIRef
+    allowedValue: URIRef
+    cap_ArmHome: URIRef
+    cap_ArmToNamedPose: URIRef
+    cap_ArmToWallReady: URIRef
+    cap_ChangeToolAutomatically: URIRef
+    cap_DetectWallFeatures: URIRef
+    cap_DriveBase: URIRef
+    cap_DriveBaseToNamedPose: URIRef
+    cap_Lift: URIRef
+    cap_MountToolByOperator: URIRef
+    cap_MoveArm: URIRef
+    cap_MoveArmLinear: URIRef
+    cap_MoveArmPath: URIRef
+    cap_MoveBaseRelative: URIRef
+    cap_ResetArm: URIRef
+    cap_ResetBase: URIRef
+    cap_RunCompressor: URIRef
+    cap_SetBasePose: URIRef
+    cap_SetPayload: URIRef
+    cap_SetPressure: URIRef
+    cap_SetTcp: URIRef
+    cap_StopAll: URIRef
+    cap_StopCompressor: URIRef
+    cap_SwitchSpray: URIRef
+    cap_SwitchToolOutput: URIRef
+    cap_Wait: URIRef
+    causedBy: URIRef
+    constraintText: URIRef
+    datatype: URIRef
+    defaultValue: URIRef
+    deviceName: URIRef
+    endpoint: URIRef
+    expandedFrom: URIRef
+    expandsTaskType: URIRef
+    frameName: URIRef
+    fromState: URIRef
+    hasDevice: URIRef
+    hasFrame: URIRef
+    hasMethod: URIRef
+    hasParameter: URIRef
+    hasPostcondition: URIRef
+    hasPrecondition: URIRef
+    hasSkillInterface: URIRef
+    hasState: URIRef
+    hasStateMachine: URIRef
+    hasStep: URIRef
+    hasTcp: URIRef
+    hasTool: URIRef
+    hasTransition: URIRef
+    invokesSkill: URIRef
+    involvesOperator: URIRef
+    isRealizedBySkill: URIRef
+    isRequired: URIRef
+    keywordOnly: URIRef
+    kinematics: URIRef
+    mass: URIRef
+    maxValue: URIRef
+    minValue: URIRef
+    model: URIRef
+    mountedOn: URIRef
+    notOfferedBy: URIRef
+    notOfferedReason: URIRef
+    offsetRpy: URIRef
+    offsetXyz: URIRef
+    opcuaBrowseName: URIRef
+    opcuaNodeId: URIRef
+    parameterIndex: URIRef
+    parameterName: URIRef
+    protocol: URIRef
+    providesCapability: URIRef
+    providesSkill: URIRef
+    reach: URIRef
+    realizedBy: URIRef
+    realizesCapability: URIRef
+    requiresCapability: URIRef
+    rosNamespace: URIRef
+    skillName: URIRef
+    sourceFile: URIRef
+    sparql: URIRef
+    stateNumber: URIRef
+    stepArgument: URIRef
+    stepIndex: URIRef
+    summary: URIRef
+    toState: URIRef
+    toolLength: URIRef
+    toolName: URIRef
+    transitionNumber: URIRef
+    unit: URIRef
+    usesDevice: URIRef
+
+
 GEO = Namespace("http://www.opengis.net/ont/geosparql#")
 
 PREFIXES: Dict[str, Namespace] = {
@@ -313,6 +471,7 @@ PREFIXES: Dict[str, Namespace] = {
     "proc": Namespace(str(PROC)),
     "ppr": Namespace(str(PPR)),
     "plb": Namespace(str(PLB)),
+    "sk": Namespace(str(SK)),
     "geo": GEO,
     "site": SITE,
 }
