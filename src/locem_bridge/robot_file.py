@@ -1,6 +1,7 @@
 """The robot file (``config/robots/*.yaml``): its keys, its validation and the one loader every layer uses.
 
-A robot file describes one robot: base (kinematics, limits, CAN drives), pedestal, arm (model, mount, named poses,
+A robot file describes one robot: base (kinematics ``mecanum`` or ``differential``, limits, CAN drives), pedestal,
+optional lift (the arm's vertical axis), arm (model, mount, named poses,
 UR controller address), tools, compressor (Modbus address, limits) and scanner. The bridges
 (:func:`locem_bridge.bridges.config.load_robot_config`), the simulated worksite
 (:func:`locem_bridge.sim.config.load_robot`), the pre-flight (:mod:`locem_bridge.config_check`) and the main job
@@ -13,6 +14,7 @@ import os
 import re
 from typing import Any, Callable, Dict, Mapping, Optional, Sequence
 
+from .common.base_kinematics import KINEMATICS, WHEEL_KEYS, WHEEL_ORDER
 from .common.can_bus import CAN_INTERFACES
 from .common.config_errors import ConfigError
 from .common.config_keys import deep_merge, get, item, load_mapping, mapping, only, vec
@@ -29,11 +31,11 @@ UR_RTDE_PORTS = {"dashboard_port": 29999, "script_port": 30003, "rtde_port": 300
 # loader reads is added here too, with its check in :func:`validate_robot`.
 ROBOT_KEYS: Dict[str, Sequence[str]] = {
     "": ("robot",),
-    "robot": ("name", "namespace", "base", "pedestal", "arm", "tools", "compressor", "scanner"),
+    "robot": ("name", "namespace", "base", "pedestal", "lift", "arm", "tools", "compressor", "scanner"),
     "robot.base": ("kind", "frame", "control_rate", "localisation_window", "named_poses", "chassis", "wheel",
                    "limits", "drives", "eds", "deadline"),
     "robot.base.chassis": ("length", "width", "height", "clearance", "mass"),
-    "robot.base.wheel": ("radius", "width", "half_wheelbase", "half_track"),
+    "robot.base.wheel": ("radius", "width") + tuple(k for kind in sorted(WHEEL_KEYS) for k in WHEEL_KEYS[kind]),
     "robot.base.limits": ("max_wheel_speed", "max_linear_velocity", "max_angular_velocity", "linear_acceleration",
                           "angular_acceleration"),
     "robot.base.drives": ("profile", "mode", "can", "master_node_id", "master_timeout_ms", "heartbeat_ms",
@@ -44,6 +46,9 @@ ROBOT_KEYS: Dict[str, Sequence[str]] = {
     "wheel": ("name", "node_id", "polarity"),
     "deadline": ("scale", "margin"),
     "robot.pedestal": ("height", "size", "xy"),
+    # the lift (optional): a CiA 402 linear axis in profile position mode on the base's CAN bus, carrying the arm
+    "robot.lift": ("range", "max_velocity", "acceleration", "tolerance", "drive", "eds", "deadline"),
+    "robot.lift.drive": ("node_id", "counts_per_m", "velocity_units_per_m_s", "heartbeat_ms", "tpdo_period_ms"),
     "robot.arm": ("backend", "model", "description", "mount", "joint_names", "controller", "named_poses",
                   "home_via", "wall_ready_flange", "deadline"),
     "robot.arm.description": ("package", "urdf"),
@@ -137,6 +142,39 @@ def _deadline(section: Dict[str, Any], path: str) -> None:
         dl["margin"] = get(dl, "margin", path + ".deadline", float, lo=0.0, hi=600.0)
 
 
+def _lift(robot: Dict[str, Any], base_dir: Optional[str]) -> None:
+    """``robot.lift``: the arm's vertical axis. ``range`` [bottom, top] = heights (m) of the arm mount (the arm's
+    base_link origin) above base_footprint the axis can reach; the axis position 0 (drive counts 0) is the bottom.
+    Its drive is a CiA 402 node on the base's CAN bus (``robot.base.drives.can``) in profile position mode."""
+    K = ROBOT_KEYS
+    lp = "robot.lift"
+    lift = mapping(robot, "lift", "robot", K[lp])
+    lift["range"] = vec(lift, "range", lp, 2)
+    lo, hi = lift["range"]
+    if not 0.0 <= lo < hi <= 5.0:
+        raise ConfigError("[%g, %g] is not a range of heights: bottom < top, both within 0..5 m" % (lo, hi),
+                          key=lp + ".range", allowed="[bottom, top] with 0 <= bottom < top <= 5")
+    lift["max_velocity"] = get(lift, "max_velocity", lp, float, lo=0.001, hi=2.0)
+    lift["acceleration"] = get(lift, "acceleration", lp, float, lo=0.001, hi=20.0)
+    lift["tolerance"] = get(lift, "tolerance", lp, float, default=0.001, lo=0.0001, hi=0.05)
+    _deadline(lift, lp)
+    drv = mapping(lift, "drive", lp, K[lp + ".drive"])
+    dp = lp + ".drive"
+    nid = get(drv, "node_id", dp, int, lo=1, hi=127)
+    wheels = robot["base"]["drives"]["wheels"]
+    taken = [w["node_id"] for w in wheels] + [robot["base"]["drives"].get("master_node_id", 127)]
+    if nid in taken:
+        raise ConfigError("%d is taken on the base's CAN bus (wheel drives %s, master %d); CAN node ids must be "
+                          "unique" % (nid, taken[:-1], taken[-1]), key=dp + ".node_id")
+    drv["counts_per_m"] = get(drv, "counts_per_m", dp, float, lo=1.0)
+    drv["velocity_units_per_m_s"] = get(drv, "velocity_units_per_m_s", dp, float, lo=1.0)
+    drv["heartbeat_ms"] = get(drv, "heartbeat_ms", dp, int, default=robot["base"]["drives"]["heartbeat_ms"], lo=1,
+                              hi=65535)
+    drv["tpdo_period_ms"] = get(drv, "tpdo_period_ms", dp, int, default=robot["base"]["drives"]["tpdo_period_ms"],
+                                lo=1, hi=65535)
+    lift["eds"] = _existing_file(get(lift, "eds", lp), lp + ".eds", base_dir)
+
+
 def _existing_file(rel: Any, key: str, base_dir: Optional[str]) -> str:
     """``rel`` resolved against ``base_dir`` (the robot file's folder) and checked to be a file."""
     if not isinstance(rel, str) or not rel:
@@ -156,13 +194,18 @@ def _validate(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str,
     get(robot, "name", "robot", str)
     get(robot, "namespace", "robot", str, default="")
     base = mapping(robot, "base", "robot", K["robot.base"])
-    get(base, "kind", "robot.base", str, choices=("mecanum",))
+    kind = get(base, "kind", "robot.base", str, choices=sorted(KINEMATICS))
     ch = mapping(base, "chassis", "robot.base", K["robot.base.chassis"])
     for key in ("length", "width", "height"):
         ch[key] = get(ch, key, "robot.base.chassis", float, lo=0.05, hi=5.0)
     ch["clearance"] = get(ch, "clearance", "robot.base.chassis", float, default=0.05, lo=0.0, hi=1.0)
     wheel = mapping(base, "wheel", "robot.base", K["robot.base.wheel"])
-    for key in ("radius", "width", "half_wheelbase", "half_track"):
+    geometry = ("radius", "width") + WHEEL_KEYS[kind]
+    for key in sorted(wheel):
+        if key not in geometry:           # another kind's geometry: the file mixes two bases
+            raise ConfigError("is not a key of a %s base" % kind, key="robot.base.wheel.%s" % key,
+                              allowed=", ".join(geometry))
+    for key in geometry:
         wheel[key] = get(wheel, key, "robot.base.wheel", float, lo=0.005, hi=5.0)
     lim = mapping(base, "limits", "robot.base", K["robot.base.limits"])
     for key in ("max_wheel_speed", "max_linear_velocity", "max_angular_velocity"):
@@ -196,9 +239,10 @@ def _validate(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str,
     drv["profile_acceleration"] = get(drv, "profile_acceleration", p, float, lo=0.1)
     drv["stop_deceleration"] = get(drv, "stop_deceleration", p, float, default=200.0, lo=1.0)
     wheels = get(drv, "wheels", p, list)
-    if len(wheels) != 4:
-        raise ConfigError("must list 4 wheels, found %d" % len(wheels), key=p + ".wheels",
-                          allowed="front_left, front_right, rear_left, rear_right")
+    order = WHEEL_ORDER[kind]
+    if len(wheels) != len(order):
+        raise ConfigError("must list %d wheels for a %s base, found %d" % (len(order), kind, len(wheels)),
+                          key=p + ".wheels", allowed=", ".join(order))
     seen = set()
     for i, w in enumerate(wheels):
         wp = "%s.wheels[%d]" % (p, i)
@@ -214,6 +258,8 @@ def _validate(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str,
     ped["height"] = get(ped, "height", "robot.pedestal", float, lo=0.0, hi=3.0)
     ped["size"] = vec(ped, "size", "robot.pedestal", 2)
     ped["xy"] = vec(ped, "xy", "robot.pedestal", 2)
+    if "lift" in robot:
+        _lift(robot, base_dir)
     arm = mapping(robot, "arm", "robot", K["robot.arm"])
     backend = _backend(arm, "backend", "robot.arm", "arm", "ur_rtde")
     desc = mapping(arm, "description", "robot.arm", K["robot.arm.description"], default={})
@@ -231,6 +277,12 @@ def _validate(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str,
     poses = get(arm, "named_poses", "robot.arm", dict, default={})
     for name in list(poses):
         poses[name] = vec(poses, name, "robot.arm.named_poses", 6)
+    if "lift" in robot:
+        lo, hi = robot["lift"]["range"]
+        if not lo - 1e-9 <= mount["xyz"][2] <= hi + 1e-9:
+            raise ConfigError("%g is outside the lift's range: with a lift it is the arm mount's height where the "
+                              "lift starts" % mount["xyz"][2], key="robot.arm.mount.xyz",
+                              allowed="z in robot.lift.range [%g, %g]" % (lo, hi))
     if arm.get("home_via") is not None and get(arm, "home_via", "robot.arm", str) not in poses:
         raise ConfigError("%r is not a named pose of the arm" % arm["home_via"], key="robot.arm.home_via",
                           allowed=sorted(poses))

@@ -12,7 +12,7 @@ from locem_bridge.bridges.errors import BridgeConfigError
 from locem_bridge.bridges.geometry import arm_base_in_footprint, planar, tool_frame_facing
 from locem_bridge.common.config_keys import deep_merge
 from locem_bridge.common.geometry import invert, matrix_to_pose, matrix_to_rotvec, pose_to_matrix, rotvec_to_matrix
-from locem_bridge.common.mecanum import MecanumKinematics
+from locem_bridge.common.base_kinematics import MecanumKinematics
 from locem_bridge.locem.catalogue import all_specs
 
 from bridge_rigs import ROBOT_YAML

@@ -27,7 +27,7 @@ CONCRETE = {target.partition(":")[0] for table in backends.BACKENDS.values() for
     "locem_bridge.bridges.ur_worker"}
 #: how the command modules name a device handle -> its interface
 HANDLES = {"arm": "arm", "_arm": "arm", "base": "base", "compressor": "compressor", "comp": "compressor",
-           "scanner": "scanner"}
+           "scanner": "scanner", "lift": "lift"}
 
 
 def _all_backends():
@@ -78,11 +78,16 @@ def test_every_backend_implements_its_interface_completely(kind, name, cls):
 
 
 def test_built_backends_set_every_attribute_their_interface_annotates(robot):
+    from locem_bridge.bridges.config import load_robot_config
+    second = build_robot(load_robot_config(os.path.join(REPO, "config", "robots", "diffdrive_ur5e.yaml")),
+                         site=SHORT_WALL)                 # the robot with a lift
     built = build_robot(robot, site=SHORT_WALL)          # built, never started: no device is contacted
-    assert sorted(built.backends) == sorted(INTERFACES)
-    for kind, backend in built.backends.items():
+    assert sorted(set(built.backends) | set(second.backends)) == sorted(INTERFACES)
+    assert "lift" not in built.backends                  # the shipped robot has no lift section
+    for kind, backend in list(built.backends.items()) + list(second.backends.items()):
         missing = [a for a in sorted(_instance_attributes(INTERFACES[kind])) if not hasattr(backend, a)]
         assert not missing, "%s backend %s lacks %s" % (kind, type(backend).__name__, missing)
+    second.close()
     arm = built.get("arm")
     assert arm.supports(Arm.PATH) and arm.supports(Arm.FORCE)
     with pytest.raises(ValueError, match="arm has no optional capability 'teleport'; known: force, path"):

@@ -11,7 +11,7 @@ import yaml
 from locem_bridge.sim.clock import SimClock
 from locem_bridge.sim.config import load_robot, load_site, validate_robot, validate_site
 from locem_bridge.sim.errors import SimConfigError
-from locem_bridge.common.mecanum import MecanumKinematics
+from locem_bridge.common.base_kinematics import MecanumKinematics
 from locem_bridge.sim.site import Site
 
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "src")
@@ -137,7 +137,7 @@ def test_a_misspelt_device_section_is_refused_instead_of_leaving_the_device_out(
     path = _robot_copy(tmp_path, misspell)
     with pytest.raises(SimConfigError) as exc:
         load_robot(path)
-    assert str(exc.value) == ("%s: robot.compresor: unknown key (allowed: arm, base, compressor, name, namespace, "
+    assert str(exc.value) == ("%s: robot.compresor: unknown key (allowed: arm, base, compressor, lift, name, namespace, "
                               "pedestal, scanner, tools)" % path)
 
 

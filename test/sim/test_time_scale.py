@@ -19,7 +19,7 @@ from locem_bridge.bridges.commands_base import BaseCommands
 from locem_bridge.bridges.config import load_robot_config, resolve_path
 from locem_bridge.locem.core import LocemCore
 from locem_bridge.locem.registry import Interface
-from locem_bridge.common.mecanum import MecanumKinematics
+from locem_bridge.common.base_kinematics import MecanumKinematics
 from locem_bridge.sim.arm_source import KinematicArm
 from locem_bridge.sim.clock import SimClock
 from locem_bridge.sim.config import resolve_relative

@@ -9,7 +9,7 @@ Layout (one concept per module):
 * :mod:`.backends`    the name -> backend table, imported lazily (no device library is loaded until used);
 * :mod:`.ur_arm` + :mod:`.ur_worker`  ur_rtde in a supervised child process;
 * :mod:`.modbus_compressor`  pymodbus client with polling, retries and the valve-closed-on-return rule;
-* :mod:`.cia402_base` + :mod:`locem_bridge.common.mecanum` + :mod:`locem_bridge.common.can_bus`  four CiA 402 drives
+* :mod:`.cia402_base` + :mod:`locem_bridge.common.base_kinematics` + :mod:`locem_bridge.common.can_bus`  four CiA 402 drives
   through canopen's ``BaseNode402``;
 * :mod:`.sim_scanner`  the SCAN source of the simulated worksite (perception stand-in on the site YAML);
 * :mod:`.geometry`    frames map -> base_footprint -> UR base, the wall-facing TCP frame (rotations:

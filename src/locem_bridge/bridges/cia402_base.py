@@ -1,4 +1,6 @@
-"""Mobile base over CAN: four CiA 402 wheel drives (canopen ``BaseNode402``) and a mecanum control loop.
+"""Mobile base over CAN: CiA 402 wheel drives (canopen ``BaseNode402``) and the base control loop, for every
+kinematics of :data:`locem_bridge.common.base_kinematics.KINEMATICS` (``robot.base.kind``: ``mecanum``, four
+wheels; ``differential``, two).
 
 Lifecycle: ``Cia402Base(base_cfg, eds_path)`` -> :meth:`start` (opens the python-can bus named by
 ``robot.base.drives.can``; a supervisor thread enables every drive: heartbeat seen, NMT OPERATIONAL, PROFILED
@@ -7,7 +9,7 @@ drives disabled, bus closed).
 
 Each control cycle: check every drive's heartbeat (consumer timeout = ``heartbeat_ms`` x
 ``consumer_timeout_factor``) and statusword; integrate odometry from the wheel positions (TPDO2, 0x6064) through
-the mecanum kinematics; compute the body twist (GOTO closed loop, an open-loop ``/cmd_vel`` twist while it is
+the base kinematics; compute the body twist (GOTO closed loop, an open-loop ``/cmd_vel`` twist while it is
 fresh, or zero); send the wheel targets (RPDO2, 0x60FF). A silent or faulted drive latches a fault: every drive
 is commanded to zero in the same cycle (the drives decelerate at ``stop_deceleration``), running motions end
 with :class:`~.errors.DeviceFault` (``HARDWARE_ERROR``). When every drive is back (boot-up, heartbeat) the
@@ -19,7 +21,21 @@ answers)::
     deadline = scale x (max(distance / speed, turn / (0.8 max_angular_velocity)) + 2 speed / linear_acceleration
                         + max_angular_velocity / angular_acceleration) + margin
 
-``scale`` and ``margin`` (s) come from ``robot.base.deadline`` (defaults 1.0 and 5 s).
+``scale`` and ``margin`` (s) come from ``robot.base.deadline`` (defaults 1.0 and 5 s). A differential base
+turns twice: its deadline counts both turns (see below) instead of the larger of drive and turn.
+
+GOTO on a non-holonomic (differential) base: turn, drive, turn. 1. turn in place toward the goal (or away from
+it when the goal lies behind: the base then drives backwards, so it never turns more than pi/2 to aim) until
+the heading is within ``ALIGN_TOLERANCE`` of the bearing; 2. drive along the bearing with the same speed profile
+as the mecanum base (v^2 = 2 a d, at most ``speed`` and ``max_linear_velocity``), steering onto the bearing
+while more than ``STEER_DISTANCE`` is left, until within half the position tolerance; 3. turn in place to the
+goal heading. Should the position leave the tolerance again meanwhile, it aims again (1). Same limits (wheel,
+linear, angular, accelerations), same completion test (within ``tolerance`` / ``angle_tolerance`` and still) as
+the mecanum base. A purely lateral request (``MOVE_BASE_REL dy=0.5``) thus becomes a quarter turn, a straight
+drive and a quarter turn back. The deadline::
+
+    deadline = scale x (distance / speed + (turn_1 + turn_2) / (0.8 max_angular_velocity)
+                        + 2 speed / linear_acceleration + 3 max_angular_velocity / angular_acceleration) + margin
 
 Heartbeat consumer: a drive is silent when no heartbeat arrived for ``heartbeat_ms`` x ``consumer_timeout_factor``
 (the robot YAML: 100 ms x 2 = 200 ms); the cycle that notices it commands every wheel to zero, so the base stands
@@ -47,13 +63,15 @@ from .config import need
 from .errors import BadRequest, BridgeConfigError, DeviceFault, LinkDown, MotionTimeout, NotConnected
 from locem_bridge.common.geometry import wrap_angle
 from .interfaces import Base, Health, Waiter
-from ..common.mecanum import MecanumKinematics
+from ..common.base_kinematics import WHEEL_ORDER, kinematics_for
 from ..common.rate import FixedRate
 
 log = logging.getLogger(__name__)
 
 SW_FAULT = 0x08
 MASTER_TIMEOUT_MS = 500
+ALIGN_TOLERANCE = 0.02      # rad: a differential base aims at the goal this closely before it drives
+STEER_DISTANCE = 0.05       # m: it steers onto the bearing while farther than this from the goal
 
 
 class Cia402Base(Base):
@@ -67,8 +85,13 @@ class Cia402Base(Base):
         drives = need(cfg, "drives", dict, where=w)
         self.can_cfg = dict(need(drives, "can", dict, where=w + ".drives"))
         self.wheels = list(need(drives, "wheels", list, where=w + ".drives"))
-        if len(self.wheels) != 4:
-            raise BadRequest("robot.base.drives.wheels must list 4 wheels (fl, fr, rl, rr), got %d" % len(self.wheels))
+        self.base_kind = str(cfg.get("kind", "mecanum"))
+        if self.base_kind not in WHEEL_ORDER:
+            raise BadRequest("robot.base.kind %r is not known, allowed: %s" % (self.base_kind, ", ".join(WHEEL_ORDER)))
+        order = WHEEL_ORDER[self.base_kind]
+        if len(self.wheels) != len(order):
+            raise BadRequest("robot.base.drives.wheels must list %d wheels (%s) for a %s base, got %d"
+                             % (len(order), ", ".join(order), self.base_kind, len(self.wheels)))
         self.node_ids = [int(x["node_id"]) for x in self.wheels]
         self.names = [str(x["name"]) for x in self.wheels]
         self.polarity = [int(x["polarity"]) for x in self.wheels]
@@ -85,9 +108,11 @@ class Cia402Base(Base):
         self.stop_decel_units = int(need(drives, "stop_deceleration", float, default=200.0, lo=1.0,
                                          where=w + ".drives") * self.vel_scale)
         wheel = need(cfg, "wheel", dict, where=w)
-        self.kin = MecanumKinematics(need(wheel, "radius", float, where=w + ".wheel"),
-                           need(wheel, "half_wheelbase", float, where=w + ".wheel"),
-                           need(wheel, "half_track", float, where=w + ".wheel"))
+        try:
+            self.kin = kinematics_for(self.base_kind, wheel)
+        except (KeyError, ValueError) as exc:
+            raise BadRequest("robot.base.wheel: %s" % exc)
+        self.holonomic = self.kin.holonomic
         limits = need(cfg, "limits", dict, where=w)
         self.max_wheel = need(limits, "max_wheel_speed", float, lo=0.1, where=w + ".limits")
         self.max_lin = need(limits, "max_linear_velocity", float, lo=0.01, where=w + ".limits")
@@ -113,7 +138,7 @@ class Cia402Base(Base):
         self._goal: Optional[Dict[str, Any]] = None
         self._last_pos: Optional[List[float]] = None
         self._fixes: List[Tuple[float, float, float]] = []   # localisation fixes taken since the base stopped
-        self._last_hb = [0.0] * 4
+        self._last_hb = [0.0] * len(self.wheels)
         self._enabled = False
         self._fault: Optional[str] = None
         self._fault_kind = ""
@@ -168,7 +193,7 @@ class Cia402Base(Base):
             self._hb_task = None
         if self.network is not None:
             try:
-                self._send_wheels([0.0] * 4)
+                self._send_wheels([0.0] * len(self.nodes))
             except Exception:
                 pass
             for node in self.nodes:
@@ -258,7 +283,7 @@ class Cia402Base(Base):
             self._cmd = [0.0, 0.0, 0.0]
             self._open_loop = None
         try:
-            self._send_wheels([0.0] * 4)
+            self._send_wheels([0.0] * len(self.nodes))
         except Exception:
             pass
         if first:
@@ -279,7 +304,7 @@ class Cia402Base(Base):
         # 2. odometry, also while the base brakes after a fault (that motion is real)
         self._odometry()
         if self._fault is not None:
-            self._send_wheels([0.0] * 4)
+            self._send_wheels([0.0] * len(self.nodes))
             self._maybe_recover(now)
             return
         # 3. command
@@ -354,6 +379,8 @@ class Cia402Base(Base):
             return cmd
 
     def _goal_twist(self, goal: Dict[str, Any]) -> List[float]:
+        if not self.holonomic:
+            return self._goal_twist_turn_drive_turn(goal)
         x, y, yaw = self._pose
         ex, ey = goal["x"] - x, goal["y"] - y
         eth = wrap_angle(goal["theta"] - yaw)
@@ -377,6 +404,61 @@ class Cia402Base(Base):
         else:
             bx = by = 0.0
         return [v * bx, v * by, w]
+
+    def _linear_speed(self, goal: Dict[str, Any], dist: float) -> float:
+        """Speed toward a goal ``dist`` away: slowing down so it can stop (v^2 = 2 a d), proportional near it."""
+        return max(min(goal["speed"], math.sqrt(2.0 * self.lin_accel * 0.8 * dist), 1.5 * dist), 0.01)
+
+    def _turn_rate(self, err: float, tolerance: float) -> float:
+        """Angular speed toward a heading ``err`` rad away (same profile as the mecanum base)."""
+        if abs(err) <= 0.3 * tolerance:
+            return 0.0
+        w = min(self.max_ang, math.sqrt(2.0 * self.ang_accel * 0.8 * abs(err)), 2.0 * abs(err))
+        return math.copysign(max(w, 0.01), err)
+
+    def _goal_twist_turn_drive_turn(self, goal: Dict[str, Any]) -> List[float]:
+        """A differential base's GOTO cycle (see the module docstring): aim, drive, turn to the goal heading."""
+        x, y, yaw = self._pose
+        ex, ey = goal["x"] - x, goal["y"] - y
+        dist = math.hypot(ex, ey)
+        eth = wrap_angle(goal["theta"] - yaw)
+        tol = goal["tolerance"]
+        still = math.hypot(self._twist[0], self._twist[1]) < 0.01 and abs(self._twist[2]) < 0.02
+        phase = goal.setdefault("phase", "aim" if dist > tol else "turn")
+        if phase == "turn" and dist > tol:
+            phase = "aim"                          # pushed out of the tolerance: aim again
+        if phase in ("aim", "drive"):
+            bearing = math.atan2(ey, ex)
+            err = wrap_angle(bearing - yaw)
+            if phase == "aim":
+                goal["reverse"] = abs(err) > math.pi / 2.0      # goal behind: drive backwards
+            if goal.get("reverse"):
+                err = wrap_angle(err + math.pi)
+            if phase == "aim":
+                if abs(err) <= ALIGN_TOLERANCE and still:
+                    phase = "drive"
+                else:
+                    goal["phase"] = phase
+                    return [0.0, 0.0, self._turn_rate(err, ALIGN_TOLERANCE) if abs(err) > ALIGN_TOLERANCE else 0.0]
+            along = ex * math.cos(yaw) + ey * math.sin(yaw)
+            if goal.get("reverse"):
+                along = -along
+            if along <= 0.3 * tol or dist <= 0.5 * tol:
+                phase = "turn" if dist <= tol else "aim"   # passed it, or close enough: stop driving
+                goal["phase"] = phase
+                return [0.0, 0.0, 0.0]
+            v = self._linear_speed(goal, along) * max(0.0, math.cos(err))
+            w = 0.0
+            if dist > STEER_DISTANCE:
+                w = max(-self.max_ang, min(self.max_ang, 2.0 * err))
+            goal["phase"] = "drive"
+            return [-v if goal.get("reverse") else v, 0.0, w]
+        goal["phase"] = "turn"
+        if dist <= tol and abs(eth) <= goal["angle_tolerance"]:
+            if still:
+                goal["reached"].set()
+            return [0.0, 0.0, 0.0]
+        return [0.0, 0.0, self._turn_rate(eth, goal["angle_tolerance"])]
 
     def _send_wheels(self, wheels: List[float]) -> None:
         for node, pol, speed in zip(self.nodes, self.polarity, wheels):
@@ -430,7 +512,7 @@ class Cia402Base(Base):
         if self._fault is not None or not self._enabled:
             return
         vx = max(-self.max_lin, min(self.max_lin, vx))
-        vy = max(-self.max_lin, min(self.max_lin, vy))
+        vy = max(-self.max_lin, min(self.max_lin, vy)) if self.holonomic else 0.0   # a differential base: no vy
         wz = max(-self.max_ang, min(self.max_ang, wz))
         with self._lock:
             if self._goal is None:
@@ -445,8 +527,18 @@ class Cia402Base(Base):
         dist = math.hypot(x - start[0], y - start[1])
         turn = abs(wrap_angle(theta - start[2]))
         speed = min(speed, self.max_lin)
-        budget = self.deadline_scale * (max(dist / speed, turn / (0.8 * self.max_ang)) + 2.0 * speed / self.lin_accel
-                                        + self.max_ang / self.ang_accel) + self.deadline_margin
+        if self.holonomic:
+            budget = self.deadline_scale * (max(dist / speed, turn / (0.8 * self.max_ang))
+                                            + 2.0 * speed / self.lin_accel + self.max_ang / self.ang_accel)
+        else:                                   # turn, drive, turn (each aim turn at most pi/2: it may reverse)
+            bearing = math.atan2(y - start[1], x - start[0])
+            aim = abs(wrap_angle(bearing - start[2]))
+            heading = start[2] if dist <= tolerance else (bearing if aim <= math.pi / 2.0 else bearing + math.pi)
+            aim = min(aim, math.pi - aim)
+            last = abs(wrap_angle(theta - heading))
+            budget = self.deadline_scale * (dist / speed + (aim + last) / (0.8 * self.max_ang)
+                                            + 2.0 * speed / self.lin_accel + 3.0 * self.max_ang / self.ang_accel)
+        budget += self.deadline_margin
         goal = {"x": x, "y": y, "theta": wrap_angle(theta), "tolerance": tolerance,
                 "angle_tolerance": angle_tolerance, "speed": speed, "reached": threading.Event()}
         t0 = time.monotonic()
@@ -487,7 +579,7 @@ class Cia402Base(Base):
             self._cmd = [0.0, 0.0, 0.0]
         if self.network is not None and self._enabled:
             try:
-                self._send_wheels([0.0] * 4)
+                self._send_wheels([0.0] * len(self.nodes))
             except Exception as exc:
                 log.warning("base halt: %s", exc)
 

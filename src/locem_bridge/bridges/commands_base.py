@@ -1,4 +1,6 @@
-"""LOCEM commands of the mobile base (declarations in ``SPECS``; :class:`BaseCommands` binds them).
+"""LOCEM commands of the mobile base and of the lift carrying the arm (declarations in ``SPECS``;
+:class:`BaseCommands` binds the base's, :class:`LiftCommands` the lift's: registered only on a robot with a
+``robot.lift`` section).
 
 Poses ``x y theta`` are base_footprint in the ``map`` frame (m, rad, REP 103); odometry starts at the initial
 pose (``SET_POSE`` or the node's ``~initial_pose``). GOTO runs closed loop on odometry until within
@@ -11,7 +13,7 @@ from typing import Any, Dict, Iterable
 from locem_bridge.locem.registry import Arg, CommandSpec
 
 from locem_bridge.common.geometry import wrap_angle
-from .interfaces import Base
+from .interfaces import Base, Lift
 
 CATEGORY = "base"
 _BASE = frozenset({"base"})
@@ -70,7 +72,19 @@ RESET_BASE = CommandSpec(
     resources=_BASE, category=CATEGORY, timeout=20.0, result=(("cleared", "the latched fault"),),
     capability="sk:cap_ResetBase")
 
-SPECS = (GOTO, GOTO_TAG, MOVE_BASE_REL, STOP_BASE, GET_POSE, SET_POSE, RESET_BASE)
+LIFT_EXTENT = 5.0          # m: the grammar's bound; the robot's own range (robot.lift.range) is checked by the lift
+LIFT = CommandSpec(
+    "LIFT", "Move the lift carrying the arm to a height (the arm mount above base_footprint; the arm's base frame "
+    "moves with it) and wait until in position. Allowed: robot.lift.range (HELP LIFT on a robot with a lift: "
+    "STATUS health.lift.range).",
+    args=(Arg.number("z", "m", 0.0, LIFT_EXTENT, "arm mount height above the floor (base_footprint)"),),
+    resources=frozenset({"lift"}), category="lift", result=(("height", "m reached"), ("error", "m from the goal"),
+                                                            ("duration_s", "seconds")),
+    timeout=120.0)
+
+BASE_SPECS = (GOTO, GOTO_TAG, MOVE_BASE_REL, STOP_BASE, GET_POSE, SET_POSE, RESET_BASE)
+LIFT_SPECS = (LIFT,)
+SPECS = BASE_SPECS + LIFT_SPECS
 
 
 class BaseCommands:
@@ -82,7 +96,7 @@ class BaseCommands:
         self.base = base
 
     def specs(self) -> Iterable[CommandSpec]:
-        return SPECS
+        return BASE_SPECS
 
     def handlers(self) -> Dict[str, Any]:
         return {"GOTO": self.goto, "GOTO_TAG": self.goto_tag, "MOVE_BASE_REL": self.move_rel,
@@ -128,3 +142,28 @@ class BaseCommands:
 
     def reset_base(self, ctx: Any) -> Dict[str, Any]:
         return self.base.reset(ctx)
+
+
+class LiftCommands:
+    """The lift's command set (``LIFT``) for :meth:`LocemCore.install`; its health (``STATUS`` ``health.lift``)
+    carries ``height`` and ``range``."""
+
+    name = "lift"
+
+    def __init__(self, lift: Lift) -> None:
+        self.lift = lift
+
+    def specs(self) -> Iterable[CommandSpec]:
+        return LIFT_SPECS
+
+    def handlers(self) -> Dict[str, Any]:
+        return {"LIFT": self.lift_to}
+
+    def stop(self) -> None:
+        self.lift.stop()
+
+    def health(self) -> Dict[str, Any]:
+        return self.lift.health()
+
+    def lift_to(self, ctx: Any, z: float) -> Dict[str, Any]:
+        return self.lift.move_to(ctx, z)

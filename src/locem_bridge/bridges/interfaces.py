@@ -403,6 +403,31 @@ class Base(Backend):
         self._unsupported(self.LOCALISATION)
 
 
+class Lift(Backend):
+    """A vertical axis carrying the arm (``robot.lift``): heights ``z`` (m) of the arm mount above base_footprint,
+    within :attr:`range`. The arm's ``base`` frame moves with it."""
+
+    kind = "lift"
+
+    #: ``[bottom, top]`` heights the axis reaches (``robot.lift.range``), m
+    range: Tuple[float, float] = (0.0, 0.0)
+
+    @abc.abstractmethod
+    def height(self) -> float:
+        """The arm mount's height now (m above base_footprint, from the drive's position)."""
+
+    @abc.abstractmethod
+    def move_to(self, waiter: Waiter, z: float) -> Dict[str, Any]:
+        """Move to ``z`` (m) and wait until in position (drive's target reached, within the tolerance): returns
+        ``height``, ``error``, ``duration_s``; :class:`~.errors.BadRequest` naming :attr:`range` (nothing moves)
+        for a height outside it; ``Aborted`` (:meth:`halt`, cancel), :class:`~.errors.MotionTimeout`,
+        :class:`~.errors.DeviceFault`."""
+
+    @abc.abstractmethod
+    def halt(self) -> None:
+        """Brake to a stand now (a running :meth:`move_to` ends ``Aborted``). Never raises."""
+
+
 class Scanner(abc.ABC):
     """Wall feature detection behind SCAN (no link of its own: built, never started)."""
 
@@ -415,4 +440,4 @@ class Scanner(abc.ABC):
 
 
 #: the interface of each device kind of :data:`.backends.BACKENDS`
-INTERFACES: Dict[str, type] = {"arm": Arm, "compressor": Compressor, "base": Base, "scanner": Scanner}
+INTERFACES: Dict[str, type] = {"arm": Arm, "compressor": Compressor, "base": Base, "lift": Lift, "scanner": Scanner}

@@ -24,11 +24,11 @@ from .backends import backend_class
 from .config import need, resolve_path
 from .interfaces import Backend
 
-ALL_DEVICES = ("arm", "compressor", "base", "scanner")
+ALL_DEVICES = ("arm", "compressor", "base", "lift", "scanner")
 
 
 class Robot:
-    """The backends (``arm``, ``compressor``, ``base``, ``scanner``) and command sets of one robot."""
+    """The backends (``arm``, ``compressor``, ``base``, ``lift``, ``scanner``) and command sets of one robot."""
 
     def __init__(self) -> None:
         self.backends: Dict[str, Any] = {}
@@ -43,7 +43,7 @@ class Robot:
                 backend.start()
 
     def close(self) -> None:
-        for kind in ("base", "arm", "compressor"):
+        for kind in ("base", "lift", "arm", "compressor"):
             backend = self.backends.get(kind)
             if backend is not None:
                 try:
@@ -66,7 +66,7 @@ def _build_robot(robot_cfg: Mapping[str, Any], devices: Sequence[str], site: Any
                  initial_pose: Optional[Tuple[float, float, float]],
                  named_base_poses: Optional[Mapping[str, Sequence[float]]]) -> Robot:
     from .commands_arm import ArmCommands
-    from .commands_base import BaseCommands
+    from .commands_base import BaseCommands, LiftCommands
     from .commands_compressor import CompressorCommands
     from .commands_wall import WallCommands
 
@@ -79,6 +79,11 @@ def _build_robot(robot_cfg: Mapping[str, Any], devices: Sequence[str], site: Any
         eds = resolve_path(robot_cfg, need(base_cfg, "eds", str, where="robot.base"))
         robot.backends["base"] = cls(base_cfg, eds, initial_pose=tuple(initial_pose or (0.0, 0.0, 0.0)))
         robot.command_sets.append(BaseCommands(robot.backends["base"]))
+    if "lift" in devices and "lift" in robot_cfg and "base" in robot_cfg:     # a node on the base's CAN bus
+        cls = backend_class("lift", "cia402")
+        robot.backends["lift"] = cls(robot_cfg["lift"], robot_cfg["base"]["drives"]["can"],
+                                     resolve_path(robot_cfg, need(robot_cfg["lift"], "eds", str, where="robot.lift")))
+        robot.command_sets.append(LiftCommands(robot.backends["lift"]))
     if "arm" in devices and "arm" in robot_cfg:
         cls = backend_class("arm", str(robot_cfg["arm"].get("backend", "ur_rtde")))
         robot.backends["arm"] = cls(robot_cfg["arm"])

@@ -3,7 +3,7 @@
 Modules (each one concept):
 
 * :mod:`.finish`         the ``finish`` vocabulary of a wall area (bare, sprayed, sanded)
-* :mod:`.mecanum`        mecanum base kinematics (the base bridge and the simulated worksite)
+* :mod:`.base_kinematics` wheeled base kinematics, mecanum and differential (the base bridge and the simulated worksite)
 * :mod:`.rate`           a fixed-rate loop timer for device loops
 * :mod:`.config_errors`  one-line configuration errors and the one YAML reader of configuration files
 * :mod:`.config_keys`    checked reading of a configuration mapping (type, range, allowed values, known keys)

@@ -25,7 +25,7 @@ from .arm_source import KinematicArm, UrArmSource
 from .clock import SimClock
 from .modbus.compressor import CompressorModel
 from .config import load_robot, load_site, resolve_relative
-from .can.drives import DriveSet
+from .can.drives import DriveSet, lift_drive
 from .errors import DeviceStandInError, SimConfigError, SimStateError
 from .modbus.modbus_server import CompressorServer
 from .world import World, resolve_arm_urdf
@@ -75,6 +75,7 @@ class Worksite:
         self.compressor: Optional[CompressorModel] = None
         self.modbus: Optional[CompressorServer] = None
         self.drives: Optional[DriveSet] = None
+        self.lift: Any = None
         self.ur: Any = None
         self.arm: Any = None
         self.world: Optional[World] = None
@@ -95,9 +96,12 @@ class Worksite:
             self.modbus.start()
             dcfg = robot["base"]["drives"]
             eds = resolve_relative(self.robot_cfg, robot["base"]["eds"])
+            if "lift" in robot:              # the lift's drive is a node on the base's bus
+                self.lift = lift_drive(robot, resolve_relative(self.robot_cfg, robot["lift"]["eds"]), self.clock.now)
             self.drives = DriveSet(dcfg, eds, self.clock.now,
                                    max_wheel_speed=robot["base"]["limits"]["max_wheel_speed"],
-                                   heartbeat_process=self.heartbeat_process)
+                                   heartbeat_process=self.heartbeat_process,
+                                   others=[self.lift] if self.lift is not None else [])
             self.drives.start()
             arm_cfg = robot["arm"]
             q0 = arm_cfg["named_poses"].get(self.arm_pose or "home", [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
@@ -108,7 +112,7 @@ class Worksite:
             else:
                 self.arm = KinematicArm(q0)
             self.world = World(self.site_cfg, self.robot_cfg, self.clock, arm=self.arm, drives=self.drives,
-                               compressor=self.compressor)
+                               compressor=self.compressor, lift=self.lift)
             if self.ur is not None:              # the arm feels the walls (force mode, actual_TCP_force)
                 self.ur.set_contact_provider(self.world.wall_contact)
             if self.ur is not None and self.protective_stop_on_collision:
@@ -158,6 +162,7 @@ class Worksite:
         if self.drives is not None:
             self.drives.stop()
             self.drives = None
+        self.lift = None
         if self.modbus is not None:
             self.modbus.stop()
             self.modbus = None
@@ -182,6 +187,8 @@ class Worksite:
             out["base_drives_can"] = "%s channel %s%s, node ids %s" % (
                 can_cfg["interface"], can_cfg["channel"], (" port %d" % can_cfg["port"]) if "port" in can_cfg else "",
                 [d.node_id for d in self.drives.drives])
+            if self.lift is not None:
+                out["lift_drive_can"] = "same bus, node id %d (profile position)" % self.lift.node_id
         if self.ur is not None:
             out["ur_controller"] = "%s dashboard %d, script %d, RTDE %d" % (
                 self.ur.address, self.ur.ports["dashboard"], self.ur.ports["script"], self.ur.ports["rtde"])

@@ -7,10 +7,13 @@ lock, so public methods are safe from any thread.
 
 What one step does:
 1. base: wheel angle increments of the CAN drives (:class:`~locem_bridge.sim.can.drives.DriveSet`) through the
-   mecanum kinematics move ``base_footprint`` in the map frame (kinematic body, no slip); the increments are
+   base kinematics (``robot.base.kind``: mecanum or differential, :mod:`locem_bridge.common.base_kinematics`) move ``base_footprint`` in the map frame (kinematic body, no slip); the increments are
    taken from the drives' exact motion segments every ``BASE_SUBSTEP`` of sim time since the last step, so the
    ground truth does not depend on the time scale or on a late step (one world step at time scale 20 covers
    0.4 s of sim time, and the midpoint rule over such steps drifted by millimetres per GOTO);
+   With a lift (``robot.lift``), the arm's mount follows the lift drive's position (``lift=``, a
+   :class:`~locem_bridge.sim.can.drives.Cia402PositionDrive`): mount z = ``robot.lift.range[0]`` + axis position;
+   :meth:`lift_height` reports it;
 2. arm: joint positions mirrored from the arm source (:mod:`.arm_source`; the UR stand-in when running),
    including every intermediate controller step delivered to the step listener since the last step;
 3. tool: the mounted tool follows ``tool0``; its process state comes from the configured switch (UR standard
@@ -42,7 +45,7 @@ from ..robot_file import TOOL_NAMES
 from .config import find_example_robot_data, resolve_arm_urdf  # noqa: F401 (re-exported)
 from .errors import SimConfigError, SimStateError
 from ..common.geometry import matrix_to_quat, quat_to_rotvec, rotation_z_along, rotvec_to_quat
-from ..common.mecanum import MecanumKinematics
+from ..common.base_kinematics import kinematics_for
 from ..common.rate import FixedRate
 from .outcome import OutcomeRecorder
 from .perception import WallScanner
@@ -57,7 +60,8 @@ class World:
     """The simulated worksite in PyBullet (see the module docstring)."""
 
     def __init__(self, site_cfg: Dict[str, Any], robot_cfg: Dict[str, Any], clock: Optional[SimClock] = None,
-                 arm: Any = None, drives: Any = None, compressor: Any = None, gui: Optional[bool] = None) -> None:
+                 arm: Any = None, drives: Any = None, compressor: Any = None, gui: Optional[bool] = None,
+                 lift: Any = None) -> None:
         self.site_cfg, self.robot_cfg = site_cfg, robot_cfg
         sim = site_cfg["simulation"]
         robot = robot_cfg["robot"]
@@ -69,8 +73,12 @@ class World:
         self.rate = float(sim["world_rate"])
         self.robot = robot
         self.tools_cfg = robot["tools"]
-        w = robot["base"]["wheel"]
-        self.mecanum = MecanumKinematics(w["radius"], w["half_wheelbase"], w["half_track"])
+        self.kinematics = kinematics_for(robot["base"].get("kind", "mecanum"), robot["base"]["wheel"])
+        self.lift = lift
+        self._lift_bottom = float(robot["lift"]["range"][0]) if "lift" in robot else 0.0
+        self._mount_z = float(robot["arm"]["mount"]["xyz"][2])      # arm mount height now (moves with a lift)
+        if lift is not None:
+            self._mount_z = self._lift_bottom + float(lift.angle)
         self.outcome = OutcomeRecorder(self.site, self.tools_cfg, sim["outcome"])
         # the scanner reports each area's finish (bare / sprayed / sanded) from what the outcome recorded
         self.scanner = WallScanner(self.site, robot["scanner"], sim["perception"]["position_noise"], sim["seed"],
@@ -130,7 +138,7 @@ class World:
             body = pb.createMultiBody(0, col, vis, [mid[0], mid[1], wall.height / 2],
                                       pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=c)
             self.wall_bodies[body] = wall.id
-        # mobile base: chassis + 4 wheels + pedestal, one kinematic multibody
+        # mobile base: chassis + driven wheels (+ casters for a differential base) + pedestal, one kinematic multibody
         base = self.robot["base"]
         ch, wh, ped = base["chassis"], base["wheel"], self.robot["pedestal"]
         body_h = ch["height"] - ch["clearance"]
@@ -144,12 +152,23 @@ class World:
         wheel_vis = pb.createVisualShape(pb.GEOM_CYLINDER, radius=wh["radius"], length=wh["width"],
                                          rgbaColor=[0.1, 0.1, 0.1, 1], physicsClientId=c)
         zc = ch["clearance"] + body_h / 2
-        for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+        for wx, wy in self.kinematics.wheel_positions():
             link_masses.append(1.0)
             link_cols.append(wheel_col)
             link_vis.append(wheel_vis)
-            link_pos.append([sx * wh["half_wheelbase"], sy * wh["half_track"], wh["radius"] - zc])
+            link_pos.append([wx, wy, wh["radius"] - zc])
             link_orn.append(pb.getQuaternionFromEuler([math.pi / 2, 0, 0]))
+        self._n_wheel_links = len(link_pos)
+        if not self.kinematics.holonomic:       # passive casters, front and rear (visual: they carry no motion)
+            cr = max(0.02, min(ch["clearance"] + 0.02, wh["radius"] / 2))
+            caster_vis = pb.createVisualShape(pb.GEOM_SPHERE, radius=cr, rgbaColor=[0.2, 0.2, 0.2, 1],
+                                              physicsClientId=c)
+            for sx in (1, -1):
+                link_masses.append(0.5)
+                link_cols.append(-1)
+                link_vis.append(caster_vis)
+                link_pos.append([sx * (ch["length"] / 2 - cr - 0.02), 0.0, cr - zc])
+                link_orn.append([0, 0, 0, 1])
         ph = max(ped["height"], 0.001)
         ped_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[ped["size"][0] / 2, ped["size"][1] / 2, ph / 2],
                                           physicsClientId=c)
@@ -216,7 +235,8 @@ class World:
         pos, orn = self._base_tf()
         pb.resetBasePositionAndOrientation(self.base_body, [pos[0], pos[1], self._base_z], orn, physicsClientId=c)
         mount = self.robot["arm"]["mount"]
-        mpos, morn = pb.multiplyTransforms(pos, orn, mount["xyz"], pb.getQuaternionFromEuler(mount["rpy"]))
+        mxyz = [mount["xyz"][0], mount["xyz"][1], self._mount_z]
+        mpos, morn = pb.multiplyTransforms(pos, orn, mxyz, pb.getQuaternionFromEuler(mount["rpy"]))
         pb.resetBasePositionAndOrientation(self.arm_body, mpos, morn, physicsClientId=c)
         # map <- UR controller base (base_link turned by pi about z)
         rot = np.asarray(pb.getMatrixFromQuaternion(morn), dtype=float).reshape(3, 3).dot(
@@ -262,6 +282,11 @@ class World:
             self._place_robot()
             self._tcp_prev = None
             self._dirty = True
+
+    def lift_height(self) -> Optional[float]:
+        """Height (m) of the arm mount above base_footprint: the lift's (ground truth), None without a lift."""
+        with self._lock:
+            return self._mount_z if self.lift is not None else None
 
     def arm_base_pose(self) -> Tuple[List[float], List[float]]:
         """Position and quaternion (x, y, z, w) of the UR controller ``base`` frame in map (the placement the
@@ -427,12 +452,20 @@ class World:
                     d = [a - b for a, b in zip(ang, self._wheel_prev)]
                     self._wheel_prev = ang
                     if any(abs(x) > 1e-12 for x in d):
-                        dx, dy, dth = self.mecanum.twist(d)
+                        dx, dy, dth = self.kinematics.twist(d)
                         x, y, yaw = self._pose
                         ym = yaw + dth / 2.0
                         self._pose = [x + math.cos(ym) * dx - math.sin(ym) * dy,
                                       y + math.sin(ym) * dx + math.cos(ym) * dy, yaw + dth]
                         moved = True
+            if self.lift is not None:
+                with self.lift._lock:
+                    self.lift.update()
+                    z = self._lift_bottom + float(self.lift.angle)
+                if abs(z - self._mount_z) > 1e-7:
+                    self._mount_z = z
+                    self._tcp_prev = None            # the TCP moved with the mount: no painting along that jump
+                    moved = True
             active = self.tool_active()
             qs: List[Tuple[List[float], bool]] = []
             while self._samples:
@@ -484,7 +517,8 @@ class World:
                         name = "arm:" + (pb.getJointInfo(body, link, physicsClientId=c)[12].decode()
                                          if link >= 0 else "root")
                     else:
-                        name = "base" if link < 0 else ("base:wheel_%d" % link if link < 4 else "base:pedestal")
+                        name = "base" if link < 0 else ("base:wheel_%d" % link if link < self._n_wheel_links
+                                                        else "base:pedestal")
                     current.add((name, wid))
         new = current - self._contacts
         self._contacts = current

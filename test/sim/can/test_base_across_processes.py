@@ -13,7 +13,7 @@ import time
 import canopen
 import pytest
 
-from locem_bridge.common.mecanum import MecanumKinematics
+from locem_bridge.common.base_kinematics import MecanumKinematics
 from locem_bridge.sim.config import resolve_relative
 from locem_bridge.common.can_bus import open_bus
 

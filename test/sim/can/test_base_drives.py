@@ -16,7 +16,7 @@ from locem_bridge.sim.clock import SimClock
 from locem_bridge.sim.config import resolve_relative
 from locem_bridge.common.can_bus import open_bus
 from locem_bridge.sim.can.drives import DriveSet
-from locem_bridge.common.mecanum import MecanumKinematics
+from locem_bridge.common.base_kinematics import MecanumKinematics
 from locem_bridge.sim.world import World
 
 

@@ -1,4 +1,5 @@
-"""Base drive stand-ins: four CiA 402 servo drives (canopen ``LocalNode``) on a python-can bus.
+"""Base drive stand-ins: the CiA 402 wheel drives (canopen ``LocalNode``) on a python-can bus, and the lift's
+position-mode drive (:class:`Cia402PositionDrive`) on the same bus.
 
 Lifecycle: ``DriveSet(drives_cfg, eds_path, clock)`` -> :meth:`DriveSet.start` (opens the bus, boots every node:
 boot-up message, PRE-OPERATIONAL, heartbeat from 0x1017) -> the world calls :meth:`DriveSet.wheel_angles` each
@@ -43,7 +44,7 @@ import struct
 import threading
 import time
 from collections import deque
-from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
+from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
 import can
 import canopen
@@ -68,8 +69,12 @@ _SW = {NOT_READY: 0x00, SWITCH_ON_DISABLED: 0x40, READY: 0x21 | 0x10, SWITCHED_O
        ENABLED: 0x27 | 0x10, QUICK_STOP: 0x07 | 0x10, FAULT_REACTION: 0x0F, FAULT: 0x08}
 SW_REMOTE = 0x0200
 SW_TARGET_REACHED = 0x0400
+MODE_PROFILED_POSITION = 1
 MODE_PROFILED_VELOCITY = 3
 SUPPORTED_MODES = (MODE_PROFILED_VELOCITY,)
+SW_SETPOINT_ACK = 0x1000
+CW_NEW_SETPOINT = 0x10
+CW_HALT = 0x100
 NMT_OPERATIONAL = 5
 NMT_PRE_OPERATIONAL = 127
 
@@ -130,6 +135,8 @@ class Cia402Drive:
     target_units = _MotionParameter()
     accel_units = _MotionParameter()
     decel_units = _MotionParameter()
+    #: the modes of operation (0x6060) this drive accepts
+    supported_modes: Tuple[int, ...] = SUPPORTED_MODES
 
     def __init__(self, node_id: int, name: str, eds_path: str, cfg: Dict[str, Any], clock: Callable[[], float]) -> None:
         self.node_id = int(node_id)
@@ -272,9 +279,9 @@ class Cia402Drive:
             self._controlword(struct.unpack_from("<H", data)[0])
         elif index == 0x6060:
             mode = struct.unpack_from("<b", data)[0]
-            if mode not in SUPPORTED_MODES:
+            if mode not in self.supported_modes:
                 log.warning("drive %d: mode of operation %d refused, supported: %s", self.node_id, mode,
-                            SUPPORTED_MODES)
+                            self.supported_modes)
                 raise SdoAbortedError(0x06090030)   # value range of parameter exceeded
             with self._lock:
                 self.update()
@@ -651,13 +658,177 @@ class Cia402Drive:
                     "angle": self.angle, "error_code": self.error_code, "refused": self.refused}
 
 
+class Cia402PositionDrive(Cia402Drive):
+    """A linear axis drive (the lift) in PROFILED POSITION mode (0x6060 = 1): target position 0x607A (counts),
+    profile velocity 0x6081, acceleration 0x6083 and deceleration 0x6084 (velocity units [per s]); a new set-point
+    is taken on the rising edge of controlword bit 4 (acknowledged in statusword bit 12 while bit 4 stays set),
+    controlword bit 8 (halt) brakes the axis at the deceleration and holds it where it stops,
+    statusword bit 10 (target reached) is set once the axis stands at the set-point. Positions are ``angle`` (m of
+    axis travel from its zero), counts = ``counts_per_rad`` x m, velocity units = ``velocity_units_per_rad_s`` x
+    m/s (the wheel drive's keys, read per metre). Outside OPERATION ENABLED + position mode the axis brakes at
+    the deceleration and keeps its position (a lift holds its load: brake). The travel is limited to
+    ``[0, travel]`` (software limits); a set-point outside is clamped.
+
+    ``cfg`` adds ``travel`` (m) and ``start`` (m) to the wheel drive's keys; ``profile_velocity`` (m/s) is the
+    default of 0x6081."""
+
+    supported_modes = (MODE_PROFILED_POSITION,)
+    SUBSTEP = 0.0005          # s of sim time per integration step of the position profile
+
+    def __init__(self, node_id: int, name: str, eds_path: str, cfg: Dict[str, Any], clock: Callable[[], float]) -> None:
+        super().__init__(node_id, name, eds_path, cfg, clock)
+        self.travel = float(cfg["travel"])
+        self.profile_velocity_units = int(round(float(cfg["profile_velocity"]) * self.vel_scale))
+        self.target_counts = 0
+        self.setpoint = min(max(float(cfg.get("start", 0.0)), 0.0), self.travel)
+        self.angle = self.setpoint
+        self._ack = False
+        od = self.node.data_store
+        od.setdefault(0x6081, {})[0] = struct.pack("<I", self.profile_velocity_units)
+        self._mark()
+
+    def update(self) -> None:
+        with self._lock:
+            now = self._clock()
+            dt = now - self._t
+            if dt <= 0.0:
+                return
+            self._t = now
+            a = self.accel_units / self.vel_scale
+            d = self.decel_units / self.vel_scale
+            vmax = max(1e-6, self.profile_velocity_units / self.vel_scale)
+            active = self.state == ENABLED and self.mode == MODE_PROFILED_POSITION and self.online
+            x, v = self.angle, self.velocity
+            while dt > 1e-12:
+                h = min(self.SUBSTEP, dt)
+                dt -= h
+                if not active:                      # brake to a stand and hold
+                    dv = min(abs(v), d * h)
+                    v_new = v - math.copysign(dv, v) if v else 0.0
+                    x += 0.5 * (v + v_new) * h
+                    v = v_new
+                    continue
+                err = self.setpoint - x
+                if abs(err) < 1e-7 and abs(v) <= d * h:
+                    x, v = self.setpoint, 0.0
+                    continue
+                s = 1.0 if err > 0 else -1.0
+                if v * s < 0.0 or v * v / (2.0 * d) >= abs(err):
+                    v_new = v - math.copysign(min(abs(v), d * h), v)       # brake (toward the set-point)
+                    if v_new == 0.0 and abs(err) > 1e-7 and v * s >= 0.0:
+                        v_new = s * min(a * h, math.sqrt(2.0 * d * abs(err)))
+                else:
+                    v_new = s * min(vmax, abs(v) + a * h)
+                step = 0.5 * (v + v_new) * h
+                if (err - step) * err < 0.0 and abs(v_new) <= 2.0 * d * h + 1e-9:
+                    x, v = self.setpoint, 0.0                                # lands on it
+                    continue
+                x += step
+                v = v_new
+            self.angle = min(max(x, -0.01), self.travel + 0.01)
+            self.velocity = v
+
+    def states_at(self, times: List[float]) -> List[Tuple[float, float]]:
+        """``(velocity, position)`` now for every time asked (the position profile keeps no segment history; the
+        TPDO sampler asks for the current instant)."""
+        with self._lock:
+            self.update()
+            return [(self.velocity, self.angle) for _ in times]
+
+    def still_since(self, t: float) -> bool:
+        with self._lock:
+            return self.velocity == 0.0 and self.in_position()
+
+    def in_position(self) -> bool:
+        with self._lock:
+            return self.mode == MODE_PROFILED_POSITION and self.velocity == 0.0 and abs(self.angle - self.setpoint) < 1e-6
+
+    def statusword(self) -> int:
+        with self._lock:
+            self.update()
+            sw = _SW[self.state] | SW_REMOTE
+            if self.state == ENABLED and self.in_position():
+                sw |= SW_TARGET_REACHED
+            if self._ack:
+                sw |= SW_SETPOINT_ACK
+            return sw
+
+    def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        if index == 0x607A:
+            with self._lock:
+                self.target_counts = struct.unpack_from("<i", data)[0]
+            return
+        if index == 0x6081:
+            value = struct.unpack_from("<I", data)[0]
+            if value == 0:
+                raise SdoAbortedError(0x06090032)   # value too low
+            with self._lock:
+                self.update()
+                self.profile_velocity_units = value
+            return
+        if index == 0x60FF:
+            return
+        prev_cw = self._last_cw
+        super()._on_write(index, subindex, od, data)
+        if index == 0x6040:
+            cw = struct.unpack_from("<H", data)[0]
+            with self._lock:
+                if cw & CW_HALT and self.state == ENABLED and self.mode == MODE_PROFILED_POSITION:
+                    self.update()                    # halt: brake at the deceleration, hold where it stops
+                    d = self.decel_units / self.vel_scale
+                    stop_at = self.angle + math.copysign(self.velocity * self.velocity / (2.0 * d), self.velocity)
+                    self.setpoint = min(max(stop_at, 0.0), self.travel)
+                elif cw & CW_NEW_SETPOINT and not prev_cw & CW_NEW_SETPOINT and self.state == ENABLED \
+                        and self.mode == MODE_PROFILED_POSITION:
+                    self.update()
+                    self.setpoint = min(max(self.target_counts / self.pos_scale, 0.0), self.travel)
+                    self._ack = True
+                    log.info("drive %d (%s): new set-point %.4f m", self.node_id, self.name, self.setpoint)
+                elif not cw & CW_NEW_SETPOINT:
+                    self._ack = False
+            self._send_status_tpdo()
+
+    def _controlword(self, cw: int) -> None:
+        with self._lock:
+            self.update()
+            was = self.state
+        super()._controlword(cw)
+        with self._lock:
+            if was != ENABLED and self.state == ENABLED:
+                self.setpoint = self.angle           # enabling holds the axis where it stands
+
+    def _boot(self) -> None:
+        with self._lock:
+            self.update()
+            keep = self.angle
+        super()._boot()
+        with self._lock:
+            self.angle = keep                        # an absolute encoder: a reboot keeps the position
+            self.setpoint = keep
+            self._ack = False
+
+
+def lift_drive(robot: Dict[str, Any], eds_path: str, clock: Callable[[], float]) -> Cia402PositionDrive:
+    """The lift's drive stand-in from the robot file's ``robot`` section (``robot.lift``): axis zero at the bottom of
+    ``lift.range``, starting where ``arm.mount.xyz`` puts the arm."""
+    lift = robot["lift"]
+    drv = lift["drive"]
+    bottom, top = lift["range"]
+    cfg = {"velocity_units_per_rad_s": drv["velocity_units_per_m_s"], "counts_per_rad": drv["counts_per_m"],
+           "heartbeat_ms": drv["heartbeat_ms"], "tpdo_period_ms": drv["tpdo_period_ms"],
+           "profile_acceleration": lift["acceleration"], "profile_velocity": lift["max_velocity"],
+           "travel": top - bottom, "start": float(robot["arm"]["mount"]["xyz"][2]) - bottom}
+    return Cia402PositionDrive(drv["node_id"], "lift", eds_path, cfg, clock)
+
+
 def _i32(value: float) -> int:
     v = int(round(value))
     return max(-(2 ** 31), min(2 ** 31 - 1, v))
 
 
 class DriveSet:
-    """The four wheel drives of the base on one bus, plus the cyclic TPDO thread.
+    """The wheel drives of the base on one bus (``others``: further drives on it, e.g. the lift), plus the cyclic
+    TPDO thread.
 
     :param drives_cfg: ``robot.base.drives`` section (with ``max_wheel_speed`` from ``robot.base.limits``).
     :param eds_path: object dictionary of the drives.
@@ -673,7 +844,7 @@ class DriveSet:
 
     def __init__(self, drives_cfg: Dict[str, Any], eds_path: str, clock: Callable[[], float],
                  bus: Optional[can.BusABC] = None, max_wheel_speed: float = 1e9,
-                 heartbeat_process: Optional[bool] = None) -> None:
+                 heartbeat_process: Optional[bool] = None, others: Sequence[Cia402Drive] = ()) -> None:
         self.cfg = drives_cfg
         self.clock = clock
         self._bus = bus
@@ -682,6 +853,7 @@ class DriveSet:
         cfg["max_wheel_speed"] = max_wheel_speed
         self.drives = [Cia402Drive(w["node_id"], w["name"], eds_path, cfg, clock) for w in drives_cfg["wheels"]]
         self.polarity = [int(w["polarity"]) for w in drives_cfg["wheels"]]
+        self.others: List[Cia402Drive] = list(others)    # further drives on the bus (the lift), not wheels
         self.network: Optional[canopen.Network] = None
         self._thread: Optional[threading.Thread] = None
         self._stop = threading.Event()
@@ -718,7 +890,7 @@ class DriveSet:
                 raise
             self.network.send_periodic = self._send_periodic    # type: ignore[assignment]
         self.network.connect()                 # bus given: only starts the notifier
-        for d in self.drives:
+        for d in self.drives + self.others:
             d.attach(self.network)
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="cia402-tpdo", daemon=True)
@@ -738,7 +910,7 @@ class DriveSet:
             now = time.monotonic()
             sample_time = self.clock() if self.sync_sampling else None   # one instant for every drive
             burst = []
-            for d in self.drives:
+            for d in self.drives + self.others:
                 try:
                     d.check_consumer(now)
                     burst.append((d, d.due_tpdo_frames(now, sample_time)))
@@ -760,7 +932,7 @@ class DriveSet:
         if self._thread is not None:
             self._thread.join(2.0)
             self._thread = None
-        for d in self.drives:
+        for d in self.drives + self.others:
             d.detach()
         if self.heartbeat_process is not None:
             self.heartbeat_process.close()
@@ -774,13 +946,13 @@ class DriveSet:
         self.network = None
 
     def drive(self, node_id: int) -> Cia402Drive:
-        for d in self.drives:
+        for d in self.drives + self.others:
             if d.node_id == node_id:
                 return d
-        raise KeyError("no drive with node id %d, known: %s" % (node_id, [d.node_id for d in self.drives]))
+        raise KeyError("no drive with node id %d, known: %s" % (node_id, [d.node_id for d in self.drives + self.others]))
 
     def wheel_angles(self) -> List[float]:
-        """Wheel angles [fl, fr, rl, rr] in rad, positive = rolling forward (polarity applied)."""
+        """Wheel angles in the kinematics' wheel order (mecanum [fl, fr, rl, rr], differential [left, right]) in rad, positive = rolling forward (polarity applied)."""
         out = []
         for d, p in zip(self.drives, self.polarity):
             with d._lock:
