@@ -8,15 +8,22 @@ XML of the trees folder; every Turtle file of the ontology folder, parsed) and r
 to the PEMKRE node, which fails with the same kind of line.
 """
 import os
-from typing import Any, Mapping, Optional
+from typing import Any, Mapping, Optional, Sequence
 
 from .common.config_errors import ConfigError
+from .common.folders import folder_files
 
 
 def check_files(site: Optional[str] = None, robot: Optional[str] = None,
                 robot_overrides: Optional[Mapping[str, Any]] = None, params_file: Optional[str] = None,
-                trees_dir: Optional[str] = None, ontology_dir: Optional[str] = None) -> None:
-    """Load each file that is given; raise the first :class:`ConfigError` (``None`` skips a file)."""
+                trees_dir: Optional[str] = None, ontology_dir: Optional[str] = None,
+                extra_trees_dirs: Sequence[str] = (), extra_ontology_dirs: Sequence[str] = (),
+                job: Optional[str] = None) -> None:
+    """Load each file that is given; raise the first :class:`ConfigError` (``None`` skips a file).
+
+    ``extra_trees_dirs`` / ``extra_ontology_dirs``: an integrator's folders, loaded together with ``trees_dir`` /
+    ``ontology_dir`` as the nodes load them (a tree ID or an ontology IRI defined twice names both files).
+    ``job``: the job YAML; each step's ``process`` must be an abstract process of the loaded Turtle."""
     if site:
         from .sim.config import load_site
         load_site(site)
@@ -29,14 +36,21 @@ def check_files(site: Optional[str] = None, robot: Optional[str] = None,
         params = load_params(params_file)
     if trees_dir:
         from .hicem.xml_loader import TreeLibrary
-        if not os.path.isdir(trees_dir):
-            raise ConfigError("trees folder does not exist", file=trees_dir)
-        TreeLibrary(params.node_registry() if params is not None else None).load_directory(trees_dir)
+        TreeLibrary(params.node_registry() if params is not None else None).load_directories(
+            [trees_dir] + list(extra_trees_dirs))
+    processes = None
     if ontology_dir:
         from .pemkre.ontology import load_files
-        if not os.path.isdir(ontology_dir):
-            raise ConfigError("ontology folder does not exist", file=ontology_dir)
-        files = sorted(os.path.join(ontology_dir, f) for f in os.listdir(ontology_dir) if f.endswith(".ttl"))
-        if not files:
-            raise ConfigError("holds no Turtle files (*.ttl)", file=ontology_dir)
-        load_files(files)
+        files = folder_files([ontology_dir] + list(extra_ontology_dirs), ".ttl", "ontology folder")
+        for folder in [ontology_dir] + list(extra_ontology_dirs):
+            if not folder_files([folder], ".ttl", "ontology folder"):
+                raise ConfigError("holds no Turtle files (*.ttl)", file=os.path.abspath(folder))
+        from rdflib.namespace import RDF
+        from .pemkre.vocab import PROC
+        processes = {str(p) for p in load_files(files).schema.subjects(RDF.type, PROC.AbstractProcess)}
+    if job:
+        from .job.steps import load_steps
+        for i, step in enumerate(load_steps(job)):
+            if processes is not None and step.iri not in processes:
+                raise ConfigError("process <%s> is not an abstract process of the loaded Turtle" % step.iri,
+                                  file=job, key="steps[%d].process" % i, allowed=sorted(processes))

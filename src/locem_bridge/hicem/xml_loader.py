@@ -198,6 +198,24 @@ class TreeLibrary:
             raise TreeLoadError("no tree files (*.xml) in directory", directory, 0, "")
         return self.load_files(paths)
 
+    def load_directories(self, directories: List[str], exclude: Tuple[str, ...] = ("node_catalogue.xml",)) -> List[str]:
+        """Load the trees of several folders as one set (the package's ``trees/`` and an integrator's folders):
+        a tree may use a subtree of another folder (e.g. the shipped ``GuardedCommand``) without including it; a
+        BehaviorTree ID defined in two files is refused naming both; a folder that does not exist or holds no
+        ``*.xml`` is refused naming it; on any error nothing of them stays loaded."""
+        from ..common.config_errors import ConfigError
+        from ..common.folders import folder_files
+        paths: List[str] = []
+        for directory in directories:
+            try:
+                found = folder_files([directory], ".xml", "trees folder", exclude)
+            except ConfigError as exc:        # a missing folder, as the trees' own error type
+                raise TreeLoadError(exc.problem, exc.file, 0, "") from None
+            if not found:
+                raise TreeLoadError("no tree files (*.xml) in directory", os.path.abspath(directory), 0, "")
+            paths += [p for p in found if p not in paths]
+        return self.load_files(paths)
+
     def load_string(self, text: str, filename: str = "<string>", link: bool = True) -> List[str]:
         """Load one document; with ``link`` (default) an error leaves the library as it was before."""
         if not link:

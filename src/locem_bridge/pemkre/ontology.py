@@ -56,12 +56,15 @@ _LINE_RE = re.compile(r"line (\d+)", re.IGNORECASE)
 
 
 def load_files(paths: Sequence[str]) -> LoadedOntologies:
-    """Parse each file; raise :class:`OntologySyntaxError` naming the file (and line) on the first bad one."""
+    """Parse each file; raise :class:`OntologySyntaxError` naming the file (and line) on the first bad one, and
+    :class:`OntologyError` naming both files when two declare the same ``owl:Ontology`` IRI (e.g. an
+    integrator's folder holding a copy of a shipped file)."""
     if not paths:
         raise OntologyError("no ontology files given")
     schema, seed = Graph(), Graph()
     h_schema, h_seed = hashlib.sha256(), hashlib.sha256()
     prefixes: Dict[str, str] = {k: str(v) for k, v in PREFIXES.items()}
+    declared: Dict[str, str] = {}    # ontology IRI -> the file that declares it
     for path in paths:
         try:
             with open(path, "rb") as fh:
@@ -80,6 +83,12 @@ def load_files(paths: Sequence[str]) -> LoadedOntologies:
             text = re.sub(r"^at line \d+ of <[^>]*>:\s*", "", " ".join(msg))
             raise OntologySyntaxError("Turtle syntax error: %s" % text[:300], source=path,
                                       line=line) from None
+        for onto in g.subjects(RDF.type, OWL.Ontology):
+            if isinstance(onto, URIRef):        # one file per ontology IRI: an integrator's copy would mix in
+                first = declared.setdefault(str(onto), path)
+                if first != path:
+                    raise OntologyError("ontology IRI <%s> is declared here and in %s; give this file an "
+                                        "ontology IRI of its own" % (onto, first), source=path)
         is_seed = any(True for o in g.subjects(RDF.type, OWL.Ontology) if (o, IS_WORLD_SEED, Literal(True)) in g)
         target, h = (seed, h_seed) if is_seed else (schema, h_schema)
         for t in g:

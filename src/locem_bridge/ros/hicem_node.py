@@ -11,7 +11,8 @@ Interfaces (relative to the node, ``/hicem/...`` when the node is named ``hicem`
   (``~pemkre: embedded``, store at ``~pemkre_store``; for single-process runs and tests).
 
 Parameters: ``~params_file`` (HICEM parameters YAML; default ``config/hicem/plasterboard.yaml`` of the package),
-``~trees_dir``, ``~hdict_path`` (HDICT SQLite file; default ``$ROS_HOME/hicem_hdict.sqlite``), ``~locem_ns``
+``~trees_dir``, ``~extra_trees_dirs`` (an integrator's tree folders loaded beside it, separated by ``:`` or ``,``;
+their trees may use the shipped subtrees), ``~hdict_path`` (HDICT SQLite file; default ``$ROS_HOME/hicem_hdict.sqlite``), ``~locem_ns``
 (default ``locem``, resolved in the node's namespace), ``~pemkre``, ``~pemkre_ns``, ``~pemkre_store``,
 ``~status_period`` (s between STATUS polls), ``~pemkre_call_deadline`` (s one PEMKRE call is sent again while
 PEMKRE is away, default 10), ``~pemkre_wait`` (s the process waits for an away PEMKRE before it fails, default
@@ -27,6 +28,7 @@ from typing import Any, Dict
 import rospkg
 import rospy
 
+from locem_bridge.common.folders import split_folders
 from locem_bridge.hicem.config import load_params
 from locem_bridge.hicem.errors import ControllerError, HicemError, OperatorError
 from locem_bridge.hicem.executive import create_executive
@@ -60,13 +62,15 @@ class HicemNode:
     def __init__(self) -> None:
         share = package_share()
         trees_dir = param("trees_dir", os.path.join(share, "trees"))
+        # the package's trees plus an integrator's folders, one set (a tree ID defined twice names both files)
+        tree_dirs = [trees_dir] + split_folders(param("extra_trees_dirs", ""))
         params_file = param("params_file", os.path.join(share, "config", "hicem", "plasterboard.yaml"))
         hdict = os.path.expanduser(param("hdict_path", os.path.join(rospkg.get_ros_home(), "hicem_hdict.sqlite")))
         locem_ns = rospy.resolve_name(param("locem_ns", "locem"))
         # the files first: a bad one fails the node at once (one line), not after waiting for LOCEM and PEMKRE
         params = load_params(params_file)
         library = TreeLibrary(params.node_registry())
-        library.load_directory(trees_dir)
+        library.load_directories(tree_dirs)
         self.locem = RosLocemClient(locem_ns, wait_s=param("locem_wait", 10.0))
         # times each PEMKRE call into $LOCEM_CALL_LOG when set (bench/bench_job.py); otherwise the client itself
         self.pemkre = instrument_from_env(_pemkre_client(param("pemkre", "ros")))
@@ -86,7 +90,8 @@ class HicemNode:
         self._publish_state(self.ctrl.state())
         if param("resume", "auto") == "auto" and self.ctrl.resume_in_background():
             rospy.logwarn("hicem: resuming the process interrupted in the previous run (HDICT %s)", hdict)
-        rospy.loginfo("hicem: %d trees from %s, HDICT %s, LOCEM %s", len(self.ex.library.tree_ids()), trees_dir,
+        rospy.loginfo("hicem: %d trees from %s, HDICT %s, LOCEM %s", len(self.ex.library.tree_ids()),
+                      ", ".join(tree_dirs),
                       hdict, locem_ns)
 
     # -- topics ---------------------------------------------------------------------------------------------

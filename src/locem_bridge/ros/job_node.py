@@ -28,37 +28,14 @@ from typing import Any, Callable, Dict, List, Optional
 
 import rospy
 
-from locem_bridge.common.config_errors import ConfigError, read_yaml
 from locem_bridge.job.report import JobEnd, RunRecord, write_report
+from locem_bridge.job.steps import load_steps
 from locem_bridge.job.tracker import TERMINAL_PHASES, JobStep, JobTracker
 from locem_bridge.msg import HicemPrompt, HicemState
 from locem_bridge.srv import HicemStartProcess, JsonCall, PemkreQuery
 from locem_bridge.ros.calls import CallFailed, timed
 from locem_bridge.ros.params import package_share, param
 from locem_bridge.ros.startup import config_guard
-
-
-def load_steps(path: str, validate_lines: Any) -> List[JobStep]:
-    """The job file's steps; a bad file raises :class:`ConfigError` (one line: file, key, problem)."""
-    doc = read_yaml(path, ConfigError) or {}
-    if not isinstance(doc, dict) or not isinstance(doc.get("steps", []), list):
-        raise ConfigError("must hold a mapping with a list 'steps'", file=path, key="steps")
-    steps = []
-    for i, entry in enumerate(doc.get("steps", [])):
-        key = "steps[%d]" % i
-        if not isinstance(entry, dict) or not isinstance(entry.get("name"), str) or \
-                not isinstance(entry.get("process"), str):
-            raise ConfigError("needs a name and a process (IRI), found %r" % (entry,), file=path, key=key)
-        options = entry.get("options") or {}
-        if not isinstance(options, dict):
-            raise ConfigError("must be a mapping, found %r" % (options,), file=path, key=key + ".options")
-        options = dict(options)
-        if validate_lines not in ("", None) and "validateLines" in options:
-            options["validateLines"] = str(validate_lines).lower() in ("true", "1", "yes")
-        steps.append(JobStep(entry["name"], entry["process"], options))
-    if not steps:
-        raise ConfigError("lists no steps", file=path, key="steps")
-    return steps
 
 
 def kpi_rows(reply: Any) -> List[Dict[str, Any]]:

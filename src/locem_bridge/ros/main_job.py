@@ -8,6 +8,7 @@ outcome table. Exit status 0 when taping, spraying and sanding all succeeded, 1 
     python -m locem_bridge.ros.main_job                      # defaults: results/ in the current folder
     python -m locem_bridge.ros.main_job --validate-lines --reject wall_1_joint_2
     python -m locem_bridge.ros.main_job --launch-arg gui:=true
+    python -m locem_bridge.ros.main_job --ontologies my_use_case --trees my_use_case --job my_use_case/job.yaml
 
 Each run takes its own device addresses (loopback address, Modbus port, CAN channel; see
 :mod:`locem_bridge.job.runs`), so two runs on one machine never reach each other's devices; when none are left it
@@ -44,17 +45,47 @@ def launch_command(args: argparse.Namespace, port: int, entry: Optional[RunEntry
            "output:=%s" % ("screen" if args.verbose else "log")]
     if args.site:
         cmd.append("site:=%s" % os.path.abspath(args.site))
+    if args.robot:
+        cmd.append("robot:=%s" % resolve_robot(args.robot))
+    if args.job:
+        cmd.append("job:=%s" % os.path.abspath(args.job))
+    if args.ontologies:       # an integrator's folders, beside the package's (roslaunch args hold one text)
+        cmd.append("extra_ontology_dirs:=%s" % ":".join(os.path.abspath(d) for d in args.ontologies))
+    if args.trees:
+        cmd.append("extra_trees_dirs:=%s" % ":".join(os.path.abspath(d) for d in args.trees))
     if entry is not None:       # this run's own device addresses and run folder name
         cmd += ["robot_overrides:=%s" % json.dumps(entry.addresses.overrides(), sort_keys=True), "run:=%s" % entry.run]
     return cmd + list(args.launch_arg)
 
 
-def robot_file(launch_args: List[str]) -> str:
-    """The robot YAML the launch will read (``--launch-arg robot:=FILE`` or the package default)."""
+def robots_dir() -> str:
+    return os.path.join(package_share(), "config", "robots")
+
+
+def resolve_robot(robot: str) -> str:
+    """``--robot``'s value as a file: a path (it names a folder or ends in .yaml / .yml) or the name of a robot
+    file of the package's ``config/robots/`` (``rbkairos_ur10e``); an unknown name raises ConfigError listing
+    the names there."""
+    from locem_bridge.common.config_errors import ConfigError
+    if os.sep in robot or robot.endswith((".yaml", ".yml")):
+        return os.path.abspath(robot)
+    path = os.path.join(robots_dir(), robot + ".yaml")
+    if not os.path.isfile(path):
+        names = sorted(f[:-5] for f in os.listdir(robots_dir()) if f.endswith(".yaml"))
+        raise ConfigError("no robot of this name in %s (or give a robot YAML's path)" % robots_dir(),
+                          key="--robot %s" % robot, allowed=names)
+    return path
+
+
+def robot_file(launch_args: List[str], robot: str = "") -> str:
+    """The robot YAML the launch will read (``--launch-arg robot:=FILE``, ``--robot NAME|FILE`` or the package
+    default)."""
     for arg in reversed(launch_args):
         if arg.startswith("robot:="):
             return os.path.abspath(arg[len("robot:="):])
-    return os.path.join(package_share(), "config", "robots", "rbkairos_ur10e.yaml")    # the launch's default
+    if robot:
+        return resolve_robot(robot)
+    return os.path.join(robots_dir(), "rbkairos_ur10e.yaml")    # the launch's default
 
 
 def claim_addresses(args: argparse.Namespace, ports: List[int]) -> RunEntry:
@@ -62,8 +93,8 @@ def claim_addresses(args: argparse.Namespace, ports: List[int]) -> RunEntry:
     RunsError with a one-line reason)."""
     from locem_bridge.common.config_errors import ConfigError
     from locem_bridge.robot_file import load_robot
-    path = robot_file(list(args.launch_arg))
     try:
+        path = robot_file(list(args.launch_arg), args.robot)
         robot = load_robot(path)["robot"]      # the loader the nodes use (preflight has checked the file)
     except ConfigError as exc:
         raise RunsError("cannot read the device addresses: %s" % exc)
@@ -77,6 +108,7 @@ def preflight(args: argparse.Namespace, robot_overrides: Optional[Dict[str, Any]
     ontologies, job) with the nodes' own loaders; the one-line error, or None when all load (under a second)."""
     from locem_bridge.config_check import check_files
     from locem_bridge.common.config_errors import ConfigError
+    from locem_bridge.common.folders import split_folders
 
     share = package_share()
     launch = dict(a.split(":=", 1) for a in args.launch_arg if ":=" in a)
@@ -98,13 +130,14 @@ def preflight(args: argparse.Namespace, robot_overrides: Optional[Dict[str, Any]
             overrides = deep_merge(overrides, extra)
         check_files(site=os.path.abspath(args.site) if args.site else path("site", os.path.join(
                         share, "config", "sites", "default.yaml")),
-                    robot=robot_file(list(args.launch_arg)),
+                    robot=robot_file(list(args.launch_arg), args.robot),
                     robot_overrides=overrides,
                     params_file=path("params_file", os.path.join(share, "config", "hicem", "plasterboard.yaml")),
                     trees_dir=path("trees_dir", os.path.join(share, "trees")),
-                    ontology_dir=path("ontology_dir", os.path.join(share, "ontologies")))
-        from .job_node import load_steps
-        load_steps(path("job", os.path.join(share, "config", "jobs", "plasterboard.yaml")), "")
+                    ontology_dir=path("ontology_dir", os.path.join(share, "ontologies")),
+                    extra_trees_dirs=list(args.trees) + split_folders(launch.get("extra_trees_dirs")),
+                    extra_ontology_dirs=list(args.ontologies) + split_folders(launch.get("extra_ontology_dirs")),
+                    job=path("job", args.job or os.path.join(share, "config", "jobs", "plasterboard.yaml")))
     except ConfigError as error:
         return error.one_line()
     return None
@@ -155,6 +188,14 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--validate-lines", action="store_true", help="the operator validates every joint first")
     parser.add_argument("--reject", default="", help="comma list of joint ids the automatic operator rejects")
     parser.add_argument("--site", default="", help="site YAML (default: config/sites/default.yaml)")
+    parser.add_argument("--robot", default="", help="robot: a name under config/robots/ (e.g. rbkairos_ur10e) or a "
+                        "robot YAML's path (default: rbkairos_ur10e)")
+    parser.add_argument("--ontologies", action="append", default=[], metavar="DIR", help="a folder of your own "
+                        "Turtle files, loaded by PEMKRE beside the package's ontologies/ (repeat for several)")
+    parser.add_argument("--trees", action="append", default=[], metavar="DIR", help="a folder of your own tree "
+                        "XML files, loaded by HICEM beside the package's trees/ (repeat for several)")
+    parser.add_argument("--job", default="", metavar="FILE", help="job YAML: the processes run in order "
+                        "(default: config/jobs/plasterboard.yaml)")
     parser.add_argument("--hmi-port", type=int, default=0, help="operator web page port (default: a free one)")
     parser.add_argument("--port", type=int, default=0, help="ROS master port (default: a free one)")
     parser.add_argument("--timeout", type=float, default=900.0, help="wall seconds before the run is abandoned")

@@ -17,7 +17,9 @@ signal) and advertises the services; ``shutdown`` closes the store. Every reply 
 
 Parameters: ``~store_path`` (directory of the persistent store; default ``$ROS_HOME/pemkre_store``),
 ``~store`` (``journal`` default, ``rocksdb``, ``memory``), ``~fsync`` (journal: flush each change to disk),
-``~ontology_dir`` (default: the package's ``ontologies/``), ``~site_namespace``, ``~log_namespace``,
+``~ontology_dir`` (default: the package's ``ontologies/``), ``~extra_ontology_dirs`` (an integrator's folders of
+Turtle loaded beside it, separated by ``:`` or ``,``), ``~trees_dir`` and ``~extra_trees_dirs`` (the tree folders
+HICEM runs, for the robot's resource model), ``~site_namespace``, ``~log_namespace``,
 ``~reasoning_max_seconds``, ``~fresh`` (delete the store first: tests and demos only).
 """
 import gc
@@ -30,6 +32,7 @@ import rospkg
 import rospy
 
 from locem_bridge.common.config_errors import ConfigError
+from locem_bridge.common.folders import folder_files, split_folders
 from locem_bridge.pemkre import ProcessEngine
 from locem_bridge.pemkre.engine import load_json
 from locem_bridge.pemkre.errors import PemkreError
@@ -140,10 +143,15 @@ def main() -> None:
     rospy.init_node("pemkre")
     path = param("store_path", os.path.join(rospkg.get_ros_home(), "pemkre_store"))
     kind = param("store", "journal")
-    onto_dir = param("ontology_dir", os.path.join(package_share(), "ontologies"))
-    if not os.path.isdir(onto_dir):
-        raise ConfigError("ontology folder does not exist", file=onto_dir)
-    files = sorted(os.path.join(onto_dir, f) for f in os.listdir(onto_dir) if f.endswith(".ttl"))
+    # the package's Turtle plus an integrator's folders (a clash of ontology IRIs is refused naming both files)
+    onto_dirs = [param("ontology_dir", os.path.join(package_share(), "ontologies"))] + \
+        split_folders(param("extra_ontology_dirs", ""))
+    files = folder_files(onto_dirs, ".ttl", "ontology folder")
+    onto_dir = os.pathsep.join(onto_dirs)
+    # the tree folders HICEM runs (the package's plus the extra ones): the resource model's composite skills
+    tree_dirs = [param("trees_dir", os.path.join(package_share(), "trees"))] + \
+        split_folders(param("extra_trees_dirs", ""))
+    folder_files(tree_dirs, ".xml", "trees folder")
 
     def factory() -> ProcessEngine:
         store = open_store(kind, path, param("fsync", False), param("fresh", False))
