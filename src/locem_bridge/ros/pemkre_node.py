@@ -148,7 +148,9 @@ def main() -> None:
         split_folders(param("extra_ontology_dirs", ""))
     files = folder_files(onto_dirs, ".ttl", "ontology folder")
     onto_dir = os.pathsep.join(onto_dirs)
-    # the tree folders HICEM runs (the package's plus the extra ones): the resource model's composite skills
+    # the tree folders HICEM runs (the package's plus the extra ones): the resource model's composite skills are
+    # generated from the same ones (build_resource_model(robot, tree_dirs, ontology_files=files): an
+    # integrator's tree realizes a capability of an integrator's Turtle)
     tree_dirs = [param("trees_dir", os.path.join(package_share(), "trees"))] + \
         split_folders(param("extra_trees_dirs", ""))
     folder_files(tree_dirs, ".xml", "trees folder")
