@@ -44,6 +44,9 @@ def test_spot_taping_from_the_integrators_folders_on_the_default_site(tmp_path):
         data = json.load(handle)
     assert [(p["name"], p["status"], p["detail"]) for p in data["processes"]] == \
         [("spot_taping", "succeeded", "completed")], data["processes"]
+    settings = data["settings"]                 # the report says which folders and job the run read
+    assert (settings["extra_ontology_dirs"], settings["extra_trees_dirs"], settings["job"]) == \
+        (USE_CASE, USE_CASE, os.path.join(USE_CASE, "job.yaml")), settings
     outcome = data["outcome"]
     joints = outcome["joints"]
     print("measured: %s; wall clock %.0f s (process %.1f s)" % (

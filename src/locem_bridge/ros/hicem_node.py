@@ -8,7 +8,8 @@ Interfaces (relative to the node, ``/hicem/...`` when the node is named ``hicem`
 - it uses LOCEM's action ``<locem>/command_action`` for every command and its ``<locem>/command`` service for a
   periodic ``STATUS`` (LOCEM's heartbeat), listens to ``diagnostics`` and ``<locem>/status``, and talks to
   PEMKRE through ``<pemkre>/*`` services (``~pemkre: ros``) or an engine embedded in this process
-  (``~pemkre: embedded``, store at ``~pemkre_store``; for single-process runs and tests).
+  (``~pemkre: embedded``, store at ``~pemkre_store``, the package's Turtle plus ``~extra_ontology_dirs``; for
+  single-process runs and tests).
 
 Parameters: ``~params_file`` (HICEM parameters YAML; default ``config/hicem/plasterboard.yaml`` of the package),
 ``~trees_dir``, ``~extra_trees_dirs`` (an integrator's tree folders loaded beside it, separated by ``:`` or ``,``;
@@ -54,7 +55,12 @@ def _pemkre_client(kind: str) -> Any:
         from locem_bridge.pemkre.store_factory import open_store
         store_path = os.path.expanduser(param("pemkre_store", os.path.join(rospkg.get_ros_home(),
                                                                             "hicem_pemkre_store")))
-        return EngineClient(ProcessEngine(open_store("rocksdb", store_path)))
+        # the package's Turtle plus an integrator's folders, as the PEMKRE node loads them
+        from locem_bridge.common.folders import folder_files
+        from locem_bridge.pemkre.ontology import default_ontology_dir
+        files = folder_files([default_ontology_dir()] +
+                             split_folders(param("extra_ontology_dirs", "")), ".ttl", "ontology folder")
+        return EngineClient(ProcessEngine(open_store("rocksdb", store_path), files))
     raise HicemError("~pemkre must be 'ros' or 'embedded', got %r" % kind)
 
 
