@@ -45,3 +45,47 @@ def test_overrides_are_checked_with_the_file_and_named_as_their_source(tmp_path)
     robot = load_robot(path, {"compressor": {"port": 5021}})["robot"]
     assert robot["compressor"]["port"] == 5021 and robot["base"]["eds"] == str(tmp_path / "cia402_drive.eds")
     assert load_robot_config(path, {"compressor": {"port": 5021}})["compressor"] == robot["compressor"]
+
+
+# -- the second robot: a differential base and a lift ------------------------------------------------------------
+DIFF_YAML = os.path.join(os.path.dirname(default_robot_path()), "diffdrive_ur5e.yaml")
+
+
+def _bad_diff(tmp_path, mutate):
+    with open(DIFF_YAML) as handle:
+        data = yaml.safe_load(handle)
+    mutate(data)
+    folder = os.path.dirname(DIFF_YAML)
+    for eds in ("cia402_drive.eds", "cia402_lift.eds"):
+        (tmp_path / eds).write_bytes(open(os.path.join(folder, eds), "rb").read())
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
+def test_the_second_robot_file_loads_with_a_differential_base_and_a_lift():
+    robot = load_robot(DIFF_YAML)["robot"]
+    assert robot["base"]["kind"] == "differential" and len(robot["base"]["drives"]["wheels"]) == 2
+    assert robot["lift"]["range"] == [0.55, 1.45] and robot["lift"]["eds"].endswith("cia402_lift.eds")
+    assert "lift" not in load_robot()["robot"]                 # the shipped robot has none
+
+
+@pytest.mark.parametrize("mutate,line", [
+    (lambda d: d["robot"]["base"]["wheel"].update(half_track=0.26),
+     "robot.base.wheel.half_track: is not a key of a differential base (allowed: radius, width, separation)"),
+    (lambda d: d["robot"]["base"]["wheel"].pop("separation"), "robot.base.wheel.separation: missing"),
+    (lambda d: d["robot"]["base"]["drives"]["wheels"].append({"name": "third", "node_id": 3, "polarity": 1}),
+     "robot.base.drives.wheels: must list 2 wheels for a differential base, found 3 (allowed: left, right)"),
+    (lambda d: d["robot"]["base"].update(kind="omni"), "robot.base.kind: 'omni' is not allowed"),
+    (lambda d: d["robot"]["lift"]["drive"].update(node_id=2),
+     "robot.lift.drive.node_id: 2 is taken on the base's CAN bus"),
+    (lambda d: d["robot"]["lift"].update(range=[1.2, 0.6]), "robot.lift.range: [1.2, 0.6] is not a range of heights"),
+    (lambda d: d["robot"]["arm"]["mount"].update(xyz=[0.12, 0.0, 1.8]),
+     "robot.arm.mount.xyz: 1.8 is outside the lift's range"),
+    (lambda d: d["robot"]["lift"].update(speed=0.1), "robot.lift.speed: unknown key"),
+])
+def test_an_inconsistent_differential_base_or_lift_is_refused_naming_the_key(tmp_path, mutate, line):
+    path = _bad_diff(tmp_path, mutate)
+    with pytest.raises(RobotFileError) as caught:
+        load_robot(path)
+    assert line in str(caught.value), str(caught.value)
