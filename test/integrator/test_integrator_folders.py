@@ -189,3 +189,24 @@ def test_preflight_refuses_an_unknown_robot_name_listing_the_robots(tmp_path):
     line = _main_job(tmp_path, "--robot", "rbkairos_ur11e")
     assert line.startswith("--robot rbkairos_ur11e: no robot of this name in "), line
     assert re.search(r"\(allowed: .*rbkairos_ur10e", line), line
+
+
+def test_main_sh_arguments_become_the_launch_arguments(tmp_path):
+    from locem_bridge.ros.main_job import arguments, launch_command, preflight
+    other = tmp_path / "more_trees"
+    args = arguments(["--robot", "diffdrive_ur5e", "--ontologies", USE_CASE, "--trees", USE_CASE, "--trees",
+                      str(other), "--job", os.path.join(USE_CASE, "job.yaml")])
+    cmd = launch_command(args, 11311)
+    robot = [a for a in cmd if a.startswith("robot:=")]
+    assert len(robot) == 1 and robot[0].endswith(os.path.join("config", "robots", "diffdrive_ur5e.yaml")), cmd
+    assert os.path.isfile(robot[0][len("robot:="):])
+    assert "job:=%s" % os.path.join(USE_CASE, "job.yaml") in cmd, cmd
+    assert "extra_ontology_dirs:=%s" % USE_CASE in cmd, cmd
+    assert "extra_trees_dirs:=%s:%s" % (USE_CASE, other) in cmd, cmd           # one text, ':'-separated
+    assert preflight(args) == "%s: trees folder does not exist" % other        # every folder checked
+    other.mkdir()
+    (other / "EMPTY_CHECK.xml").write_text('<root BTCPP_format="4">\n  <BehaviorTree ID="EMPTY_CHECK">\n'
+                                           '    <AlwaysSuccess/>\n  </BehaviorTree>\n</root>\n')
+    assert preflight(args) is None                                              # the whole set loads
+    robot_file = tmp_path / "robots" / "my_robot.yaml"                          # a path is taken as it is
+    assert launch_command(arguments(["--robot", str(robot_file)]), 11311).count("robot:=%s" % robot_file) == 1

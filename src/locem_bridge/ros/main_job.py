@@ -180,7 +180,8 @@ def _follow(proc: "subprocess.Popen[str]", verbose: bool, found: Dict[str, str],
     stop.set()
 
 
-def main(argv: Optional[List[str]] = None) -> int:
+def arguments(argv: Optional[List[str]] = None) -> argparse.Namespace:
+    """The command line of :func:`main` (``tools/main.sh``'s arguments)."""
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--results-dir", default="results", help="folder receiving one subfolder per run")
     parser.add_argument("--time-scale", type=float, default=10.0, help="sim seconds per wall second (default 10: the "
@@ -203,7 +204,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--verbose", action="store_true", help="show every node's output")
     parser.add_argument("--max-runs", type=int, default=8, help="runs at once on this machine, each on its own "
                         "device addresses (default 8)")
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    args = arguments(argv)
     started = time.monotonic()
     problem = preflight(args)
     if problem:
