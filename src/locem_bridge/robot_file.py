@@ -56,7 +56,7 @@ ROBOT_KEYS: Dict[str, Sequence[str]] = {
     "robot.arm.controller": ("host", "dashboard_port", "script_port", "rtde_port", "rtde_frequency",
                              "watchdog_frequency"),
     "robot.tools": TOOL_NAMES,
-    "tool": ("tcp", "mass", "cog", "switch", "body"),
+    "tool": ("kind", "tcp", "mass", "cog", "switch", "body"),
     "robot.tools.taping_tool": ("tape_width",),
     "robot.tools.spray_gun": ("spray_half_angle", "standoff"),
     "robot.tools.sander": ("pad_radius",),
@@ -305,6 +305,8 @@ def _validate(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str,
     for name in TOOL_NAMES:
         tp = "robot.tools.%s" % name
         tool = mapping(tools, name, "robot.tools", tuple(K["tool"]) + tuple(K[tp]))
+        # the tool's ppr:Tool class in snake_case (spray_gun -> ppr:SprayGun), checked by the resource model
+        tool["kind"] = get(tool, "kind", tp, str, default=name)
         tool["tcp"] = vec(tool, "tcp", tp, 6)
         tool["mass"] = get(tool, "mass", tp, float, lo=0.0, hi=12.5)
         tool["cog"] = vec(tool, "cog", tp, 3, default=[0.0, 0.0, 0.0])

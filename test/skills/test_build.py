@@ -1,0 +1,214 @@
+"""The resource model of the shipped robot, generated from its robot file, the LOCEM registry and trees/."""
+import glob
+import math
+import os
+import re
+
+import pytest
+from rdflib import Graph, Literal, URIRef
+from rdflib import namespace
+from rdflib.namespace import RDF
+
+from locem_bridge.bridges.commands_base import MAP_EXTENT
+from locem_bridge.pemkre.vocab import PLB, PPR, PROC, SK
+from locem_bridge.skills import build_resource_model
+from locem_bridge.skills.units import QUDT_UNIT, UNITS
+
+from skills_testkit import ONTOLOGIES, ROBOT, TREES
+
+
+def _locem_node_registry():
+    """The registry exactly as locem_node builds it for the robot file (LocemCore + build_robot + install)."""
+    from locem_bridge.bridges.config import load_robot_config
+    from locem_bridge.bridges.robot import build_robot
+    from locem_bridge.locem.core import LocemCore
+
+    core = LocemCore()
+    robot = build_robot(load_robot_config(ROBOT))
+    try:
+        for command_set in robot.command_sets:
+            core.install(command_set)
+        return {s.name: (s, core.registry.handler(s.name) is not None) for s in core.registry.specs()}
+    finally:
+        robot.close()
+        core.close()
+
+
+def test_every_registered_command_is_a_basic_skill_with_its_arguments_units_and_ranges(shipped_model):
+    registry = _locem_node_registry()
+    basic = {s.name: s for s in shipped_model.basic_skills}
+    assert set(basic) == set(registry)
+    assert len(basic) >= 36
+    for name, (spec, served) in registry.items():
+        skill = basic[name]
+        assert skill.offered == served and served
+        assert [p.name for p in skill.parameters] == [a.name for a in spec.args]
+        for p, a in zip(skill.parameters, spec.args):
+            assert (p.unit, p.minimum, p.maximum, p.required, p.keyword_only) == (
+                a.unit, a.minimum, a.maximum, a.required, a.keyword_only), (name, a.name)
+            assert p.choices == tuple(a.choices)
+            if not a.required:
+                assert p.default == a.default
+        # the resources it occupies, and the device of its category (STOP_ARM, GET_POSE occupy none)
+        expected = {r for r in spec.resources if r != "tool"} | ({spec.category} & {"arm", "base", "compressor"})
+        assert skill.devices == tuple(sorted(expected)), name
+    # the ranges a caller sees are the ones LOCEM enforces
+    goto = shipped_model.skill("GOTO", "basic")
+    assert goto.capability == str(SK.cap_DriveBase) and goto.devices == ("base",)
+    x = goto.parameters[0]
+    assert (x.name, x.datatype, x.unit, x.minimum, x.maximum, x.required) == (
+        "x", "double", "m", -MAP_EXTENT, MAP_EXTENT, True)
+    spray = shipped_model.skill("SPRAY_AREA", "basic")
+    assert spray.devices == ("arm", "compressor")
+    pressure = [p for p in spray.parameters if p.name == "pressure"][0]
+    assert (pressure.unit, pressure.default, pressure.keyword_only) == ("bar", 2.5, True)
+    mount = shipped_model.skill("MOUNT_TOOL", "basic")
+    assert mount.parameters[0].choices == ("taping_tool", "spray_gun", "sander")
+    assert mount.capability == str(SK.cap_MountToolByOperator)
+    assert shipped_model.skill("WALL_READY", "basic").capability == str(SK.cap_ArmToWallReady)
+    assert set(shipped_model.skill("HOME", "basic").interfaces) == {"service", "action"}
+
+
+def _action_trees():
+    out = []
+    for path in sorted(glob.glob(os.path.join(TREES, "*.xml"))):
+        text = open(path, encoding="utf-8").read()
+        m = re.search(r'main_tree_to_execute="([A-Z_]+)"', text)
+        if m and m.group(1) != "BASIC_SKILL":          # BASIC_SKILL runs basic skills; it is no skill itself
+            out.append(m.group(1))
+    return out
+
+
+def test_every_action_tree_is_a_composite_skill_realizing_its_task_types_capability(shipped_model):
+    trees = _action_trees()
+    assert len(trees) >= 10
+    composite = {s.name: s for s in shipped_model.composite_skills}
+    assert set(trees) == set(composite)
+    onto = Graph()
+    for f in ("plasterboard.ttl", "skill.ttl"):
+        onto.parse(os.path.join(ONTOLOGIES, f), format="turtle")
+    for task_type in onto.subjects(PROC.actionType, None):
+        action = str(onto.value(task_type, PROC.actionType))
+        required = onto.value(task_type, SK.requiresCapability)
+        # the tree named like the action type realizes exactly what the task type requires
+        assert composite[action].capability == str(required), action
+        assert composite[action].offered, action
+
+
+@pytest.mark.parametrize("tree, params, invokes, operator, devices", [
+    ("GET_TOOL", [("tool", True)], {"WALL_READY", "HOME", "MOUNT_TOOL", "GET_POSE", "GOTO"}, True, ("arm", "base")),
+    ("TAPE_LINE", [("line", True)], {"APPLY_TAPE", "WALL_READY", "GET_POSE", "GOTO"}, False, ("arm", "base")),
+    ("VALIDATE_TAPE_LINE", [("line", True)], {"APPLY_TAPE_START", "WALL_READY", "GET_POSE", "GOTO"}, True,
+     ("arm", "base")),
+    ("SPRAY_AREA", [("area", True)], {"SPRAY_AREA", "WALL_READY", "GET_POSE", "GOTO"}, False,
+     ("arm", "base", "compressor")),
+    ("GO_HOME", [("location", False)], {"WALL_READY", "HOME", "GET_POSE", "GOTO"}, False, ("arm", "base")),
+    ("SCAN", [], {"SCAN"}, False, ("scanner",)),
+    ("RECOVER", [], {"RESET_ARM", "WALL_READY"}, True, ("arm",)),
+])
+def test_composite_skill_params_invoked_commands_and_operator_come_from_the_tree(shipped_model, tree, params, invokes,
+                                                                                  operator, devices):
+    skill = shipped_model.skill(tree, "composite")
+    assert [(p.name, p.required) for p in skill.parameters] == params
+    assert set(skill.invokes) == invokes
+    assert skill.involves_operator is operator
+    assert skill.devices == devices
+    assert skill.source == os.path.join(TREES, tree + ".xml")
+
+
+def test_devices_tools_mount_chain_reach_and_kinematics_come_from_the_robot_file(shipped_model):
+    m = shipped_model
+    assert m.robot_name == "rbkairos_ur10e" and m.kinematics == "mecanum" and m.namespace == "robot_1"
+    assert {d.name: d.kind for d in m.devices} == {"base": "base", "arm": "arm", "compressor": "compressor",
+                                                   "scanner": "scanner"}
+    arm = m.device("arm")
+    assert (arm.model, arm.protocol, arm.reach) == ("ur10e", "ur_rtde", 1.3)
+    assert m.device("base").kinematics == "mecanum" and m.device("base").protocol == "cia402"
+    # the chain TCP -> flange -> arm -> pedestal -> base_footprint -> base, offsets adding up to the file's numbers
+    frames = {"frame_" + f.name: f for f in m.frames}
+    chain, node, z = [], "frame_tcp_spray_gun", 0.0
+    tool = m.tool("spray_gun")
+    frames["frame_" + tool.tcp.name] = tool.tcp
+    while node:
+        chain.append(node)
+        if node in frames:
+            f = frames[node]
+            node, z = f.mounted_on, z + (f.xyz[2] if f.xyz else 0.0)
+        else:
+            d = m.device(node[len("device_"):])
+            node, z = d.mounted_on, z + d.xyz[2]
+    assert chain == ["frame_tcp_spray_gun", "frame_flange", "device_arm", "frame_pedestal", "frame_base_footprint",
+                     "device_base"]
+    assert z == pytest.approx(0.18 + 0.60 + 0.45)      # tcp z + pedestal + chassis top: flange offsets vary
+    assert {t.name: t.tool_class for t in m.tools} == {"taping_tool": str(PPR.TapingTool),
+                                                       "spray_gun": str(PPR.SprayGun), "sander": str(PPR.Sander)}
+    assert {t.name: t.length for t in m.tools} == pytest.approx({"taping_tool": 0.22, "spray_gun": 0.18,
+                                                                 "sander": 0.14})
+
+
+def test_a_tcp_rotation_vector_becomes_roll_pitch_yaw(robot_copy):
+    text = open(robot_copy).read().replace("tcp: [0.0, 0.0, 0.14, 0.0, 0.0, 0.0]",
+                                          "tcp: [0.0, 0.0, 0.14, 0.0, 0.0, 1.5708]")
+    open(robot_copy, "w").write(text)
+    tcp = build_resource_model(robot_copy, [TREES]).tool("sander").tcp
+    assert tcp.rpy == pytest.approx((0.0, 0.0, 1.5708)) and tcp.xyz == pytest.approx((0.0, 0.0, 0.14))
+
+
+def test_the_graph_says_what_the_records_say(shipped_model):
+    g = shipped_model.to_graph()
+    robot = shipped_model.robot_iri
+    assert robot == URIRef("https://locem-bridge.example.org/robot/rbkairos_ur10e/robot")
+    assert (robot, RDF.type, PPR.Robot) in g
+    provided = set(g.objects(robot, SK.providesSkill))
+    assert len(provided) == len(shipped_model.skills()) == 46
+    assert len(set(g.subjects(RDF.type, SK.BasicSkill))) == 36
+    assert len(set(g.subjects(RDF.type, SK.CompositeSkill))) == 10
+    # tools keep the local names HICEM and LOCEM use, with the classes PEMKRE's parameter queries bind
+    for name, cls in (("taping_tool", PPR.TapingTool), ("spray_gun", PPR.SprayGun), ("sander", PPR.Sander)):
+        assert (shipped_model.iri(name), RDF.type, cls) in g
+        assert (robot, SK.hasTool, shipped_model.iri(name)) in g
+    rows = list(g.query(
+        "SELECT ?min ?max ?unit ?dt WHERE { ?s sk:skillName 'GOTO' ; sk:hasParameter ?p . ?p sk:parameterName 'x' ; "
+        "sk:minValue ?min ; sk:maxValue ?max ; sk:unit ?unit ; sk:datatype ?dt }", initNs={"sk": SK}))
+    assert rows == [(Literal(-MAP_EXTENT, datatype=namespace.XSD.double), Literal(MAP_EXTENT, datatype=namespace.XSD.double),
+                     URIRef(QUDT_UNIT + "M"), namespace.XSD.double)]
+    get_tool = shipped_model.iri("skill_tree_GET_TOOL")
+    assert (get_tool, SK.realizesCapability, PLB.cap_GetTool) in g
+    assert (PLB.cap_GetTool, SK.isRealizedBySkill, get_tool) in g
+    assert (get_tool, SK.involvesOperator, Literal(True)) in g
+    assert (get_tool, SK.invokesSkill, shipped_model.iri("skill_MOUNT_TOOL")) in g
+    assert (get_tool, SK.hasStateMachine, SK.ProgramStateMachine) in g
+    assert (robot, SK.providesCapability, PLB.cap_TapeJoint) in g
+    # every unit in the graph is a QUDT unit the table knows
+    units = {str(u) for u in g.objects(None, SK.unit)}
+    assert units and units <= {QUDT_UNIT + u for u in UNITS.values() if u}
+
+
+def test_a_tree_invoking_a_command_this_robot_does_not_register_is_kept_but_not_offered(trees_copy):
+    with open(os.path.join(trees_copy, "GET_TOOL.xml"), encoding="utf-8") as handle:
+        text = handle.read()
+    text = text.replace('command="MOUNT_TOOL {tool}"', 'command="CHANGE_TOOL tool={tool}"')
+    with open(os.path.join(trees_copy, "GET_TOOL.xml"), "w", encoding="utf-8") as handle:
+        handle.write(text)
+    model = build_resource_model(ROBOT, [trees_copy])
+    skill = model.skill("GET_TOOL", "composite")
+    assert not skill.offered
+    assert skill.reason == "invokes CHANGE_TOOL, which this robot's LOCEM does not register"
+    assert skill.capability == str(PLB.cap_GetTool)
+    g = model.to_graph()
+    node = model.iri("skill_tree_GET_TOOL")
+    assert (model.robot_iri, SK.providesSkill, node) not in g
+    assert (node, SK.notOfferedBy, model.robot_iri) in g
+    assert str(g.value(node, SK.notOfferedReason)) == skill.reason
+    # the robot still offers every other skill, and no longer claims the capability only that tree realized
+    assert (model.robot_iri, SK.providesCapability, PLB.cap_GetTool) not in g
+    assert len(model.offered_skills()) == len(model.skills()) - 1
+
+
+def test_building_the_model_starts_and_connects_nothing(shipped_model):
+    # the stand-ins do not run in this test: building succeeded without a UR controller, Modbus server or CAN bus,
+    # and no thread of a backend was left behind
+    import threading
+    names = [t.name for t in threading.enumerate()]
+    assert not [n for n in names if re.search(r"rtde|modbus|canopen|cia402", n, re.I)], names
+    assert math.isfinite(shipped_model.device("arm").reach)
