@@ -212,3 +212,21 @@ def test_building_the_model_starts_and_connects_nothing(shipped_model):
     names = [t.name for t in threading.enumerate()]
     assert not [n for n in names if re.search(r"rtde|modbus|canopen|cia402", n, re.I)], names
     assert math.isfinite(shipped_model.device("arm").reach)
+
+
+def test_the_second_robot_has_its_own_base_kinematics_reach_lift_and_lift_skill():
+    m = build_resource_model(os.path.join(os.path.dirname(ROBOT), "diffdrive_ur5e.yaml"), [TREES])
+    assert m.robot_name == "diffdrive_ur5e" and m.kinematics == "differential"
+    assert m.device("base").kinematics == "differential" and m.device("arm").reach == 0.85
+    # the arm rides on the lift, the lift on the pedestal column
+    assert (m.device("arm").mounted_on, m.device("lift").mounted_on) == ("device_lift", "frame_pedestal")
+    lift = m.skill("LIFT", "basic")
+    assert lift.capability == str(SK.cap_Lift) and lift.devices == ("lift",) and lift.offered
+    assert (lift.parameters[0].name, lift.parameters[0].unit) == ("z", "m")
+    g = m.to_graph()
+    assert (m.iri("device_base"), SK.kinematics, SK.DifferentialDrive) in g
+    assert (m.robot_iri, SK.providesCapability, SK.cap_Lift) in g
+    # two robots' models share one store without clashing: every subject is under its own robot's IRI
+    shipped = build_resource_model(ROBOT, [TREES]).to_graph()
+    both = {s for s in g.subjects() if "/robot/" in str(s)} & {s for s in shipped.subjects() if "/robot/" in str(s)}
+    assert both == set()

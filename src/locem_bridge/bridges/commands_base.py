@@ -80,7 +80,7 @@ LIFT = CommandSpec(
     args=(Arg.number("z", "m", 0.0, LIFT_EXTENT, "arm mount height above the floor (base_footprint)"),),
     resources=frozenset({"lift"}), category="lift", result=(("height", "m reached"), ("error", "m from the goal"),
                                                             ("duration_s", "seconds")),
-    timeout=120.0)
+    timeout=120.0, capability="sk:cap_Lift")
 
 BASE_SPECS = (GOTO, GOTO_TAG, MOVE_BASE_REL, STOP_BASE, GET_POSE, SET_POSE, RESET_BASE)
 LIFT_SPECS = (LIFT,)

@@ -24,6 +24,7 @@ from rdflib.namespace import RDF, RDFS
 
 from ..common.config_errors import ConfigError
 from ..common.geometry import rotvec_to_matrix
+from ..bridges.robot import ALL_DEVICES
 from ..common.paths import shipped_dir
 from ..pemkre.vocab import PLB, PPR, SK
 from .errors import SkillModelError
@@ -32,7 +33,6 @@ from .model import BASIC, COMPOSITE, DEVICE_CLASSES, KINEMATICS, Device, Frame, 
 from .trees import read_tree_skills
 from .units import UNITS
 
-ALL_DEVICES = ("arm", "compressor", "base", "scanner")
 #: resources a command may occupy that are not devices of their own (the tool on the flange)
 NON_DEVICE_RESOURCES = ("tool",)
 #: reach of UR arm models (flange from the base axis, m; manufacturer data) when robot.arm has no `reach`
@@ -201,9 +201,10 @@ def _hardware(model: ResourceModel, robot: Mapping[str, Any], devices: Sequence[
         model.frames.append(Frame("pedestal", footprint, ped_xyz, (0.0, 0.0, 0.0)))
         arm_parent, parent_xyz = "frame_pedestal", ped_xyz
     lift = robot.get("lift")
-    if isinstance(lift, Mapping):
-        model.devices.append(Device("lift", "lift", protocol=str(lift.get("protocol", lift.get("profile", ""))),
-                                    mounted_on=arm_parent))
+    if isinstance(lift, Mapping) and "lift" in devices:
+        # the lift's carriage rides on the pedestal column; offsets below hold with the lift at its lowest
+        model.devices.append(Device("lift", "lift", protocol=str(lift.get("protocol", "cia402")),
+                                    mounted_on=arm_parent, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)))
         arm_parent = "device_lift"
     arm = robot["arm"]
     model_name = str(arm.get("model", ""))
@@ -215,7 +216,7 @@ def _hardware(model: ResourceModel, robot: Mapping[str, Any], devices: Sequence[
         reach = ARM_REACH[model_name.lower()]
     mount = arm["mount"]
     xyz = _vec3(mount["xyz"])
-    if arm_parent == "frame_pedestal":
+    if arm_parent in ("frame_pedestal", "device_lift"):
         xyz = (xyz[0] - parent_xyz[0], xyz[1] - parent_xyz[1], xyz[2] - parent_xyz[2])
     model.devices.append(Device("arm", "arm", protocol=str(arm.get("backend", "ur_rtde")), model=model_name,
                                 mounted_on=arm_parent, xyz=xyz, rpy=_vec3(mount["rpy"]), reach=float(reach)))
