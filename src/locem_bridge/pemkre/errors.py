@@ -120,3 +120,17 @@ class WorldUpdateError(PemkreError, ValueError):
     """A world-state update (e.g. a SCAN result) does not have the contracts.md shape."""
 
     code = "WORLD_UPDATE"
+
+
+class UnmatchableProcessError(PemkreError):
+    """A process has a task no skill of this robot realizes (``start_process`` refuses it, nothing is written).
+
+    The message names every such task node and why no skill fits; ``match`` holds the whole
+    :class:`~locem_bridge.pemkre.matching.ProcessMatch`.
+    """
+
+    code = "UNMATCHABLE_PROCESS"
+
+    def __init__(self, message: str, match: object = None) -> None:
+        super().__init__(message)
+        self.match = match

@@ -35,12 +35,14 @@ G_SCHEMA_INFERRED = GRAPHS["schema-inferred"]
 G_WORLD = GRAPHS.world
 #: Specific processes and task executions: the execution log.
 G_LOG = GRAPHS.log
+#: The robots' resource models (skills, devices, tools; generated from the robot files), replaced as a whole.
+G_RESOURCES = GRAPHS.resources
 #: Inferences about world and log instances, maintained incrementally.
 G_ABOX_INFERRED = GRAPHS["abox-inferred"]
 #: Bookkeeping (ontology hash, counters).
 G_META = GRAPHS.meta
 
-ASSERTED_GRAPHS: Tuple[URIRef, ...] = (G_ONTOLOGY, G_WORLD, G_LOG)
+ASSERTED_GRAPHS: Tuple[URIRef, ...] = (G_ONTOLOGY, G_WORLD, G_LOG, G_RESOURCES)
 INFERRED_GRAPHS: Tuple[URIRef, ...] = (G_SCHEMA_INFERRED, G_ABOX_INFERRED)
 
 
