@@ -28,6 +28,7 @@ clock) and ``reasoning_max_triples``: a change that hits a bound -- a world upda
 good state and the same call can be repeated.
 """
 import datetime
+import hashlib
 import json
 import logging
 import secrets
@@ -44,13 +45,15 @@ from ..common.next_action import NextAction
 from ..common.task_status import TASK_STATUSES
 from .errors import (BindingError, ConditionError, InvalidParameterError, InvalidStatusError, OntologyError,
                      ProcessModelError, QueryError, TaskStateError, UnknownProcessError, UnknownQueryError,
-                     UnknownTaskError)
+                     UnknownTaskError, UnmatchableProcessError)
+from .matching import ARG, SKILL, TEMPLATE, MatchingQueries, NodeMatch, ProcessMatch, SkillCatalog, match_process
 from .ontology import (AbstractProcess, FlowNode, ProcessModel, Transition, compile_model, default_ontology_files,
                        load_files)
 from .reasoning import IncrementalReasoner, SchemaRules, bounded_closure, inferred_part
-from .store import (G_LOG, G_META, G_ONTOLOGY, G_SCHEMA_INFERRED, G_WORLD, ChangeSet, QueryResult, TripleStore)
+from .store import (G_LOG, G_META, G_ONTOLOGY, G_RESOURCES, G_SCHEMA_INFERRED, G_WORLD, ChangeSet, QueryResult,
+                    TripleStore)
 from .terms import check_iri, local_name, parameter_document, to_term
-from .vocab import LOG, META, PROC, SITE
+from .vocab import LOG, META, PROC, SITE, SK
 from .world import scan_changes
 
 _log = logging.getLogger(__name__)
@@ -73,6 +76,9 @@ _P_sequenceNumber = PROC.sequenceNumber
 _P_startedAt = PROC.startedAt
 _P_status = PROC.status
 _P_taskCount = PROC.taskCount
+_P_TaskExecution = PROC.TaskExecution
+_S_realizedBy = SK.realizedBy
+_S_expandedFrom = SK.expandedFrom
 
 MAX_DETAIL_CHARS = 1_000_000
 _STORED_DETAIL_CHARS = 2000
@@ -83,6 +89,8 @@ MAX_REQUEST_ID_CHARS = 200
 #: Where request ids are remembered: bookkeeping, not the execution log (the KPIs never see them).
 _M_statusRequest = META.statusRequestId
 _M_startRequest = META.startRequestId
+#: The hash of the resource model stored in G_RESOURCES (a model loaded again unchanged writes nothing).
+_M_resourceHash = META.resourceModelHash
 #: Schema closures by ontology hash, shared by the engines of one process (a closure is never modified).
 _CLOSURE_CACHE: Dict[str, Graph] = {}
 
@@ -151,6 +159,28 @@ class _State:
     task_count: int
 
 
+def _grounded(graph: Graph) -> List[Tuple[Node, Node, Node]]:
+    """The triples of ``graph`` with blank nodes replaced by stable IRIs (the store takes no blank nodes)."""
+    if not any(isinstance(x, BNode) for t in graph for x in t):
+        return list(graph)
+    from rdflib.compare import to_canonical_graph
+
+    canonical = to_canonical_graph(graph)
+    return list(canonical.skolemize(authority=str(LOG).rstrip("/").rsplit("/", 1)[0], basepath="/resource-node/"))
+
+
+def _argument_literal(text: str) -> Literal:
+    """A template step's literal argument: an integer or a number typed as such, else text."""
+    try:
+        return Literal(int(text))
+    except ValueError:
+        pass
+    try:
+        return Literal(float(text), datatype=XSD.double)
+    except ValueError:
+        return Literal(text)
+
+
 def _now_literal(t: float) -> Literal:
     return Literal(datetime.datetime.fromtimestamp(t, tz=datetime.timezone.utc).isoformat(), datatype=XSD.dateTime)
 
@@ -175,8 +205,10 @@ class ProcessEngine:
                  reasoning_max_triples: int = 500_000, schema_max_seconds: float = 300.0,
                  schema_max_triples: int = 2_000_000, max_walk_steps: int = 10_000,
                  allow_unsupported_owl: bool = False,
-                 reasoning_clock: Callable[[], float] = time.monotonic) -> None:
+                 reasoning_clock: Callable[[], float] = time.monotonic,
+                 resource_model: Optional[Graph] = None, robot: Optional[str] = None) -> None:
         self.store = store
+        self._schema_bounds = (schema_max_seconds, schema_max_triples)
         self.site = Namespace(str(check_iri(site_namespace, "site namespace"))) if site_namespace else SITE
         self.log_ns = Namespace(str(check_iri(log_namespace, "log namespace"))) if log_namespace else LOG
         self.clock = clock
@@ -227,6 +259,14 @@ class ProcessEngine:
             cs.add.append((META.ontology, META.seedHash, Literal(loaded.seed_hash), G_META))
             store.apply(cs)
         self._active: Optional[URIRef] = self._find_running()
+        # capability matching (pemkre/matching.py): off until a resource model is loaded
+        self._matching = False
+        self._robot: Optional[URIRef] = check_iri(robot, "robot IRI") if robot else None
+        self._match_queries: Optional[MatchingQueries] = None
+        self._catalog: Optional[SkillCatalog] = None
+        self._matches: Dict[URIRef, ProcessMatch] = {}
+        if resource_model is not None:
+            self.load_resource_model(resource_model)
 
     @staticmethod
     def _check_unsupported(rules: SchemaRules, allow: bool) -> None:
@@ -290,6 +330,92 @@ class ProcessEngine:
         with self._lock:
             return str(self._active) if self._active is not None else None
 
+    # ================================================================= capability matching
+    def load_resource_model(self, graph: Optional[Graph], robot: Optional[str] = None) -> int:
+        """Put a resource model (skills, devices, tools of one or more robots) into the store and match from now on.
+
+        The model replaces the one stored before (graph ``G_RESOURCES``; inferences follow in the same atomic
+        change; a model equal to the stored one writes nothing). ``robot`` names the robot processes run on
+        (default: the one given at construction, else the model's first robot by IRI). ``None`` turns matching
+        off (the stored model stays). Returns the number of triples of the model.
+        """
+        with self._lock:
+            if graph is not None and not isinstance(graph, Graph):
+                raise InvalidParameterError("the resource model must be an rdflib Graph, got %s" % type(graph).__name__)
+            if robot:
+                self._robot = check_iri(robot, "robot IRI")
+            self._catalog = None
+            self._matches.clear()
+            if graph is None:
+                self._matching = False
+                return 0
+            triples = _grounded(graph)
+            digest = hashlib.sha256("\n".join(sorted("%s %s %s" % (s.n3(), p.n3(), o.n3())
+                                                     for s, p, o in triples)).encode("utf-8")).hexdigest()
+            stored = self.store.value(META.ontology, _M_resourceHash, (G_META,))
+            if stored is None or str(stored) != digest:
+                cs = ChangeSet()
+                cs.remove += list(self.store.quads(None, None, None, (G_RESOURCES,)))
+                cs.add += [(s, p, o, G_RESOURCES) for s, p, o in triples]
+                cs = self.reasoner.infer(self.store, cs, max_seconds=self._schema_bounds[0],
+                                         max_triples=self._schema_bounds[1])
+                cs.remove += list(self.store.quads(META.ontology, _M_resourceHash, None, (G_META,)))
+                cs.add.append((META.ontology, _M_resourceHash, Literal(digest), G_META))
+                self.store.apply(cs)
+            self._matching = True
+            self._catalog_now()
+            return len(triples)
+
+    @property
+    def matching(self) -> bool:
+        """True when a resource model is loaded: processes are matched to the robot's skills."""
+        return self._matching
+
+    def _catalog_now(self) -> SkillCatalog:
+        if self._catalog is None:
+            if self._match_queries is None:
+                self._match_queries = MatchingQueries(self.store)
+            self._catalog = SkillCatalog.read(self._match_queries)
+        return self._catalog
+
+    def _bind_for_match(self, node: FlowNode, prm: Any) -> Optional[Node]:
+        """A task parameter's value in the current world (no process yet: ?process and ?task stay unbound)."""
+        try:
+            rows = self.store.select(prm.query, None)
+        except QueryError:
+            return None
+        value = rows[0].get("value") if rows else None
+        return None if isinstance(value, BNode) else value
+
+    def _match(self, ap: AbstractProcess) -> ProcessMatch:
+        return match_process(self._catalog_now(), ap, self._bind_for_match, self._robot)
+
+    def match_process(self, process: str) -> ProcessMatch:
+        """Every task node of the abstract ``process`` matched to this robot's skills, with the rejected
+        candidates and their reasons (:mod:`locem_bridge.pemkre.matching`). Read-only."""
+        with self._lock:
+            iri = check_iri(process, "process IRI")
+            ap = self.model.processes.get(iri)
+            if ap is None:
+                raise UnknownProcessError("<%s> is not an abstract process; known processes: %s"
+                                          % (iri, ", ".join(self.processes()) or "none"))
+            if not self._matching:
+                raise TaskStateError("no resource model is loaded, so nothing is matched (start PEMKRE with the "
+                                     "robot's resource model, or call load_resource_model)")
+            return self._match(ap)
+
+    def _node_match(self, sp: URIRef, ap: AbstractProcess, node: FlowNode) -> Optional[NodeMatch]:
+        """How the task of ``node`` is realized in process ``sp`` (None: no matching, the tree is the action type)."""
+        if not self._matching:
+            return None
+        pm = self._matches.get(sp)
+        if pm is None:                  # a process started before a restart: match it again
+            pm = self._matches[sp] = self._match(ap)
+        nm = pm.node(str(node.iri))
+        if not nm.ok:
+            raise UnmatchableProcessError("process <%s>: %s" % (sp, "; ".join(pm.problems())), pm)
+        return nm
+
     def start_process(self, process: str, options: Optional[Mapping[str, Any]] = None, *,
                       abort_running: bool = False, request_id: str = "") -> str:
         """Create a specific process realizing the abstract ``process``; return its IRI.
@@ -314,6 +440,12 @@ class ProcessEngine:
                 raise UnknownProcessError("<%s> is not an abstract process; known processes: %s"
                                           % (iri, ", ".join(self.processes()) or "none"))
             opt_values = self._option_values(ap, options or {})
+            pm: Optional[ProcessMatch] = None
+            if self._matching:
+                pm = self._match(ap)
+                if not pm.ok:
+                    raise UnmatchableProcessError(
+                        "process <%s> cannot run on robot <%s>: %s" % (iri, pm.robot, "; ".join(pm.problems())), pm)
             cs = ChangeSet()
             if self._active is not None and self._state(self._active).status == "running":
                 if not abort_running:
@@ -333,6 +465,8 @@ class ProcessEngine:
                 cs.add.append((sp, _M_startRequest, Literal(rid), G_META))
             self._commit(cs)
             self._active = sp
+            if pm is not None:
+                self._matches[sp] = pm
             return str(sp)
 
     def _option_values(self, ap: AbstractProcess, options: Mapping[str, Any]) -> List[Tuple[URIRef, Node]]:
@@ -375,6 +509,10 @@ class ProcessEngine:
                 tstatus = self.model.status_name.get(self._v(state.task, _P_status), "")
                 if tstatus in ("issued", "in_progress"):
                     return self._describe(state.task, state, tstatus)
+                if tstatus == "succeeded" and self._matching:
+                    parent = self._v(state.task, _S_expandedFrom)
+                    if parent is not None and self.model.status_name.get(self._v(parent, _P_status), "") != "succeeded":
+                        return self._issue_step(state, parent)   # the template has steps left
                 if tstatus == "succeeded":
                     leaving = True
                 elif tstatus == "failed" and self.model.task_node_index[state.node][1].on_failure:
@@ -462,6 +600,7 @@ class ProcessEngine:
                 raise BindingError("binding query <%s> returned a blank node; parameters must be IRIs or literals"
                                    % prm.iri, str(prm.iri))
             params.append((task, prm.prop, value))
+        nm = self._node_match(sp, ap, node)
         now = self.clock()
         tt = node.task_type
         assert tt is not None
@@ -471,21 +610,97 @@ class ProcessEngine:
                    (task, _P_issuedAt, _now_literal(now), G_LOG), (task, _P_sequenceNumber, Literal(seq), G_LOG)]
         cs.add += [(s, p, o, G_LOG) for s, p, o in params]
         self._replace(cs, sp, _P_currentNode, node.iri)
+        real = nm.realization if nm is not None else None
+        if real is not None and real.kind == TEMPLATE:
+            # the task is expanded: its first step is issued now, as a task of its own
+            sub, answer = self._step_changes(cs, sp, task, real, 0, {p: o for _, p, o in params}, seq + 1, now)
+            self._replace(cs, sp, _P_currentTask, sub)
+            self._replace(cs, sp, _P_taskCount, Literal(seq + 1))
+            self._commit(cs)
+            return answer
+        if real is not None:
+            cs.add.append((task, _S_realizedBy, URIRef(real.skill), G_LOG))
         self._replace(cs, sp, _P_currentTask, task)
         self._replace(cs, sp, _P_taskCount, Literal(seq))
         self._commit(cs)
-        return NextAction("action", str(sp), str(task), tt.action_type, parameter_document(task, sorted(params)), "issued")
+        return NextAction("action", str(sp), str(task), tt.action_type, parameter_document(task, sorted(params)),
+                          "issued", skill=real.name if real else "", skill_kind=real.skill_kind if real else "")
+
+    def _step_changes(self, cs: ChangeSet, sp: URIRef, parent: URIRef, real: Any, index: int,
+                      parent_params: Mapping[URIRef, Node], seq: int, now: float) -> Tuple[URIRef, NextAction]:
+        """Add the subtask for step ``index`` of the template realizing ``parent`` to ``cs``; its next action."""
+        step = real.steps[index]
+        sub = URIRef("%s_task_%d" % (sp, seq))
+        by_name = {local_name(p): o for p, o in parent_params.items()}
+        args: List[Tuple[URIRef, URIRef, Node]] = []
+        for name, text in step.arguments:
+            if text.startswith("{") and text.endswith("}"):
+                value = by_name.get(text[1:-1])
+                if value is None:
+                    raise BindingError("step %d of template <%s> passes %s=%s, but task <%s> has no value for %r"
+                                       % (step.index, real.template, name, text, parent, text[1:-1]), real.template)
+                names = self._catalog_now().tool_names.get(value)  # type: ignore[arg-type]
+                if names:                   # a tool: the skill takes its name (as the robot file spells it)
+                    value = Literal(sorted(names)[0])
+            else:
+                value = _argument_literal(text)
+            args.append((sub, ARG[name], value))
+        cs.add += [(sub, _RDF_TYPE, _P_TaskExecution, G_LOG), (sub, _P_partOfProcess, sp, G_LOG),
+                   (sub, _S_expandedFrom, parent, G_LOG), (sub, _S_realizedBy, URIRef(step.skill), G_LOG),
+                   (sub, _P_status, self.model.status_iri["issued"], G_LOG),
+                   (sub, _P_issuedAt, _now_literal(now), G_LOG), (sub, _P_sequenceNumber, Literal(seq), G_LOG)]
+        cs.add += [(s, p, o, G_LOG) for s, p, o in args]
+        return sub, NextAction("action", str(sp), str(sub), step.name, parameter_document(sub, sorted(args)),
+                               "issued", skill=step.name, skill_kind=step.skill_kind)
+
+    def _steps_of(self, parent: URIRef) -> List[URIRef]:
+        return [s for s, _, _, _ in self.store.quads(None, _S_expandedFrom, parent, (G_LOG,))]
+
+    def _template_of(self, state: _State, parent: URIRef) -> Any:
+        ap = self.model.processes[state.abstract]
+        nm = self._node_match(state.sp, ap, self.model.task_node_index[state.node][1])
+        real = nm.realization if nm is not None else None
+        if real is None or real.kind != TEMPLATE:
+            raise UnmatchableProcessError("task <%s> was expanded by a task template, but its node <%s> is no longer "
+                                          "realized by one (was the resource model changed under a running process?)"
+                                          % (parent, state.node))
+        return real
+
+    def _issue_step(self, state: _State, parent: URIRef) -> NextAction:
+        """The next step of the template that expands ``parent`` (the previous step succeeded)."""
+        real = self._template_of(state, parent)
+        done = len(self._steps_of(parent))
+        _, node = self.model.task_node_index[state.node]
+        params = {prm.prop: v for prm in node.parameters for v in [self._v(parent, prm.prop)] if v is not None}
+        cs = ChangeSet()
+        seq = state.task_count + 1
+        sub, answer = self._step_changes(cs, state.sp, parent, real, done, params, seq, self.clock())
+        self._replace(cs, state.sp, _P_currentTask, sub)
+        self._replace(cs, state.sp, _P_taskCount, Literal(seq))
+        self._commit(cs)
+        return answer
 
     def _describe(self, task: URIRef, state: _State, tstatus: str) -> NextAction:
         proc_iri, node = self.model.task_node_index[state.node]
         tt = node.task_type
         assert tt is not None
+        skill, kind = "", ""
+        realized = self._v(task, _S_realizedBy) if self._matching else None
+        if realized is not None:
+            info = self._catalog_now().skills.get(realized)  # type: ignore[arg-type]
+            skill, kind = (info.name, info.kind) if info is not None else (local_name(realized), "")
+        if realized is not None and self._v(task, _S_expandedFrom) is not None:   # a template step
+            args = [(task, p, o) for _, p, o, _ in self.store.quads(task, None, None, (G_LOG,))
+                    if str(p).startswith(str(ARG))]
+            return NextAction("action", str(state.sp), str(task), skill, parameter_document(task, sorted(args)),
+                              tstatus, skill=skill, skill_kind=kind)
         params = []
         for prm in node.parameters:
             v = self._v(task, prm.prop)
             if v is not None:
                 params.append((task, prm.prop, v))
-        return NextAction("action", str(state.sp), str(task), tt.action_type, parameter_document(task, sorted(params)), tstatus)
+        return NextAction("action", str(state.sp), str(task), tt.action_type, parameter_document(task, sorted(params)),
+                          tstatus, skill=skill, skill_kind=kind)
 
     def _end(self, state: _State, node: FlowNode) -> NextAction:
         now = self.clock()
@@ -504,8 +719,8 @@ class ProcessEngine:
         node = ap.nodes.get(state.node) if ap else None
         return (node.end_outcome if node is not None else None) or "ended"
 
-    def _fail_changes(self, state: _State, message: str) -> ChangeSet:
-        now = self.clock()
+    def _fail_changes(self, state: _State, message: str, now: Optional[float] = None) -> ChangeSet:
+        now = self.clock() if now is None else now
         cs = ChangeSet()
         self._replace(cs, state.sp, _P_status, self.model.status_iri["failed"])
         cs.add.append((state.sp, _P_endedAt, _now_literal(now), G_LOG))
@@ -517,6 +732,11 @@ class ProcessEngine:
                 cs.add.append((state.task, _P_endedAt, _now_literal(now), G_LOG))
                 if self._v(state.task, _P_detail) is None:
                     cs.add.append((state.task, _P_detail, Literal(message[:_STORED_DETAIL_CHARS]), G_LOG))
+            parent = self._v(state.task, _S_expandedFrom)     # a template step: its parent task fails with it
+            if parent is not None and self.model.status_name.get(self._v(parent, _P_status), "") in (
+                    "issued", "in_progress"):
+                self._replace(cs, parent, _P_status, self.model.status_iri["failed"])
+                cs.add.append((parent, _P_endedAt, _now_literal(now), G_LOG))
         started = _time_of(self._v(state.sp, _P_startedAt))
         if started is not None:
             cs.add.append((state.sp, _P_durationSeconds, Literal(max(0.0, now - started), datatype=XSD.double), G_LOG))
@@ -566,6 +786,13 @@ class ProcessEngine:
             cs = ChangeSet()
             self._replace(cs, t, _P_status, self.model.status_iri[status])
             effects_applied, world_changed = 0, 0
+            # a template step: its parent task (the node's task) takes its status along; the node's effects
+            # apply once, with the parent's parameters, when the last step succeeds
+            parent = self._v(t, _S_expandedFrom) if self._matching else None
+            owner = parent if parent is not None else t
+            with_effects = True
+            if parent is not None:
+                with_effects = self._step_status(cs, state, t, parent, status, detail, now)
             if status == "in_progress":
                 cs.add.append((t, _P_startedAt, _now_literal(now), G_LOG))
             else:
@@ -575,14 +802,14 @@ class ProcessEngine:
                     cs.add.append((t, _P_durationSeconds, Literal(max(0.0, now - begin), datatype=XSD.double), G_LOG))
                 stored_detail = detail
                 world = ChangeSet()
-                if status == "succeeded" and tt.result_format == _P_ScanResultJson and detail.strip():
+                if status == "succeeded" and tt.result_format == _P_ScanResultJson and detail.strip() and with_effects:
                     world = scan_changes(self._scan_argument(detail, "detail (the SCAN result)"), self.store,
                                          self.site)
                     stored_detail = "scan result: %d world triples added, %d removed" % (len(world.add), len(world.remove))
                     world_changed = len(world.add) + len(world.remove)
                 if stored_detail:
                     cs.add.append((t, _P_detail, Literal(stored_detail[:_STORED_DETAIL_CHARS]), G_LOG))
-                effects = [e for e in node.all_effects() if e.on_status == status]
+                effects = [e for e in node.all_effects() if e.on_status == status] if with_effects else []
                 conditional = [e for e in effects if e.on_detail is not None]
                 if conditional and not any(e.on_detail == detail for e in conditional):
                     raise InvalidStatusError("a %s %s task needs detail %s, got %r"
@@ -591,8 +818,8 @@ class ProcessEngine:
                 for e in effects:
                     if e.on_detail is not None and e.on_detail != detail:
                         continue
-                    subj = e.subject_node if e.subject_node is not None else self._param(t, node, e.subject_param)
-                    value = e.value_node if e.value_node is not None else self._param(t, node, e.value_param)
+                    subj = e.subject_node if e.subject_node is not None else self._param(owner, node, e.subject_param)
+                    value = e.value_node if e.value_node is not None else self._param(owner, node, e.value_param)
                     if subj is None or value is None:
                         raise ProcessModelError("effect <%s> of task <%s> cannot be applied: parameter %r has no "
                                                 "value" % (e.iri, t, e.subject_param or e.value_param))
@@ -604,11 +831,38 @@ class ProcessEngine:
                 cs.extend(world)
                 if status == "failed" and not node.on_failure:
                     # no failure transition: the process fails with its task (else next_action walks one)
-                    cs.extend(self._fail_changes(state, "task <%s> (%s) failed: %s" % (t, tt.action_type, detail)))
+                    cs.extend(self._fail_changes(state, "task <%s> (%s) failed: %s" % (t, tt.action_type, detail),
+                                                 now))
             if rid:
                 cs.add.append((t, _M_statusRequest, Literal("%s %s" % (status, rid)), G_META))
             self._commit(cs, max_seconds=None)
             return TaskStatusReport(str(t), status, str(sp), effects_applied, world_changed)
+
+    def _step_status(self, cs: ChangeSet, state: _State, sub: URIRef, parent: URIRef, status: str, detail: str,
+                     now: float) -> bool:
+        """Carry a template step's status to its parent task; True when the node's effects apply now."""
+        pstatus = self.model.status_name.get(self._v(parent, _P_status), "")
+        if status == "in_progress":
+            if pstatus == "issued":
+                self._replace(cs, parent, _P_status, self.model.status_iri["in_progress"])
+                cs.add.append((parent, _P_startedAt, _now_literal(now), G_LOG))
+            return False
+        if status == "succeeded":
+            real = self._template_of(state, parent)
+            if len(self._steps_of(parent)) < len(real.steps):
+                return False
+        else:
+            realized = self._v(sub, _S_realizedBy)
+            info = self._catalog_now().skills.get(realized) if realized is not None else None  # type: ignore[arg-type]
+            detail = "step %d (%s) failed: %s" % (len(self._steps_of(parent)),
+                                                   info.name if info is not None else realized, detail)
+            cs.add.append((parent, _P_detail, Literal(detail[:_STORED_DETAIL_CHARS]), G_LOG))
+        self._replace(cs, parent, _P_status, self.model.status_iri[status])
+        cs.add.append((parent, _P_endedAt, _now_literal(now), G_LOG))
+        begin = _time_of(self._v(parent, _P_startedAt)) or _time_of(self._v(parent, _P_issuedAt))
+        if begin is not None:
+            cs.add.append((parent, _P_durationSeconds, Literal(max(0.0, now - begin), datatype=XSD.double), G_LOG))
+        return True
 
     def _status_request(self, rid: str) -> Optional[Tuple[URIRef, str]]:
         """(task, status) of the report that carried request id ``rid``, if one was applied."""
@@ -699,7 +953,8 @@ class ProcessEngine:
                         problems.append("task <%s> has %d statuses" % (t, len(ts)))
                         continue
                     name = st.get(ts[0], "?")
-                    if name in ("issued", "in_progress") and (t != cur or status != "running"):
+                    if name in ("issued", "in_progress") and (t != cur or status != "running") and not (
+                            status == "running" and cur is not None and self._v(cur, _S_expandedFrom) == t):
                         problems.append("task <%s> is %s but is not the current task of a running process" % (t, name))
             if len(running) > 1:
                 problems.append("%d processes are running: %s" % (len(running), running))

@@ -313,6 +313,9 @@ class PLB(DefinedNamespace):
     taping_validResult: URIRef
     taping_validate: URIRef
     taping_validateOption: URIRef
+    tmpl_getToolAutomatically: URIRef
+    tmpl_getToolAutomatically_1: URIRef
+    tmpl_getToolAutomatically_2: URIRef
     tool: URIRef
     validateLines: URIRef
 
