@@ -137,6 +137,7 @@ def main() -> int:
         store = JournaledStore(os.path.join(tmp, "db"))
         engine = ProcessEngine(store)
         engine.update_world(world(args.features))
+        next_action_times(engine, 50)       # warm-up (first queries, caches), not counted
         base = next_action_times(engine, args.samples)
         t0 = time.perf_counter()
         engine.load_resource_model(model)
