@@ -49,14 +49,24 @@ ROBOT_KEYS: Dict[str, Sequence[str]] = {
     # the lift (optional): a CiA 402 linear axis in profile position mode on the base's CAN bus, carrying the arm
     "robot.lift": ("range", "max_velocity", "acceleration", "tolerance", "drive", "eds", "deadline"),
     "robot.lift.drive": ("node_id", "counts_per_m", "velocity_units_per_m_s", "heartbeat_ms", "tpdo_period_ms"),
-    "robot.arm": ("backend", "model", "description", "mount", "joint_names", "controller", "named_poses",
+    "robot.arm": ("backend", "model", "reach", "description", "mount", "joint_names", "controller", "named_poses",
                   "home_via", "wall_ready_flange", "deadline"),
     "robot.arm.description": ("package", "urdf"),
     "robot.arm.mount": ("xyz", "rpy"),
     "robot.arm.controller": ("host", "dashboard_port", "script_port", "rtde_port", "rtde_frequency",
                              "watchdog_frequency"),
     "robot.tools": TOOL_NAMES,
-    "tool": ("kind", "tcp", "mass", "cog", "switch", "body"),
+    "tool": ("kind", "tcp", "mass", "cog", "switch", "body", "wall_work"),
+    # how the tool works at a wall on this robot, measured (see config/robots/rbkairos_ur10e.yaml); the numbers
+    # the trees use are derived from it by locem_bridge.robot_facts:
+    #   work             the wall work the tool does: the HICEM parameter section and robot.work.<work>.* key
+    #                    (taping | spray | sand for the shipped trees), one tool per work
+    #   flange_distance  m, flange ahead of the base centre along the wall normal while the tool works at the wall
+    #   lateral_reach    m, how far to either side of the base's wall-normal axis the TCP reaches at the wall
+    #   z_band           m, [z_min, z_max]: heights the TCP reaches at the wall from one base pose
+    #   line_length      m, longest straight line along the wall worked from one base pose (default
+    #                    2 x lateral_reach)
+    "wall_work": ("work", "flange_distance", "lateral_reach", "z_band", "line_length"),
     "robot.tools.taping_tool": ("tape_width",),
     "robot.tools.spray_gun": ("spray_half_angle", "standoff"),
     "robot.tools.sander": ("pad_radius",),
@@ -187,6 +197,24 @@ def _existing_file(rel: Any, key: str, base_dir: Optional[str]) -> str:
     return os.path.abspath(path)
 
 
+def _wall_work(tool: Dict[str, Any], tp: str) -> None:
+    """``wall_work`` of one tool (keys: :data:`ROBOT_KEYS` ``wall_work``), checked and normalised in place."""
+    p = tp + ".wall_work"
+    ww = mapping(tool, "wall_work", tp, ROBOT_KEYS["wall_work"])
+    work = get(ww, "work", p, str)
+    if not re.match(r"^[a-z][a-z0-9_]*$", work):
+        raise ConfigError("%r is not a work name" % work, key=p + ".work",
+                          allowed="lower-case letters, digits and _, e.g. taping, spray, sand")
+    ww["flange_distance"] = get(ww, "flange_distance", p, float, lo=0.05, hi=3.0)
+    ww["lateral_reach"] = get(ww, "lateral_reach", p, float, lo=0.0, hi=3.0)
+    band = vec(ww, "z_band", p, 2)
+    if not 0.0 <= band[0] < band[1]:
+        raise ConfigError("%s must be two heights 0 <= z_min < z_max" % (band,), key=p + ".z_band",
+                          allowed="[z_min, z_max] in m")
+    ww["z_band"] = band
+    ww["line_length"] = get(ww, "line_length", p, float, default=2.0 * ww["lateral_reach"], lo=0.01, hi=10.0)
+
+
 def _validate(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str, Any]:
     K = ROBOT_KEYS
     only(data, "", K[""])
@@ -268,6 +296,8 @@ def _validate(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str,
         get(desc, "package", "robot.arm.description", str, default="", choices=("", "example-robot-data"))
         if not desc.get("package") or os.path.isabs(desc["urdf"]):
             desc["urdf"] = _existing_file(desc["urdf"], "robot.arm.description.urdf", base_dir)
+    # m, the arm's reach (flange from the shoulder axis, the maker's figure: UR10e 1.3 m, UR5e 0.85 m)
+    arm["reach"] = get(arm, "reach", "robot.arm", float, lo=0.1, hi=5.0)
     mount = mapping(arm, "mount", "robot.arm", K["robot.arm.mount"])
     mount["xyz"] = vec(mount, "xyz", "robot.arm.mount", 3)
     mount["rpy"] = vec(mount, "rpy", "robot.arm.mount", 3)
@@ -318,6 +348,14 @@ def _validate(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str,
         body["radius"] = get(body, "radius", tp + ".body", float, lo=0.005, hi=0.5)
         body["length"] = get(body, "length", tp + ".body", float, lo=0.005, hi=1.0)
         tool["body"] = body
+        _wall_work(tool, tp)
+    works: Dict[str, str] = {}
+    for name in TOOL_NAMES:
+        work = tools[name]["wall_work"]["work"]
+        if work in works:
+            raise ConfigError("%r is the work of %s too; one tool per work" % (work, works[work]),
+                              key="robot.tools.%s.wall_work.work" % name)
+        works[work] = name
     tools["taping_tool"]["tape_width"] = get(tools["taping_tool"], "tape_width", "robot.tools.taping_tool",
                                              float, default=0.05, lo=0.005, hi=0.5)
     sg = tools["spray_gun"]
