@@ -1,6 +1,8 @@
-"""House rules a machine can check: the core is ROS-free, and every Python file is Python 3.8 syntax."""
+"""House rules a machine can check: the core is ROS-free, every Python file is Python 3.8 syntax, and the trees,
+the executive and its parameters hold no robot facts."""
 import ast
 import os
+import re
 
 import pytest
 
@@ -127,3 +129,72 @@ def test_every_python_file_is_python_38():
 def test_the_py38_rule_detects_newer_syntax(source, fragment):
     problems = py38_problems(source, "x.py")
     assert problems and fragment in problems[0]
+
+
+# Robot facts (tool names, standoffs, reach, widths, height bands, segment lengths) come from the robot file
+# (config/robots/*.yaml), derived by locem_bridge/robot_facts.py and read by the trees as {@robot...}: the trees,
+# the executive and the HICEM parameters hold none, so the same trees run on every robot.
+FACT_WORDS = {"standoff", "reach", "width", "flange"}              # a key with one of these as a _-separated word
+FACT_KEYS = {"tools", "z_range", "z_band", "segment_length", "lane_spacing", "line_length"}
+_YAML_KEY = re.compile(r"^\s*(?:-\s*)?([A-Za-z_][A-Za-z0-9_]*)\s*:")
+_CFG_REF = re.compile(r"\bcfg((?:\.[A-Za-z_][A-Za-z0-9_]*)+)")
+
+
+def _fact_key(key):
+    return key in FACT_KEYS or bool(FACT_WORDS & set(key.lower().split("_")))
+
+
+def robot_fact_findings(text, kind, tool_names):
+    """(line, what) for every robot fact in a file's text: a tool name of the robot (anywhere, comments too), a
+    robot-fact key (``kind`` yaml: a mapping key; trees and code: a ``cfg.<section>.<key>`` reference)."""
+    names = re.compile(r"\b(%s)\b" % "|".join(re.escape(n) for n in tool_names))
+    found = []
+    for number, line in enumerate(text.splitlines(), 1):
+        for match in names.finditer(line):
+            found.append((number, "tool name '%s'" % match.group(1)))
+        keys = []
+        if kind == "yaml":
+            m = _YAML_KEY.match(line.split("#", 1)[0])
+            keys = [m.group(1)] if m else []
+        for ref in _CFG_REF.finditer(line):
+            keys += [k for k in ref.group(1).split(".") if k]
+        found += [(number, "robot-fact key '%s'" % k) for k in keys if _fact_key(k)]
+    return found
+
+
+def _fact_files():
+    for name in sorted(os.listdir(os.path.join(REPO, "trees"))):
+        if name.endswith(".xml"):
+            yield os.path.join(REPO, "trees", name), "xml"
+    for path in python_files("src/locem_bridge/hicem"):
+        yield path, "py"
+    folder = os.path.join(REPO, "config", "hicem")
+    for name in sorted(os.listdir(folder)):
+        if name.endswith((".yaml", ".yml")):
+            yield os.path.join(folder, name), "yaml"
+
+
+def test_trees_hicem_and_its_parameters_hold_no_robot_facts():
+    from locem_bridge.robot_file import load_robot
+    tools = list(load_robot()["robot"]["tools"])
+    offenders = []
+    for path, kind in _fact_files():
+        with open(path, encoding="utf-8") as handle:
+            offenders += ["%s:%d: %s (robot facts come from the robot file: {@robot...}, locem_bridge/robot_facts.py)"
+                          % (os.path.relpath(path, REPO), line, what)
+                          for line, what in robot_fact_findings(handle.read(), kind, tools)]
+    assert not offenders, "robot facts in trees, hicem/ or config/hicem:\n" + "\n".join(offenders)
+
+
+def test_the_robot_fact_rule_detects_a_violation():
+    tools = ["taping_tool", "spray_gun"]
+    yaml_text = ("spray:\n  base_standoff: 1.3   # gun\n  section_run_in: 0.02\n  tools: [a]\n"
+                 "area_work:\n  unreachable_codes: [X]\n  tool_change_location: home\n  # the spray_gun's fan\n")
+    assert robot_fact_findings(yaml_text, "yaml", tools) == [
+        (2, "robot-fact key 'base_standoff'"), (4, "robot-fact key 'tools'"), (8, "tool name 'spray_gun'")]
+    xml_text = ('<A section_width="{@robot.work.spray.section_width}" s="{@cfg.spray.speed}"/>\n'
+                '<B w="{@cfg.sand.lane_spacing}" t="{@cfg.tools}"/>\n<!-- param_tool: taping_tool -->\n')
+    assert robot_fact_findings(xml_text, "xml", tools) == [
+        (2, "robot-fact key 'lane_spacing'"), (2, "robot-fact key 'tools'"), (3, "tool name 'taping_tool'")]
+    assert robot_fact_findings('X = input_port("standoff", F, "{@cfg.taping.z_range}")\n', "py", tools) == [
+        (1, "robot-fact key 'z_range'")]

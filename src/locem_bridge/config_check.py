@@ -33,7 +33,7 @@ def check_files(site: Optional[str] = None, robot: Optional[str] = None,
     params = None
     if params_file:
         from .hicem.config import load_params
-        params = load_params(params_file)
+        params = load_params(params_file, robot)
     if trees_dir:
         from .hicem.xml_loader import TreeLibrary
         TreeLibrary(params.node_registry() if params is not None else None).load_directories(

@@ -8,12 +8,14 @@ import pytest
 
 from locem_bridge.bridges import backends, commands_arm, commands_base, commands_compressor, commands_wall
 from locem_bridge.bridges.config import load_robot_config, need
-from locem_bridge.bridges.errors import BridgeConfigError
+from locem_bridge.bridges.errors import BadRequest, BridgeConfigError
 from locem_bridge.bridges.geometry import arm_base_in_footprint, planar, tool_frame_facing
 from locem_bridge.common.config_keys import deep_merge
 from locem_bridge.common.geometry import invert, matrix_to_pose, matrix_to_rotvec, pose_to_matrix, rotvec_to_matrix
 from locem_bridge.common.base_kinematics import MecanumKinematics
 from locem_bridge.locem.catalogue import all_specs
+from locem_bridge.locem.core import LocemCore
+from locem_bridge.robot_file import load_robot
 
 from bridge_rigs import ROBOT_YAML
 
@@ -129,7 +131,9 @@ def test_every_bridge_command_is_declared_once_with_units_and_ranges():
     specs = all_specs()
     names = [s.name for s in specs]
     assert len(names) == len(set(names))
-    bridge = [s for m in (commands_arm, commands_base, commands_compressor, commands_wall) for s in m.SPECS]
+    robot = load_robot()["robot"]
+    bridge = [s for m in (commands_base, commands_compressor) for s in m.SPECS] + \
+        list(commands_arm.specs_for(robot)) + list(commands_wall.specs_for(robot))
     for spec in bridge:
         assert spec.name in names
         for arg in spec.args:
@@ -143,8 +147,7 @@ def test_every_bridge_command_is_declared_once_with_units_and_ranges():
 
 
 def test_help_and_bad_input_for_bridge_commands_without_hardware(core):
-    from locem_bridge.bridges.commands_arm import SPECS
-    for spec in SPECS:
+    for spec in commands_arm.specs_for(load_robot()["robot"]):
         core.registry.declare(spec)
     r = core.dispatcher.execute("HELP MOVE_L")
     assert r.success and "a number from 0.001 to 1 m/s" in r.message
@@ -161,8 +164,32 @@ def test_help_and_bad_input_for_bridge_commands_without_hardware(core):
                                               "speed": 0.1}) == pytest.approx(72.0)
 
 
+def test_a_robots_registry_takes_reach_and_tools_from_its_robot_file(core, robot):
+    """Robot facts come from the robot file: the TCP bound (reach + longest tool) of the arm commands' pose
+    arguments and MOVE_PATH's waypoints, and MOUNT_TOOL's choices; a UR5e-class reach narrows them."""
+    shipped = {s.name: s for s in all_specs()}
+    assert [a.maximum for a in shipped["MOVE_L"].args[:3]] == [pytest.approx(1.30 + 0.22)] * 3
+    assert shipped["MOUNT_TOOL"].args[0].choices == tuple(robot["tools"]) == ("taping_tool", "spray_gun", "sander")
+    short = load_robot(overrides={"arm": {"reach": 0.85}})["robot"]
+    specs = {s.name: s for s in all_specs(short)}
+    assert specs["SET_TCP"].args[0].maximum == pytest.approx(0.85 + 0.22)
+    small = LocemCore(grace=0.5, stop_timeout=2.0)
+    try:
+        for cores, spec_set in ((core, shipped), (small, specs)):
+            for spec in spec_set.values():
+                cores.registry.declare(spec)
+        assert core.dispatcher.execute("MOVE_L 1.2 0.1 0.5 0 3.14 0").code.value == "NOT_READY"   # in range
+        r = small.dispatcher.execute("MOVE_L 1.2 0.1 0.5 0 3.14 0")
+        assert r.code.value == "INVALID_ARGUMENT" and "-1.07 to 1.07" in r.message, r.message
+        assert "1.07" in small.dispatcher.execute("HELP MOVE_L").message
+    finally:
+        small.close()
+    with pytest.raises(BadRequest, match="allowed -1.07 to 1.07 m"):
+        commands_arm.parse_waypoints("1.2:0.2:0.4:0:3.14:0", 1.07)
+    assert commands_arm.parse_waypoints("1.2:0.2:0.4:0:3.14:0")[0][0] == 1.2      # the shipped bound
+
+
 def test_move_path_waypoints_are_checked():
-    from locem_bridge.bridges.errors import BadRequest
     pts = commands_arm.parse_waypoints("0.5:0.2:0.4:0:3.14:0/0.5:0.3:0.4:0:3.14:0")
     assert len(pts) == 2 and pts[1][1] == 0.3
     with pytest.raises(BadRequest, match="waypoint 2 'x' must be 6 numbers"):

@@ -13,7 +13,16 @@ def test_shipped_parameters_and_blackboard_entries():
     p = HicemParams(copy.deepcopy(RAW))
     assert p.resume_policy["TAPE_LINE"] == "RESUME_TAPE_LINE" and p.hdict_synchronous == "FULL"
     bb = p.blackboard_entries()
-    assert bb["cfg.taping.base_standoff"] == RAW["taping"]["base_standoff"]
+    assert bb["cfg.taping.speed"] == RAW["taping"]["speed"]
+    # the robot facts of the shipped robot file, derived with the tuning: today's numbers
+    assert bb["robot.tools"] == ["taping_tool", "spray_gun", "sander"]
+    assert (bb["robot.work.taping.base_standoff"], bb["robot.work.spray.base_standoff"],
+            bb["robot.work.sand.base_standoff"]) == (1.05, 1.30, 1.00)
+    assert bb["robot.work.spray.section_width"] == bb["robot.work.sand.section_width"] == 0.60
+    assert (bb["robot.work.spray.lane_spacing"], bb["robot.work.sand.lane_spacing"]) == (0.15, 0.18)
+    assert bb["robot.work.spray.tool_standoff"] == 0.30
+    assert bb["robot.work.taping.z_range"] == [0.10, 2.15] and bb["robot.work.taping.segment_length"] == 1.20
+    assert bb["robot.work.spray"]["tool"] == "spray_gun"
     assert bb["cfg.site.locations"]["home"] == bb["cfg.site.locations.home"]
     assert flatten({"a": {"b": 1}}) == {"cfg.a": {"b": 1}, "cfg.a.b": 1}
 
@@ -25,6 +34,9 @@ def test_shipped_parameters_and_blackboard_entries():
     (("hhlc", "resume_policy"), {"TAPE_LINE": ""}, "resume_policy.TAPE_LINE"),
     (("health", "modules"), [{"name": "x", "timeout": 1}], "unknown keys"),
     (("datastore", "prune"), [{"collection": "x", "age": 1}], "allowed keys"),
+    (("spray", "lane_ratio"), 1.5, "spray.lane_ratio: 1.5 is out of range (allowed: > 0 and <= 1)"),
+    (("sand", "lane_overrun"), 0.4, "sand.lane_overrun: 0.4 m leaves no strip within the sander's lateral reach"),
+    (("sand", "lane_overrun"), "far", "sand.lane_overrun: must be a finite number, found 'far'"),
 ])
 def test_bad_values_are_named(path, value, msg):
     raw = copy.deepcopy(RAW)

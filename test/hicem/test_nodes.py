@@ -35,8 +35,8 @@ class Rig:
         self.ctx = NodeContext(locem=self.locem, store=self.store, health=self.health, operator=self.operator,
                                data_handler=self.hdh, clock=self.clock)
         bb = Blackboard()
-        bb.update({"cfg.locem.command_timeout_s": 10.0, "cfg.tools": ["taping_tool", "spray_gun"],
-                   "cfg.taping.base_standoff": 0.8, "cfg.taping.lateral_offset": 0.1,
+        bb.update({"cfg.locem.command_timeout_s": 10.0, "robot.tools": ["taping_tool", "spray_gun"],
+                   "robot.work.taping.base_standoff": 0.8, "cfg.taping.lateral_offset": 0.1,
                    "cfg.taping.yaw_offset": 0.0, "cfg.taping.surface_offset": 0.01,
                    "cfg.taping.plumb_tolerance": 0.02})
         bb.update(cfg or {})

@@ -6,7 +6,7 @@ from py_trees.common import Status
 
 from test_nodes import Rig
 
-CFG = {"cfg.taping.segment_length": 1.2, "cfg.taping.z_range": [0.0, 2.2]}
+CFG = {"robot.work.taping.segment_length": 1.2, "robot.work.taping.z_range": [0.0, 2.2]}
 BODY = '<GetTapeSegments line_id="%s" segments="{s}" count="{c}" skipped="{k}"/>'
 
 
@@ -26,7 +26,7 @@ def test_vertical_joint_is_clipped_to_the_band_and_taped_outwards_from_its_middl
 
 
 def test_horizontal_joint_is_cut_into_pieces_each_approached_in_front_of_its_middle():
-    rig = Rig(BODY % "wall_2_joint_1", cfg=dict(CFG, **{"cfg.taping.segment_length": 0.8}))
+    rig = Rig(BODY % "wall_2_joint_1", cfg=dict(CFG, **{"robot.work.taping.segment_length": 0.8}))
     assert rig.tree.tick() == Status.SUCCESS
     segs = rig.bb.get("s")
     # 2.0 m from y=2.5 to y=0.5 on wall_2 (x=4.8, normal -x): three pieces of 2/3 m, no length skipped
@@ -42,12 +42,12 @@ def test_horizontal_joint_is_cut_into_pieces_each_approached_in_front_of_its_mid
 
 
 def test_joint_outside_the_band_fails_with_the_heights_and_bad_ports_are_named():
-    rig = Rig(BODY % "wall_2_joint_1", cfg=dict(CFG, **{"cfg.taping.z_range": [1.5, 2.2]}))
-    rig2 = Rig(BODY % "wall_1_joint_1", cfg=dict(CFG, **{"cfg.taping.z_range": [2.6, 3.0]}))
+    rig = Rig(BODY % "wall_2_joint_1", cfg=dict(CFG, **{"robot.work.taping.z_range": [1.5, 2.2]}))
+    rig2 = Rig(BODY % "wall_1_joint_1", cfg=dict(CFG, **{"robot.work.taping.z_range": [2.6, 3.0]}))
     assert rig2.tree.tick() == Status.FAILURE
     assert "outside the reachable band 2.60..3.00" in rig2.reason()
     # a horizontal joint is not clipped by height (its height is the line's own)
     assert rig.tree.tick() == Status.SUCCESS
-    bad = Rig(BODY % "wall_1_joint_1", cfg=dict(CFG, **{"cfg.taping.z_range": [2.0, 1.0]}))
+    bad = Rig(BODY % "wall_1_joint_1", cfg=dict(CFG, **{"robot.work.taping.z_range": [2.0, 1.0]}))
     assert bad.tree.tick() == Status.FAILURE
     assert "z_range must be two heights z_min < z_max, got [2.0, 1.0]" in bad.reason()

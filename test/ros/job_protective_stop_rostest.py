@@ -19,7 +19,7 @@ sys.path[:0] = [HERE]
 
 import rospkg  # noqa: E402
 import rostest  # noqa: E402
-import yaml  # noqa: E402
+from locem_bridge.hicem.config import load_params  # noqa: E402
 
 from job_support import (SANDING, TERMINAL, HicemTimeline, LocemResults, MotionProbe, SimCalls,  # noqa: E402
                          init_test_node, kpi_count, kpi_interventions, outcome_goal_failures, process_record,
@@ -41,8 +41,7 @@ class JobProtectiveStopTest(unittest.TestCase):
         cls.sim = SimCalls()
         areas = cls.sim.call("scan")["areas"]
         params = os.path.join(rospkg.RosPack().get_path(PKG), "config", "hicem", "plasterboard.yaml")
-        with open(params, encoding="utf-8") as handle:
-            width = float(yaml.safe_load(handle)["sand"]["section_width"])
+        width = load_params(params).robot.work["sand"]["section_width"]      # the shipped robot's, derived
         cls.sections = sum(max(1, int(math.ceil(a["width"] / width - 1e-9))) for a in areas)
         cls.probe = MotionProbe(setting("host"), int(setting("modbus_port")))
         try:

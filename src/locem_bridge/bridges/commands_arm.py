@@ -1,4 +1,9 @@
-"""LOCEM commands of the UR arm (declarations in ``SPECS``; :class:`ArmCommands` binds them to an arm backend).
+"""LOCEM commands of the UR arm (declarations from :func:`arm_specs`; :class:`ArmCommands` binds them to an arm
+backend).
+
+The bound of TCP coordinates (and of TCP offsets) is a fact of the robot: ``tcp_bound`` (m) = the arm's reach
+plus its longest tool (:func:`locem_bridge.robot_facts.tcp_bound`, from ``robot.arm.reach`` and
+``robot.tools``); the registry of a robot is built from its file (:func:`specs_for`).
 
 Joint positions in rad; poses ``[x, y, z, rx, ry, rz]`` (m, rotation vector in rad) in the UR ``base`` frame,
 TCP offset applied. Motions have a registry deadline computed from the arguments (worst case) and a tighter one
@@ -7,18 +12,19 @@ from the actual path length once the start is known; a safety stop answers ``HAR
 """
 
 import math
+from functools import lru_cache
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Tuple
 
 from locem_bridge.locem.registry import Arg, CommandSpec
 
 from .errors import BadRequest
 from locem_bridge.common.geometry import angle_between
+from locem_bridge.robot_facts import shipped_tcp_bound, tcp_bound
 from .interfaces import Arm
 
 CATEGORY = "arm"
 _ARM = frozenset({"arm"})
 TWO_PI = 2.0 * math.pi
-REACH = 1.5                     # m, bound of TCP coordinates accepted (UR10e reach 1.3 m + tool)
 MAX_PATH_POINTS = 50
 MAX_BLEND = 0.5                 # m, largest blend radius accepted (ur_rtde allows up to 2 m)
 MOTION_MARGIN_S, PATH_UPLOAD_S, ROTATION_WEIGHT = Arm.MOTION_MARGIN_S, Arm.PATH_UPLOAD_S, Arm.ROTATION_WEIGHT
@@ -33,9 +39,9 @@ def _joints() -> tuple:
     return tuple(Arg.number("q%d" % (i + 1), "rad", -TWO_PI, TWO_PI, "joint %d position" % (i + 1)) for i in range(6))
 
 
-def _pose(doc: str) -> tuple:
-    return (Arg.number("x", "m", -REACH, REACH, doc + " x"), Arg.number("y", "m", -REACH, REACH, doc + " y"),
-            Arg.number("z", "m", -REACH, REACH, doc + " z"),
+def _pose(doc: str, bound: float) -> tuple:
+    return (Arg.number("x", "m", -bound, bound, doc + " x"), Arg.number("y", "m", -bound, bound, doc + " y"),
+            Arg.number("z", "m", -bound, bound, doc + " z"),
             Arg.number("rx", "rad", -TWO_PI, TWO_PI, doc + " rotation vector x"),
             Arg.number("ry", "rad", -TWO_PI, TWO_PI, doc + " rotation vector y"),
             Arg.number("rz", "rad", -TWO_PI, TWO_PI, doc + " rotation vector z"))
@@ -59,38 +65,6 @@ MOVE_J = CommandSpec(
     "MOVE_J", "Move the arm to joint positions (synchronised joint motion).", args=_joints() + _speed_j(),
     resources=_ARM, category=CATEGORY, pausable=False, result=_MOTION_RESULT,
     deadline=lambda v: joint_travel_bound(v["speed"], v["accel"]), capability="sk:cap_MoveArm")
-MOVE_L = CommandSpec(
-    "MOVE_L", "Move the TCP in a straight line to a pose in the arm base frame.", args=_pose("target") + _speed_l(),
-    resources=_ARM, category=CATEGORY, result=_MOTION_RESULT,
-    deadline=lambda v: 2.0 * REACH / v["speed"] + 2.0 * v["speed"] / v["accel"] + MOTION_MARGIN_S + 1.0,
-    capability="sk:cap_MoveArmLinear")
-
-
-def _path_deadline(v: Mapping[str, Any]) -> float:
-    """Registry deadline of MOVE_PATH: the waypoint-to-waypoint length plus a first leg across the whole reach,
-    one acceleration and stop per waypoint, the script upload and the margin."""
-    speed, accel = v["speed"], v["accel"]
-    try:
-        points = parse_waypoints(v["waypoints"])
-    except BadRequest:           # refused by the handler anyway; any finite deadline will do
-        return 2.0 * REACH / speed + MOTION_MARGIN_S + 1.0
-    length = 2.0 * REACH + sum(math.dist(points[i][:3], points[i + 1][:3])
-                               + ROTATION_WEIGHT * angle_between(points[i], points[i + 1])
-                               for i in range(len(points) - 1))
-    return length / speed + len(points) * 2.0 * speed / accel + MOTION_MARGIN_S + PATH_UPLOAD_S + 1.0
-
-
-MOVE_PATH = CommandSpec(
-    "MOVE_PATH", "Move the TCP through waypoints as one controller path: straight segments, each interior waypoint "
-    "rounded on an arc within its blend radius without stopping (blend 0 stops there); the last waypoint is reached "
-    "exactly. Waypoints: x:y:z:rx:ry:rz[:blend] joined by '/', e.g. 0.5:0.2:0.4:0:3.14:0/0.5:0.3:0.4:0:3.14:0 "
-    "blend=0.02. A blend radius may be at most half of either neighbouring segment.",
-    args=(Arg.word("waypoints", "up to %d poses x:y:z:rx:ry:rz (m, rad), each optionally :blend (m, 0..%g, overrides "
-                                "blend), joined by '/'" % (MAX_PATH_POINTS, MAX_BLEND), max_length=1000),)
-    + _speed_l() + (Arg.number("blend", "m", 0.0, MAX_BLEND, "blend radius at the interior waypoints (0 = stop at "
-                                                              "each)", default=0.0, keyword_only=True),),
-    resources=_ARM, category=CATEGORY, result=_MOTION_RESULT + (("waypoints", "waypoints in the path"),),
-    deadline=_path_deadline, capability="sk:cap_MoveArmPath")
 MOVE_HOME = CommandSpec(
     "MOVE_HOME", "Move the arm to a named joint pose of the robot configuration (default home).",
     args=(Arg.word("pose", "named pose of robot.arm.named_poses", default="home"),) + _speed_j(),
@@ -105,9 +79,6 @@ GET_JOINTS = CommandSpec(
 GET_TCP_POSE = CommandSpec(
     "GET_TCP_POSE", "Read the TCP pose now (arm base frame, TCP offset applied).", category=CATEGORY, timeout=2.0,
     inline=True, query=True, result=(("pose", "[x, y, z, rx, ry, rz], m and rad"),))
-SET_TCP = CommandSpec(
-    "SET_TCP", "Set the TCP offset from the flange.", args=_pose("TCP offset"), resources=_ARM, category=CATEGORY,
-    timeout=3.0, result=(("tcp", "the offset set"),), capability="sk:cap_SetTcp")
 SET_PAYLOAD = CommandSpec(
     "SET_PAYLOAD", "Set the payload mass and centre of gravity (flange frame).",
     args=(Arg.number("mass", "kg", 0.0, 12.5, "payload mass"), Arg.number("cx", "m", -0.5, 0.5, "centre of gravity x"),
@@ -124,18 +95,64 @@ RESET_ARM = CommandSpec(
     category=CATEGORY, timeout=30.0, result=(("cleared", "the latched safety stop"), ("steps", "recovery steps")),
     capability="sk:cap_ResetArm")
 
-SPECS = (MOVE_J, MOVE_L, MOVE_PATH, MOVE_HOME, STOP_ARM, GET_JOINTS, GET_TCP_POSE, SET_TCP, SET_PAYLOAD,
-         TOOL_OUTPUT, RESET_ARM)
+def _path_deadline(v: Mapping[str, Any], bound: float) -> float:
+    """Registry deadline of MOVE_PATH: the waypoint-to-waypoint length plus a first leg across the whole reach
+    (``bound``: the TCP coordinate bound), one acceleration and stop per waypoint, the script upload and the
+    margin."""
+    speed, accel = v["speed"], v["accel"]
+    try:
+        points = parse_waypoints(v["waypoints"], bound)
+    except BadRequest:           # refused by the handler anyway; any finite deadline will do
+        return 2.0 * bound / speed + MOTION_MARGIN_S + 1.0
+    length = 2.0 * bound + sum(math.dist(points[i][:3], points[i + 1][:3])
+                               + ROTATION_WEIGHT * angle_between(points[i], points[i + 1])
+                               for i in range(len(points) - 1))
+    return length / speed + len(points) * 2.0 * speed / accel + MOTION_MARGIN_S + PATH_UPLOAD_S + 1.0
 
 
-def parse_waypoints(text: str) -> List[List[float]]:
+@lru_cache(maxsize=16)
+def arm_specs(bound: float) -> Tuple[CommandSpec, ...]:
+    """The arm commands of a robot whose TCP coordinates are bounded by ``bound`` (m, :func:`tcp_bound`): the
+    pose arguments' ranges and the motion deadlines depend on it."""
+    move_l = CommandSpec(
+        "MOVE_L", "Move the TCP in a straight line to a pose in the arm base frame.",
+        args=_pose("target", bound) + _speed_l(), resources=_ARM, category=CATEGORY, result=_MOTION_RESULT,
+        deadline=lambda v: 2.0 * bound / v["speed"] + 2.0 * v["speed"] / v["accel"] + MOTION_MARGIN_S + 1.0,
+        capability="sk:cap_MoveArmLinear")
+    move_path = CommandSpec(
+        "MOVE_PATH", "Move the TCP through waypoints as one controller path: straight segments, each interior "
+        "waypoint rounded on an arc within its blend radius without stopping (blend 0 stops there); the last "
+        "waypoint is reached exactly. Waypoints: x:y:z:rx:ry:rz[:blend] joined by '/', e.g. "
+        "0.5:0.2:0.4:0:3.14:0/0.5:0.3:0.4:0:3.14:0 blend=0.02. A blend radius may be at most half of either "
+        "neighbouring segment.",
+        args=(Arg.word("waypoints", "up to %d poses x:y:z:rx:ry:rz (m, rad), each optionally :blend (m, 0..%g, "
+                                    "overrides blend), joined by '/'" % (MAX_PATH_POINTS, MAX_BLEND),
+                       max_length=1000),)
+        + _speed_l() + (Arg.number("blend", "m", 0.0, MAX_BLEND, "blend radius at the interior waypoints (0 = stop "
+                                                                  "at each)", default=0.0, keyword_only=True),),
+        resources=_ARM, category=CATEGORY, result=_MOTION_RESULT + (("waypoints", "waypoints in the path"),),
+        deadline=lambda v: _path_deadline(v, bound), capability="sk:cap_MoveArmPath")
+    set_tcp = CommandSpec(
+        "SET_TCP", "Set the TCP offset from the flange.", args=_pose("TCP offset", bound), resources=_ARM,
+        category=CATEGORY, timeout=3.0, result=(("tcp", "the offset set"),), capability="sk:cap_SetTcp")
+    return (MOVE_J, move_l, move_path, MOVE_HOME, STOP_ARM, GET_JOINTS, GET_TCP_POSE, set_tcp, SET_PAYLOAD,
+            TOOL_OUTPUT, RESET_ARM)
+
+
+def specs_for(robot: Mapping[str, Any]) -> Tuple[CommandSpec, ...]:
+    """The arm commands of the robot section ``robot`` (a loaded robot file's ``robot``)."""
+    return arm_specs(tcp_bound(robot))
+
+
+def parse_waypoints(text: str, bound: Optional[float] = None) -> List[List[float]]:
     """``x:y:z:rx:ry:rz[:blend]/...`` -> the poses; BadRequest naming the bad waypoint (see :func:`parse_path`)."""
-    return parse_path(text)[0]
+    return parse_path(text, bound)[0]
 
 
-def parse_path(text: str) -> Tuple[List[List[float]], List[Optional[float]]]:
+def parse_path(text: str, bound: Optional[float] = None) -> Tuple[List[List[float]], List[Optional[float]]]:
     """``x:y:z:rx:ry:rz[:blend]/...`` -> (poses, per-waypoint blend or None); BadRequest naming the bad waypoint
-    and what is allowed."""
+    and what is allowed. ``bound``: the TCP coordinate bound (m; None: the shipped robot's)."""
+    bound = shipped_tcp_bound() if bound is None else bound
     chunks = text.split("/")
     if len(chunks) > MAX_PATH_POINTS:
         raise BadRequest("MOVE_PATH: %d waypoints, allowed at most %d" % (len(chunks), MAX_PATH_POINTS),
@@ -151,8 +168,8 @@ def parse_path(text: str) -> Tuple[List[List[float]], List[Optional[float]]]:
         if len(values) not in (6, 7) or not all(math.isfinite(v) for v in values):
             raise BadRequest("MOVE_PATH: waypoint %d '%s' must be 6 numbers x:y:z:rx:ry:rz, optionally :blend"
                              % (i + 1, chunk[:60]), argument="waypoints")
-        if any(abs(v) > REACH for v in values[:3]):
-            raise BadRequest("MOVE_PATH: waypoint %d position out of range; allowed -%g to %g m" % (i + 1, REACH, REACH),
+        if any(abs(v) > bound for v in values[:3]):
+            raise BadRequest("MOVE_PATH: waypoint %d position out of range; allowed -%g to %g m" % (i + 1, bound, bound),
                              argument="waypoints")
         if any(abs(v) > TWO_PI for v in values[3:6]):
             raise BadRequest("MOVE_PATH: waypoint %d rotation vector out of range; allowed -%.4f to %.4f rad"
@@ -166,15 +183,17 @@ def parse_path(text: str) -> Tuple[List[List[float]], List[Optional[float]]]:
 
 
 class ArmCommands:
-    """The arm command set for :meth:`LocemCore.install`."""
+    """The arm command set for :meth:`LocemCore.install`; ``tcp_bound`` (m): the robot's TCP coordinate bound
+    (:func:`locem_bridge.robot_facts.tcp_bound`; None: the shipped robot's)."""
 
     name = "arm"
 
-    def __init__(self, arm: Arm) -> None:
+    def __init__(self, arm: Arm, tcp_bound: Optional[float] = None) -> None:
         self.arm = arm
+        self.tcp_bound = shipped_tcp_bound() if tcp_bound is None else float(tcp_bound)
 
     def specs(self) -> Iterable[CommandSpec]:
-        return SPECS
+        return arm_specs(self.tcp_bound)
 
     def handlers(self) -> Dict[str, Any]:
         return {"MOVE_J": self.move_j, "MOVE_L": self.move_l, "MOVE_PATH": self.move_path,
@@ -198,7 +217,7 @@ class ArmCommands:
 
     def move_path(self, ctx: Any, waypoints: str, speed: float, accel: float, blend: float) -> Dict[str, Any]:
         self.arm.require(Arm.PATH)
-        points, own = parse_path(waypoints)
+        points, own = parse_path(waypoints, self.tcp_bound)
         radii = [blend if b is None else b for b in own]
         return self.arm.move_path(ctx, points, speed, accel, radii)
 

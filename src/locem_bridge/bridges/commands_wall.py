@@ -20,6 +20,7 @@ then the area again) needs no COMPRESSOR_ON first.
 
 import math
 import time
+from functools import lru_cache
 from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -35,7 +36,6 @@ from .geometry import arm_base_in_footprint, planar, tool_frame_facing
 from .interfaces import Arm, Base, Compressor, Scanner, Waiter
 
 CATEGORY = "wall"
-TOOLS = ("taping_tool", "spray_gun", "sander")
 EXT = 100.0
 APPROACH_SPEED = 0.25          # m/s, free moves near the wall
 CONTACT_SPEED = 0.05           # m/s, the last centimetres to the wall
@@ -72,11 +72,17 @@ SCAN = CommandSpec(
     resources=frozenset({"scanner"}), category=CATEGORY, timeout=10.0,
     result=(("stamp", "time of the scan"), ("walls", "walls seen"), ("joints", "joint lines: start, end, kind"),
             ("areas", "wall areas: origin, u, width, height")), capability="sk:cap_DetectWallFeatures")
-MOUNT_TOOL = CommandSpec(
-    "MOUNT_TOOL", "Make the operator-mounted tool active: TCP offset and payload from the robot configuration.",
-    args=(Arg.choice("tool", TOOLS, "the tool the operator mounted"),), resources=frozenset({"arm", "tool"}),
-    category=CATEGORY, timeout=5.0, result=(("tool", "active tool"), ("tcp", "TCP offset"), ("mass", "kg")),
-    capability="sk:cap_MountToolByOperator")
+
+
+def mount_tool_spec(tools: Tuple[str, ...]) -> CommandSpec:
+    """MOUNT_TOOL of a robot whose tools (``robot.tools`` of its file) are ``tools``."""
+    return CommandSpec(
+        "MOUNT_TOOL", "Make the operator-mounted tool active: TCP offset and payload from the robot configuration.",
+        args=(Arg.choice("tool", tools, "the tool the operator mounted"),), resources=frozenset({"arm", "tool"}),
+        category=CATEGORY, timeout=5.0, result=(("tool", "active tool"), ("tcp", "TCP offset"), ("mass", "kg")),
+        capability="sk:cap_MountToolByOperator")
+
+
 APPLY_TAPE_START = CommandSpec(
     "APPLY_TAPE_START", "Bring the taping tool in front of a line's start for the operator to judge (tool off).",
     args=_LINE_ARGS + _normal() + (Arg.number("approach", "m", 0.0, 0.5, "distance in front of the wall", default=0.05,
@@ -136,7 +142,18 @@ HOME = CommandSpec(
     "HOME", "Process outputs off, arm to its home pose.", resources=frozenset({"arm", "tool"}), category=CATEGORY,
     timeout=60.0, result=(("q", "joint positions"),), capability="sk:cap_ArmHome")
 
-SPECS = (SCAN, MOUNT_TOOL, APPLY_TAPE_START, APPLY_TAPE, SPRAY_AREA, SAND_AREA, WALL_READY, HOME)
+
+
+@lru_cache(maxsize=16)
+def wall_specs(tools: Tuple[str, ...]) -> Tuple[CommandSpec, ...]:
+    """The wall commands of a robot with these tools (MOUNT_TOOL's choices)."""
+    return (SCAN, mount_tool_spec(tuple(tools)), APPLY_TAPE_START, APPLY_TAPE, SPRAY_AREA, SAND_AREA, WALL_READY,
+            HOME)
+
+
+def specs_for(robot: Mapping[str, Any]) -> Tuple[CommandSpec, ...]:
+    """The wall commands of the robot section ``robot`` (a loaded robot file's ``robot``)."""
+    return wall_specs(tuple(robot.get("tools", {})))
 
 
 class HookedWaiter:
@@ -441,7 +458,7 @@ class WallCommands:
         self.ready_flange: Optional[List[float]] = [float(v) for v in flange] if flange else None
 
     def specs(self) -> Iterable[CommandSpec]:
-        return SPECS
+        return wall_specs(tuple(self.tools))
 
     def handlers(self) -> Dict[str, Any]:
         return {"SCAN": self.scan, "MOUNT_TOOL": self.mount_tool, "APPLY_TAPE_START": self.apply_tape_start,
@@ -506,7 +523,7 @@ class WallCommands:
             self._need("compressor").set_valve(on)
 
     def _outputs_off(self) -> None:
-        for tool in TOOLS:
+        for tool in self.tools:
             try:
                 self._switch(tool, False)
             except (BridgeError, NotReady):

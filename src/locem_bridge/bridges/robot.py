@@ -69,6 +69,7 @@ def _build_robot(robot_cfg: Mapping[str, Any], devices: Sequence[str], site: Any
     from .commands_base import BaseCommands, LiftCommands
     from .commands_compressor import CompressorCommands
     from .commands_wall import WallCommands
+    from ..robot_facts import tcp_bound
 
     robot = Robot()
     if "base" in devices and "base" in robot_cfg:
@@ -87,7 +88,7 @@ def _build_robot(robot_cfg: Mapping[str, Any], devices: Sequence[str], site: Any
     if "arm" in devices and "arm" in robot_cfg:
         cls = backend_class("arm", str(robot_cfg["arm"].get("backend", "ur_rtde")))
         robot.backends["arm"] = cls(robot_cfg["arm"])
-        robot.command_sets.append(ArmCommands(robot.backends["arm"]))
+        robot.command_sets.append(ArmCommands(robot.backends["arm"], tcp_bound=tcp_bound(robot_cfg)))
     if "compressor" in devices and "compressor" in robot_cfg:
         cls = backend_class("compressor", str(robot_cfg["compressor"].get("protocol", "modbus_tcp")))
         robot.backends["compressor"] = cls(robot_cfg["compressor"])

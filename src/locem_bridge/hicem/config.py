@@ -1,18 +1,23 @@
-"""HICEM parameters (``config/hicem/plasterboard.yaml``): loading, checking, and the ``cfg.*`` blackboard entries.
+"""HICEM parameters (``config/hicem/plasterboard.yaml``) and robot facts: loading, checking, and the ``cfg.*`` and
+``robot.*`` blackboard entries.
 
 :func:`load_params` reads the YAML file; :class:`HicemParams` checks the keys the executive itself needs
 (raising :class:`ConfigError` with the dotted key path) and flattens every leaf into blackboard entries
 ``cfg.<section>.<key>`` that trees read as ``{@cfg.<section>.<key>}``. ``hhlc.node_modules`` names the node
 modules whose classes the trees may use (:meth:`HicemParams.node_registry`).
+The robot's facts (tool names, standoffs, section widths, lane spacings, height bands: what the robot file
+measured, derived by :mod:`locem_bridge.robot_facts` with the process tuning of these parameters) become
+``robot.*`` entries, read as ``{@robot.work.<work>.<name>}``; the parameters hold no robot fact.
 """
 import math
 import os
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Optional
 
 
 from .datastore import PruneRule
 from ..common.config_errors import read_yaml
 from ..common.paths import checkout_root
+from ..robot_facts import RobotFacts, load_facts
 from .errors import ConfigError
 from .health import ModuleSpec
 from .registry import DEFAULT_NODE_MODULES, NODE_MODULES_KEY, NodeRegistry, default_registry
@@ -67,10 +72,14 @@ def flatten(d: Dict[str, Any], prefix: str = "cfg") -> Dict[str, Any]:
 
 
 class HicemParams:
-    def __init__(self, raw: Dict[str, Any]) -> None:
+    """The checked parameters ``raw`` and the facts of the robot file ``robot_file`` (None: the shipped robot
+    file, ``config/robots/rbkairos_ur10e.yaml``)."""
+
+    def __init__(self, raw: Dict[str, Any], robot_file: Optional[str] = None) -> None:
         if not isinstance(raw, dict):
             raise ConfigError("must hold a mapping at the top level, found %s" % type(raw).__name__)
         self.raw = raw
+        self.robot: RobotFacts = load_facts(robot_file or None, tuning=raw, error=ConfigError)
         self.tick_period_s = _get(raw, "hhlc.tick_period_s", float)
         self.idle_poll_s = _get(raw, "hhlc.idle_poll_s", float)
         self.resume_policy: Dict[str, str] = dict(_get(raw, "hhlc.resume_policy", dict))
@@ -114,13 +123,17 @@ class HicemParams:
         return default_registry(modules=self.node_modules)
 
     def blackboard_entries(self) -> Dict[str, Any]:
-        return flatten(self.raw)
+        """``cfg.*`` (the parameters) and ``robot.*`` (the robot facts) entries of a tree's root blackboard."""
+        entries = flatten(self.raw)
+        entries.update(self.robot.blackboard_entries())
+        return entries
 
 
-def load_params(path: str = DEFAULT_PARAMS_FILE) -> HicemParams:
-    """Read and check the parameter file; a problem raises :class:`ConfigError` naming the file (one line)."""
+def load_params(path: str = DEFAULT_PARAMS_FILE, robot_file: Optional[str] = None) -> HicemParams:
+    """Read and check the parameter file with the robot file's facts (None: the shipped robot file); a problem
+    raises :class:`ConfigError` naming the file (one line)."""
     raw = read_yaml(path, ConfigError)
     try:
-        return HicemParams(raw)
+        return HicemParams(raw, robot_file)
     except ConfigError as exc:
         raise exc.in_file(path)

@@ -38,9 +38,11 @@ class Executive:
 def create_executive(pemkre: Any, locem: Any, hdict_path: Optional[str] = None,
                      params_file: str = DEFAULT_PARAMS_FILE, trees_dir: str = DEFAULT_TREES_DIR,
                      params: Optional[HicemParams] = None, library: Optional[TreeLibrary] = None,
-                     clock: Callable[[], float] = time.monotonic, start_watchdog: bool = True) -> Executive:
-    """Build every HICEM part. ``hdict_path`` None keeps everything in memory (no crash recovery)."""
-    params = params or load_params(params_file)
+                     clock: Callable[[], float] = time.monotonic, start_watchdog: bool = True,
+                     robot_file: Optional[str] = None) -> Executive:
+    """Build every HICEM part. ``hdict_path`` None keeps everything in memory (no crash recovery); ``robot_file``:
+    the robot file whose facts the trees read (None: the shipped robot; ignored when ``params`` is given)."""
+    params = params or load_params(params_file, robot_file)
     if library is None:
         library = TreeLibrary(params.node_registry())
         library.load_directory(trees_dir)

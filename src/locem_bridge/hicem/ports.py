@@ -5,7 +5,7 @@ description). In the XML a port value is either a *literal* (converted once, at 
 type; a conversion failure is a load-time error) or a *blackboard pointer* ``{key}`` (resolved on every read;
 a string found on the blackboard is converted by the declared type, any other value must already have it).
 
-Keys may carry dots (``{cfg.taping.standoff}``); a leading ``@`` (``{@cfg.x}``) addresses the root blackboard
+Keys may carry dots (``{cfg.taping.speed}``); a leading ``@`` (``{@cfg.x}``) addresses the root blackboard
 of the tree, as in BT.CPP 4.
 """
 import json

@@ -1,11 +1,12 @@
 """Every command LOCEM can declare, with or without hardware: the source of the API documentation.
 
-Each entry names a module with a ``SPECS`` tuple; modules are imported lazily so the catalogue never pulls in
-a device library. Bridges append their declaration modules here.
+Each entry names a module with a ``SPECS`` tuple, or, when the commands depend on the robot (argument ranges,
+tool names), a ``specs_for(robot)`` function taking the robot file's ``robot`` section; modules are imported
+lazily so the catalogue never pulls in a device library. Bridges append their declaration modules here.
 """
 
 import importlib
-from typing import List, Tuple
+from typing import Any, List, Mapping, Optional, Tuple
 
 from .registry import CommandSpec
 
@@ -18,8 +19,14 @@ DECLARATION_MODULES: Tuple[str, ...] = (
 )
 
 
-def all_specs() -> List[CommandSpec]:
+def all_specs(robot: Optional[Mapping[str, Any]] = None) -> List[CommandSpec]:
+    """Every command a LOCEM of ``robot`` (a loaded robot file's ``robot`` section; default: the shipped robot
+    file's) can declare, with that robot's ranges and tool names."""
+    if robot is None:
+        from ..robot_file import load_robot
+        robot = load_robot()["robot"]
     specs: List[CommandSpec] = []
     for module_name in DECLARATION_MODULES:
-        specs.extend(importlib.import_module(module_name).SPECS)
+        module = importlib.import_module(module_name)
+        specs.extend(module.specs_for(robot) if hasattr(module, "specs_for") else module.SPECS)
     return specs

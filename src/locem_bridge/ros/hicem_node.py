@@ -74,7 +74,8 @@ class HicemNode:
         hdict = os.path.expanduser(param("hdict_path", os.path.join(rospkg.get_ros_home(), "hicem_hdict.sqlite")))
         locem_ns = rospy.resolve_name(param("locem_ns", "locem"))
         # the files first: a bad one fails the node at once (one line), not after waiting for LOCEM and PEMKRE
-        params = load_params(params_file)
+        robot_file = param("robot", os.path.join(share, "config", "robots", "rbkairos_ur10e.yaml"))
+        params = load_params(params_file, robot_file)
         library = TreeLibrary(params.node_registry())
         library.load_directories(tree_dirs)
         self.locem = RosLocemClient(locem_ns, wait_s=param("locem_wait", 10.0))

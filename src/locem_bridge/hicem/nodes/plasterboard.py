@@ -6,7 +6,9 @@ each), GetAreaRaster (base stations and raster rectangles for an area), PlanTran
 away from the walls). They read the scanned walls, joints and areas through the HDH (the paper's data handler).
 
 Like every node they hold no number of their own: standoffs, offsets and tolerances arrive through ports, by
-default from the ``taping``/``site`` sections of the HICEM parameters (``config/hicem/plasterboard.yaml``).
+default from the robot facts (``robot.work.taping.*``, ``robot.tools``: the robot file, derived by
+:mod:`locem_bridge.robot_facts`) and the ``taping``/``site`` sections of the HICEM parameters
+(``config/hicem/plasterboard.yaml``).
 """
 import math
 from typing import Any, Dict, List, Tuple
@@ -23,7 +25,7 @@ from ..ports import ANY, FLOAT, FLOAT_LIST, INT, JSON, STRING, STRING_LIST, inpu
 # Ports the taping and area nodes declare alike, declared once: the same name, type, default and meaning in each.
 LINE_ID = input_port("line_id", STRING, None, "", "stored joint id")
 AREA_ID = input_port("area_id", STRING, None, "", "stored area id")
-STANDOFF = input_port("standoff", FLOAT, "{@cfg.taping.base_standoff}", "m", "base centre distance from the wall")
+STANDOFF = input_port("standoff", FLOAT, "{@robot.work.taping.base_standoff}", "m", "base centre distance from the wall")
 LATERAL_OFFSET = input_port("lateral_offset", FLOAT, "{@cfg.taping.lateral_offset}", "m", "shift along the wall")
 YAW_OFFSET = input_port("yaw_offset", FLOAT, "{@cfg.taping.yaw_offset}", "rad", "added to the wall-facing heading")
 SURFACE_OFFSET = input_port("surface_offset", FLOAT, "{@cfg.taping.surface_offset}", "m", "tool point off the wall")
@@ -39,7 +41,7 @@ class TagIdNameToObjectId(Leaf):
     PORTS = (
         input_port("symbol", STRING, None, "", "PEMKRE parameter, e.g. {param_line}"),
         input_port("kind", STRING, None, "", "expected object kind", choices=("joint", "area", "wall", "tool")),
-        input_port("tools", STRING_LIST, "{@cfg.tools}", "", "tool names known to this robot"),
+        input_port("tools", STRING_LIST, "{@robot.tools}", "", "tool names known to this robot"),
         output_port("object_id", STRING, None, "", "stored object id"),
     )
 
@@ -161,9 +163,9 @@ class GetTapeSegments(Leaf):
                    "surface_offset) and the inward normal. The clipped length is reported as skipped.")
     PORTS = (
         LINE_ID,
-        input_port("segment_length", FLOAT, "{@cfg.taping.segment_length}", "m",
+        input_port("segment_length", FLOAT, "{@robot.work.taping.segment_length}", "m",
                    "longest piece taped from one base pose"),
-        input_port("z_range", FLOAT_LIST, "{@cfg.taping.z_range}", "m",
+        input_port("z_range", FLOAT_LIST, "{@robot.work.taping.z_range}", "m",
                    "z_min;z_max, the height band the arm reaches with the tool facing the wall"),
         STANDOFF, LATERAL_OFFSET, YAW_OFFSET, SURFACE_OFFSET, MAX_TILT,
         output_port("segments", JSON, None, "", "list of {approach, start, end, normal, length}"),
