@@ -101,6 +101,20 @@ def _case_hicem_params(tmp_path):
     return ["--launch-arg", "params_file:=" + path], "%s: hhlc.tick_period_s: must be a finite number, got 'fast'" % path
 
 
+def _case_robot_wall_work(tmp_path):
+    path = _robot(tmp_path, lambda r: r["tools"]["sander"]["wall_work"].update(work="spray"))
+    return (["--launch-arg", "robot:=" + path],
+            "%s: robot.tools.sander.wall_work.work: 'spray' is the work of spray_gun too; one tool per work" % path)
+
+
+def _case_hicem_tuning_against_the_robot(tmp_path):
+    data = yaml.safe_load(open(os.path.join(REPO, "config", "hicem", "plasterboard.yaml")))
+    data["spray"]["lane_overrun"] = 0.4
+    path = _dump(tmp_path / "params.yaml", data)
+    return (["--launch-arg", "params_file:=" + path], "%s: spray.lane_overrun: 0.4 m leaves no strip within the "
+            "spray_gun's lateral reach of 0.4 m (allowed: < 0.4)" % path)
+
+
 def _case_hicem_node_module(tmp_path):
     data = yaml.safe_load(open(os.path.join(REPO, "config", "hicem", "plasterboard.yaml")))
     data["hhlc"]["node_modules"].append("site_nodes_not_there")
@@ -131,7 +145,8 @@ def _case_robot_overrides(tmp_path):
 
 
 CASES = [_case_site_unknown_key, _case_site_bad_value, _case_robot_misspelt_device, _case_robot_missing_key,
-         _case_robot_relative_eds, _case_robot_controller_port, _case_hicem_params, _case_hicem_node_module,
+         _case_robot_relative_eds, _case_robot_controller_port, _case_robot_wall_work, _case_hicem_params,
+         _case_hicem_tuning_against_the_robot, _case_hicem_node_module,
          _case_tree_xml, _case_turtle, _case_robot_overrides]
 
 

@@ -128,16 +128,17 @@ class RobotFacts:
         return out
 
 
-def _tuning(tuning: Mapping[str, Any], work: str, key: str, lo: float, hi: float) -> Optional[float]:
+def _tuning(tuning: Mapping[str, Any], work: str, key: str, ok: Callable[[float], bool],
+            allowed: str) -> Optional[float]:
+    """``tuning[work][key]`` (None when absent), a finite number for which ``ok`` holds."""
     section = tuning.get(work)
     if not isinstance(section, Mapping) or key not in section:
         return None
     value = section[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ConfigError("must be a finite number, found %r" % (value,), key="%s.%s" % (work, key))
-    if not lo < value <= hi:
-        raise ConfigError("%r is out of range" % (value,), key="%s.%s" % (work, key),
-                          allowed="> %g and <= %g" % (lo, hi))
+    if not ok(float(value)):
+        raise ConfigError("%r is out of range" % (value,), key="%s.%s" % (work, key), allowed=allowed)
     return float(value)
 
 
@@ -157,14 +158,14 @@ def derive(robot: Mapping[str, Any], tuning: Optional[Mapping[str, Any]] = None,
             "z_range": [_r(z) for z in ww["z_band"]], "lateral_reach": _r(ww["lateral_reach"]),
             "segment_length": _r(ww["line_length"]),
         }
-        overrun = _tuning(tuning, work, "lane_overrun", -1e-12, float(ww["lateral_reach"]))
+        reach = float(ww["lateral_reach"])
+        overrun = _tuning(tuning, work, "lane_overrun", lambda v: v >= 0.0, ">= 0")
         if overrun is not None:
-            entries["section_width"] = section_width(float(ww["lateral_reach"]), overrun)
+            entries["section_width"] = section_width(reach, overrun)
             if entries["section_width"] <= 0.0:
                 raise ConfigError("%g m leaves no strip within the %s's lateral reach of %g m"
-                                  % (overrun, name, ww["lateral_reach"]), key="%s.lane_overrun" % work,
-                                  allowed="< %g" % ww["lateral_reach"])
-        ratio = _tuning(tuning, work, "lane_ratio", 0.0, 1.0)
+                                  % (overrun, name, reach), key="%s.lane_overrun" % work, allowed="< %g" % reach)
+        ratio = _tuning(tuning, work, "lane_ratio", lambda v: 0.0 < v <= 1.0, "> 0 and <= 1")
         if ratio is not None:
             entries["lane_spacing"] = lane_spacing(width, ratio)
             if entries["lane_spacing"] <= 0.0:
