@@ -327,7 +327,7 @@ class ComposeSkillCommand(Leaf):
     PORTS = (
         input_port("skill", STRING, "{skill}", "", "LOCEM command name of the basic skill"),
         input_port("omit", STRING_LIST, "", "", "parameter names not sent (e.g. ones only PEMKRE uses)"),
-        output_port("command", STRING, None, "", "the composed command, e.g. 'CHANGE_TOOL tool=spray_gun'"),
+        output_port("command", STRING, None, "", "the composed command, e.g. 'LIFT z=1.2'"),
     )
 
     def on_tick(self) -> Status:
