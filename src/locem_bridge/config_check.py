@@ -2,9 +2,10 @@
 
 :func:`check_files` loads each given file with the same loader its node uses (site and robot YAML through the
 one robot/site validation, the robot file together with the launch's overrides; HICEM parameters; every tree
-XML of the trees folder; every Turtle file of the ontology folder, parsed) and raises the first
+XML of the trees folder; every Turtle file of the ontology folder, parsed; with a robot, trees and ontologies, the
+robot's resource model generated from them as the PEMKRE node does) and raises the first
 :class:`~locem_bridge.common.config_errors.ConfigError`, whose ``str`` is the one line ``FILE: KEY: PROBLEM (allowed:
-...)``. It takes well under a second; the process model's structure (checked when PEMKRE compiles it) is left
+...)``. It takes a second or two; the process model's structure (checked when PEMKRE compiles it) is left
 to the PEMKRE node, which fails with the same kind of line.
 """
 import os
@@ -54,3 +55,7 @@ def check_files(site: Optional[str] = None, robot: Optional[str] = None,
             if processes is not None and step.iri not in processes:
                 raise ConfigError("process <%s> is not an abstract process of the loaded Turtle" % step.iri,
                                   file=job, key="steps[%d].process" % i, allowed=sorted(processes))
+    if robot and trees_dir and ontology_dir:    # skills naming absent devices, unknown units or capabilities, ...
+        from .skills import build_resource_model
+        build_resource_model(robot, [trees_dir] + list(extra_trees_dirs), robot_overrides or None,
+                             ontology_files=files)

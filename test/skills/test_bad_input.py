@@ -127,3 +127,14 @@ def test_the_export_command_writes_nothing_for_bad_input(trees_copy, tmp_path):
     assert len(lines) == 1 and lines[0].startswith(os.path.join(trees_copy, "TAPE_LINE.xml") + ": ")
     assert "'nope' is not a capability" in lines[0]
     assert not out.exists() and not (tmp_path / "out").exists()
+
+
+def test_the_pre_flight_refuses_an_inconsistent_resource_model(trees_copy):
+    from locem_bridge.config_check import check_files
+
+    from skills_testkit import ONTOLOGIES
+    check_files(robot=ROBOT, trees_dir=TREES, ontology_dir=ONTOLOGIES)        # the shipped files pass
+    path = os.path.join(trees_copy, "SCAN.xml")
+    _edit(path, 'capability="plb:cap_ScanWalls"', 'capability="plb:cap_ScanEverything"')
+    _refused(lambda: check_files(robot=ROBOT, trees_dir=trees_copy, ontology_dir=ONTOLOGIES), path,
+             "TreeNodesModel.SubTree[SCAN].capability", "is not a capability")
