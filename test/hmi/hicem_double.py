@@ -29,6 +29,34 @@ WALLS: Dict[str, List[Tuple[str, float]]] = {
     "wall_1": [("wall_1_joint_1", 1.2), ("wall_1_joint_2", 2.4)],
     "wall_2": [("wall_2_joint_1", 1.2)],
 }
+SK = "https://locem-bridge.example.org/ont/skill#"
+ROBOT = "https://locem-bridge.example.org/robot/diffdrive_ur5e/"
+# the skill matching PEMKRE answers (ProcessMatch.to_dict()) for the taping and sanding processes on a robot with a
+# tool changer and no sander; spraying is refused as PEMKRE refuses without a resource model
+MATCHES: Dict[str, Dict[str, Any]] = {
+    TAPING: {"process": TAPING, "robot": ROBOT + "robot", "ok": True, "nodes": [
+        {"node": PLB + "t_scan", "task_type": PLB + "ScanTask", "action_type": "SCAN",
+         "capability": PLB + "cap_ScanWalls", "ok": True, "problem": "", "rejected": [],
+         "realization": {"kind": "skill", "name": "SCAN", "skill": ROBOT + "skill_SCAN", "skill_kind": "composite",
+                         "involves_operator": False}},
+        {"node": PLB + "t_getTool", "task_type": PLB + "GetToolTask", "action_type": "GET_TOOL",
+         "capability": PLB + "cap_GetTool", "ok": True, "problem": "",
+         "rejected": [{"candidate": ROBOT + "skill_GET_TOOL", "name": "GET_TOOL", "kind": "composite",
+                       "reason": "uses MOUNT_TOOL, not offered by this robot"}],
+         "realization": {"kind": "template", "name": "tmpl_getToolAutomatically", "involves_operator": False,
+                         "template": PLB + "tmpl_getToolAutomatically", "steps": [
+                             {"index": 1, "capability": SK + "cap_ArmToWallReady", "skill": ROBOT + "skill_WALL_READY",
+                              "name": "WALL_READY", "skill_kind": "basic", "arguments": [], "involves_operator": False},
+                             {"index": 2, "capability": SK + "cap_ChangeToolAutomatically",
+                              "skill": ROBOT + "skill_CHANGE_TOOL", "name": "CHANGE_TOOL", "skill_kind": "basic",
+                              "arguments": ["tool={tool}"], "involves_operator": False}]}}]},
+    PLB + "SandingProcess": {"process": PLB + "SandingProcess", "robot": ROBOT + "robot", "ok": False, "nodes": [
+        {"node": PLB + "s_sand", "task_type": PLB + "SandAreaTask", "action_type": "SAND_AREA",
+         "capability": PLB + "cap_SandArea", "ok": False, "realization": None,
+         "problem": "no skill of this robot realizes plb:cap_SandArea",
+         "rejected": [{"candidate": ROBOT + "skill_SAND_AREA", "name": "SAND_AREA", "kind": "composite",
+                       "reason": "tool absent: sander"}]}]},
+}
 COLORS = {"open": (210, 40, 40), "taped": (30, 160, 60), "manual": (40, 90, 220)}   # as sim.outcome draws them
 
 
@@ -126,6 +154,13 @@ class ScriptedHicemDouble:
                                    "operatorInterventions": self.desk.interventions, "manualFallbacks": manual,
                                    "successRate": 1.0 if self._tasks else 0.0}],
                     "task_types": [by_type[k] for k in sorted(by_type)]}
+
+    def match_process(self, iri: str) -> Dict[str, Any]:
+        with self._lock:
+            self.calls.append(("match_process", iri))
+        if iri not in MATCHES:
+            raise BackendRefused("PEMKRE match refused: no resource model is loaded, so nothing is matched")
+        return MATCHES[iri]
 
     def wall_pictures(self) -> Dict[str, bytes]:
         with self._lock:

@@ -160,3 +160,58 @@ def test_click_through_a_run(browser, server, double, tmp_path):
     shot = str(tmp_path / "operator_hmi.png")
     assert browser.save_screenshot(shot) and os.path.getsize(shot) > 10000
     print("screenshot: %s" % shot)
+
+
+def test_the_skill_matching_of_a_process_is_shown_per_task(browser, server, double, tmp_path):
+    from selenium.common.exceptions import StaleElementReferenceException
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    from hicem_double import PROCESSES
+
+    def wait(cond, what):
+        return WebDriverWait(browser, WAIT_S, poll_frequency=0.05,
+                             ignored_exceptions=(StaleElementReferenceException,)).until(lambda d: cond(),
+                                                                                         message=what)
+
+    def skills_button(iri):
+        return wait(lambda: browser.find_element(By.CSS_SELECTOR, '.match-button[data-iri="%s"]' % iri),
+                    "the Skills button of %s" % iri)
+
+    def row(action):
+        return browser.find_element(By.CSS_SELECTOR, '#match-table tr[data-action="%s"]' % action)
+
+    browser.get(server.url)
+    skills_button(TAPING).click()
+    wait(lambda: browser.find_elements(By.CSS_SELECTOR, '#match-table[data-process="%s"]' % TAPING),
+         "the matching table of the taping process")
+    assert "Taping on diffdrive_ur5e" in browser.find_element(By.ID, "match-process").text
+    get_tool = row("GET_TOOL")
+    chosen = get_tool.find_element(By.CSS_SELECTOR, "td.chosen")
+    assert chosen.get_attribute("data-kind") == "template" and "tmpl_getToolAutomatically" in chosen.text
+    steps = [li.text for li in chosen.find_elements(By.CSS_SELECTOR, "ol.steps li")]
+    assert steps == ["WALL_READY (basic) for cap_ArmToWallReady",
+                     "CHANGE_TOOL tool={tool} (basic) for cap_ChangeToolAutomatically"]
+    rejected = [li.text for li in get_tool.find_elements(By.CSS_SELECTOR, "td.rejected li")]
+    assert rejected == ["GET_TOOL (composite): uses MOUNT_TOOL, not offered by this robot"]
+    scan = row("SCAN")
+    assert scan.find_element(By.CSS_SELECTOR, "td.chosen").get_attribute("data-skill") == "SCAN"
+    assert scan.find_element(By.CSS_SELECTOR, "td.rejected").text == "none"
+    assert browser.save_screenshot(str(tmp_path / "operator_hmi_matching.png"))
+
+    # a process nothing realizes on this robot: the task is marked, with why, and the candidate's reason
+    skills_button(PROCESSES[2]["iri"]).click()
+    wait(lambda: browser.find_elements(By.CSS_SELECTOR, '#match-table[data-process="%s"]' % PROCESSES[2]["iri"]),
+         "the matching table of the sanding process")
+    sand = row("SAND_AREA")
+    assert "unmatched" in sand.get_attribute("class")
+    assert "none: no skill of this robot realizes plb:cap_SandArea" in sand.text
+    assert "SAND_AREA (composite): tool absent: sander" in sand.text
+    assert "not every task can be realized" in browser.find_element(By.ID, "match-process").text
+
+    # PEMKRE refusing (no resource model) is shown like every refusal
+    skills_button(PROCESSES[1]["iri"]).click()
+    wait(lambda: browser.find_element(By.ID, "error-banner").is_displayed(), "the error banner")
+    assert "no resource model" in browser.find_element(By.ID, "error-text").text
+    assert [c[1] for c in double.calls if c[0] == "match_process"] == [TAPING, PROCESSES[2]["iri"],
+                                                                        PROCESSES[1]["iri"]]

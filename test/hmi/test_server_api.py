@@ -613,3 +613,57 @@ def test_one_client_cannot_take_every_stream_slot(double):
         for sock in held:
             sock.close()
         assert serving(srv.url)
+
+
+# ------------------------------------------------------------------------------------- skill matching --
+def test_the_skill_matching_of_a_process_per_task(server, double):
+    from urllib.parse import quote
+    r = get(server.url, "/api/match?process=" + quote(TAPING, safe=""))
+    assert r.status == 200, r
+    view = r.json["match"]
+    assert view["process"] == TAPING and view["ok"] is True and view["robot_name"] == "diffdrive_ur5e"
+    scan, get_tool = view["tasks"]
+    assert (scan["action_type"], scan["capability"], scan["chosen"]["name"], scan["chosen"]["kind"]) == (
+        "SCAN", "cap_ScanWalls", "SCAN", "composite")
+    assert get_tool["chosen"]["kind"] == "template" and get_tool["chosen"]["name"] == "tmpl_getToolAutomatically"
+    assert [(s["index"], s["name"], s["kind"], s["arguments"], s["capability"]) for s in get_tool["chosen"]["steps"]] == [
+        (1, "WALL_READY", "basic", "", "cap_ArmToWallReady"),
+        (2, "CHANGE_TOOL", "basic", "tool={tool}", "cap_ChangeToolAutomatically")]
+    assert get_tool["rejected"] == [{"name": "GET_TOOL", "kind": "composite",
+                                     "reason": "uses MOUNT_TOOL, not offered by this robot"}]
+    assert ("match_process", TAPING) in double.calls
+
+
+def test_an_unmatchable_process_shows_why_and_refusals_and_bad_requests_are_clear(server, double):
+    from urllib.parse import quote
+    sanding = PROCESSES[2]["iri"]
+    (task,) = get(server.url, "/api/match?process=" + quote(sanding, safe="")).json["match"]["tasks"]
+    assert task["ok"] is False and task["chosen"] is None and "cap_SandArea" in task["problem"]
+    assert task["rejected"][0]["reason"] == "tool absent: sander"
+    r = get(server.url, "/api/match?process=" + quote(PROCESSES[1]["iri"], safe=""))      # PEMKRE refuses
+    assert r.status == 409 and r.error["code"] == "refused" and "no resource model" in r.error["message"]
+    r = get(server.url, "/api/match")
+    assert r.status == 400 and r.error["code"] == "missing_field" and "process" in r.error["message"]
+    r = get(server.url, "/api/match?process=urn%3Anope")
+    assert r.status == 404 and r.error["code"] == "unknown_process" and TAPING in r.error["message"]
+    r = get(server.url, "/api/match?proc=x")
+    assert r.status == 400 and r.error["code"] == "unknown_field" and "allowed: process" in r.error["message"]
+    assert post(server.url, "/api/match", {}).status == 405
+    assert not any(c[0] == "match_process" and c[1] == "urn:nope" for c in double.calls)
+    assert serving(server.url)
+
+
+def test_a_backend_without_matching_and_a_malformed_match_are_named():
+    class NoMatching(ScriptedHicemDouble):
+        match_process = None
+
+    class Broken(ScriptedHicemDouble):
+        def match_process(self, iri):
+            return {"process": iri, "nodes": [{"node": "", "realization": None}]}
+
+    from urllib.parse import quote
+    for backend, status, code, words in ((NoMatching(), 404, "no_matching", "does not offer skill matching"),
+                                         (Broken(), 502, "bad_match", "'node'")):
+        with HmiServer(backend, "127.0.0.1", 0, poll_period_s=0.05, shutdown_poll_s=0.05) as srv:
+            r = get(srv.url, "/api/match?process=" + quote(TAPING, safe=""))
+            assert (r.status, r.error["code"]) == (status, code) and words in r.error["message"], r

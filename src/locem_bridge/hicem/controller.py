@@ -7,9 +7,10 @@ composite skill's tree, :data:`BASIC_SKILL_TREE` for a basic skill, else the tre
 action type) → HDICT record ``phase=running`` → ``set_task_status(in_progress)`` → tick the tree every ``hhlc.tick_period_s`` until SUCCESS/FAILURE → ``phase=finished`` (outcome stored) →
 ``set_task_status(succeeded|failed, detail)`` → ``phase=reported`` } until PEMKRE answers ``ended``/``failed``.
 
-- The tree gets a fresh blackboard: ``cfg.*`` (HICEM parameters), ``robot.*`` (robot facts), ``param_<name>`` (PEMKRE parameters),
-  ``task``, ``action_type``, ``skill`` and ``skill_kind`` (the matched skill; empty when PEMKRE names none). ``task_detail`` written by the tree becomes the status detail; on failure the
-  detail is the reason recorded by the failing node.
+- The tree gets a fresh blackboard: ``cfg.*`` (HICEM parameters), ``robot.*`` (robot facts), ``param_<name>``
+  (PEMKRE parameters), ``task``, ``action_type``, ``skill`` and ``skill_kind`` (the matched skill; empty when
+  PEMKRE names none). ``task_detail`` written by the tree becomes the status detail; on failure the detail is the
+  reason recorded by the failing node.
 - :meth:`stop`: the running tree is halted (its LOCEM commands are cancelled, its prompts withdrawn), the
   safe commands (``locem.safe_commands``) are sent, the task is reported failed ``stopped: <reason>``, the
   process state becomes ``stopped``. A crucial-module fault from the HEM halts the tree the same way at once

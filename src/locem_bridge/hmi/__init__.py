@@ -43,13 +43,18 @@ All JSON bodies are UTF-8 objects. POSTs need ``Content-Type: application/json``
 ``GET  /api/kpis``                          ``{"kpis": K}``
 ``GET  /api/walls``                         ``{"walls": [W]}``
 ``GET  /api/walls/<wall_id>.png``           ``image/png``, the wall's current picture
+``GET  /api/match?process=<iri>``           ``{"match": M}``: PEMKRE's skill matching of an offered process
+                                            (the backend's optional ``match_process``)
 ==========================================  ===================================================================
 
 Shapes: S = ``{"process", "phase", "action", "tree", "node", "detail": str, "health": {"status": "ok" | "degraded"
 | "fault" | "unknown", "detail": str}, "progress": {"done": int, "total": int, "text": str} | null}``;
 P = ``{"id", "kind", "text": str, "choices": [str], "context": {...}}``; R = ``{"iri", "name", "description"}``;
 W = ``{"id": wall_id, "version": token, "url": "/api/walls/<id>.png?v=<token>" | ""}`` (empty url: the picture
-is not written yet); K = ``{table_name: [flat row objects]}``; E = ``{"time", "level", "text"}``.
+is not written yet); K = ``{table_name: [flat row objects]}``; E = ``{"time", "level", "text"}``;
+M = ``{"process", "robot", "robot_name", "ok", "tasks": [{"node", "task", "action_type", "task_type",
+"capability", "ok", "chosen": {"kind": basic | composite | template, "name", "steps": [{"index", "name", "kind",
+"capability", "arguments"}], "operator"} | null, "rejected": [{"name", "kind", "reason"}], "problem"}]}``.
 
 Errors are ``{"error": {"status": int, "code": str, "message": str}}`` with: 400 ``malformed_json``,
 ``bad_body``, ``missing_body``, ``missing_field``, ``unknown_field`` (naming the fields), ``answer_not_allowed``,
@@ -57,10 +62,10 @@ Errors are ``{"error": {"status": int, "code": str, "message": str}}`` with: 400
 ``forbidden_host`` (loopback server asked for another Host), ``forbidden_origin`` (a request from a page served
 elsewhere: another ``Origin``, or ``Sec-Fetch-Site`` cross-site/same-site on ``/api``); 404 ``not_found``
 (unknown endpoint; the message lists the endpoints), ``unknown_process``, ``unknown_wall``,
-``picture_not_ready``; 405 ``method_not_allowed``; 409
+``picture_not_ready``, ``no_matching`` (the backend offers no skill matching); 405 ``method_not_allowed``; 409
 ``prompt_not_open`` (answered, withdrawn or never asked; the message lists the open prompts), ``refused`` (the
 backend declined, with its reason); 411/413/415 for body framing, size and type; 502 ``backend_error`` /
-``bad_picture``; 503 ``backend_unavailable``, ``too_many_streams`` (in all, or per client address). The server
+``bad_picture`` / ``bad_match``; 503 ``backend_unavailable``, ``too_many_streams`` (in all, or per client address). The server
 keeps serving after any of them.
 
 Run it against the robot with ``rosrun locem_bridge operator_hmi`` (default http://127.0.0.1:8088/, ``_mode:=web``:

@@ -24,6 +24,9 @@ should return quickly, reading cached state where they can):
   ``{"processes": [...], "task_types": [...]}``), or ``{}`` while there is nothing to show.
 - ``wall_pictures()`` -> ``{wall_id: png_bytes_or_path}``: the current picture of each wall as PNG bytes or the
   path of a PNG file (read when served; a missing file means "not yet available").
+- optional ``match_process(iri)`` -> PEMKRE's skill matching of an abstract process (``ProcessMatch.to_dict()``,
+  JSON text or decoded; :func:`locem_bridge.hmi.pemkre_view.match_view` reads it); raise :class:`BackendRefused`
+  when PEMKRE refuses (no resource model, unknown process). A backend without it: the page says so (404).
 
 Any other exception from a backend is reported to the operator as a backend failure (HTTP 502) and logged.
 """

@@ -15,16 +15,18 @@ from .hicem_view import snapshot_from_hicem
 KpiSource = Callable[[], Dict[str, List[Dict[str, Any]]]]
 PictureSource = Callable[[], Dict[str, Any]]
 ProgressSource = Callable[[], Optional[Dict[str, Any]]]
+MatchSource = Callable[[str], Any]
 
 
 class ExecutiveBackend:
     """HmiBackend over ``controller`` (HighLevelController), ``operator`` (OperatorDesk), ``health``
-    (HealthMonitor, optional). ``processes`` lists what may be started (``{"iri", "name", "description"}``)."""
+    (HealthMonitor, optional). ``processes`` lists what may be started (``{"iri", "name", "description"}``);
+    ``match`` (optional) answers the page's skill matching of a process (``ProcessMatch.to_dict()`` of PEMKRE)."""
 
     def __init__(self, controller: Any, operator: Any, health: Any = None,
                  processes: Sequence[Dict[str, Any]] = (), kpis: Optional[KpiSource] = None,
                  pictures: Optional[PictureSource] = None, progress: Optional[ProgressSource] = None,
-                 stop_reason: str = "STOP pressed on the operator HMI") -> None:
+                 stop_reason: str = "STOP pressed on the operator HMI", match: Optional[MatchSource] = None) -> None:
         self.controller = controller
         self.operator = operator
         self.health = health
@@ -33,6 +35,9 @@ class ExecutiveBackend:
         self._pictures = pictures
         self._progress = progress
         self.stop_reason = stop_reason
+        # the page offers skill matching only when something can answer it (None: the server answers 404)
+        self.match_process: Optional[MatchSource] = (
+            (lambda iri: self._refused(match, iri)) if match is not None else None)
 
     @classmethod
     def for_executive(cls, executive: Any, **kw: Any) -> "ExecutiveBackend":
@@ -71,3 +76,12 @@ class ExecutiveBackend:
 
     def wall_pictures(self) -> Dict[str, Any]:
         return self._pictures() if self._pictures is not None else {}
+
+    @staticmethod
+    def _refused(match: MatchSource, iri: str) -> Any:
+        """``match(iri)`` (e.g. ``lambda iri: engine.match_process(iri).to_dict()``); whatever it raises (PEMKRE's
+        refusals: no resource model, unknown process) is shown to the operator as a refusal naming the error."""
+        try:
+            return match(iri)
+        except Exception as err:  # noqa: BLE001 - PEMKRE's error classes are not imported into the HMI core
+            raise BackendRefused("%s: %s" % (type(err).__name__, err))

@@ -8,6 +8,9 @@
 - :func:`taping_progress` summarizes the ``feature_counts`` query (joint lines per taping status).
 - :func:`work_progress` summarizes the ``feature_status`` query for the work the running process does: joints
   while taping, areas while spraying or sanding (see :func:`locem_bridge.hmi.hicem_view.WorkFollower`).
+- :func:`match_view` turns PEMKRE's skill matching of a process (``/pemkre/match``, ``ProcessMatch.to_dict()``)
+  into what the page shows per task: the chosen skill (or template and its steps' skills) and every rejected
+  candidate with its reason.
 """
 import json
 from typing import Any, Dict, Iterable, List, Optional, Union
@@ -121,3 +124,69 @@ def processes_from_ontologies(paths: Iterable[str]) -> List[Dict[str, str]]:
         name = iri.rsplit("#", 1)[-1].rsplit("/", 1)[-1]
         out.append({"iri": iri, "name": name, "description": labels.get("en") or labels.get(None) or ""})
     return sorted(out, key=lambda p: (p["name"], p["iri"]))
+
+
+def _text(value: Any) -> str:
+    return "" if value is None else str(value)
+
+
+def _chosen(real: Dict[str, Any]) -> Dict[str, Any]:
+    if real.get("kind") == "template":
+        steps = []
+        for st in real.get("steps") or []:
+            if not isinstance(st, dict):
+                raise ValueError("a template step must be an object, got %s" % type(st).__name__)
+            args = " ".join(_text(a) for a in st.get("arguments") or [])
+            steps.append({"index": st.get("index"), "name": _text(st.get("name")), "kind": _text(st.get("skill_kind")),
+                          "capability": _local(st.get("capability")), "arguments": args,
+                          "operator": bool(st.get("involves_operator"))})
+        return {"kind": "template", "name": _text(real.get("name")) or _local(real.get("template")),
+                "steps": steps, "operator": bool(real.get("involves_operator"))}
+    return {"kind": _text(real.get("skill_kind")) or _text(real.get("kind")), "name": _text(real.get("name")),
+            "iri": _text(real.get("skill")), "steps": [], "operator": bool(real.get("involves_operator"))}
+
+
+def match_view(raw: Union[str, bytes, Dict[str, Any]]) -> Dict[str, Any]:
+    """``{"process", "robot", "robot_name", "ok", "tasks": [...]}`` from a process match (JSON text or decoded): per task node
+    ``node``, ``task`` (its local name), ``action_type``, ``task_type``, ``capability`` (local name; "" = none
+    required, the action type's tree runs), ``ok``, ``chosen`` (``{"kind": basic|composite|template, "name",
+    "steps": [{"index", "name", "kind", "capability", "arguments"}], "operator"}`` or None), ``rejected``
+    (``[{"name", "kind", "reason"}]``) and ``problem``. Raises ``ValueError`` naming what is malformed."""
+    if isinstance(raw, (str, bytes)):
+        try:
+            raw = json.loads(raw)
+        except ValueError as err:
+            raise ValueError("process match is not JSON: %s" % err)
+    if not isinstance(raw, dict) or not isinstance(raw.get("nodes"), list):
+        raise ValueError("process match must be an object with a 'nodes' list, got %.80r" % (raw,))
+    tasks = []
+    for n in raw["nodes"]:
+        if not isinstance(n, dict) or not n.get("node"):
+            raise ValueError("each matched task node must be an object with 'node', got %.80r" % (n,))
+        real = n.get("realization")
+        if real is not None and not isinstance(real, dict):
+            raise ValueError("task node %s: 'realization' must be an object or null" % n["node"])
+        rejected = []
+        for r in n.get("rejected") or []:
+            if not isinstance(r, dict):
+                raise ValueError("task node %s: a rejected candidate must be an object" % n["node"])
+            rejected.append({"name": _text(r.get("name")) or _local(r.get("candidate")), "kind": _text(r.get("kind")),
+                             "reason": _text(r.get("reason"))})
+        capability = _text(n.get("capability"))
+        tasks.append({"node": _text(n["node"]), "task": _local(n["node"]), "action_type": _text(n.get("action_type")),
+                      "task_type": _local(n.get("task_type")), "capability": _local(capability),
+                      "ok": bool(n.get("ok", real is not None or not capability)),
+                      "chosen": _chosen(real) if real else None, "rejected": rejected,
+                      "problem": _text(n.get("problem"))})
+    robot = _text(raw.get("robot"))
+    return {"process": _text(raw.get("process")), "robot": robot, "robot_name": _robot_name(robot),
+            "ok": bool(raw.get("ok", all(t["ok"] for t in tasks))), "tasks": tasks}
+
+
+def _robot_name(iri: str) -> str:
+    """``diffdrive_ur5e`` for ``.../robot/diffdrive_ur5e/robot`` (the generated model's robot IRI), else the
+    local name."""
+    parts = iri.rstrip("/").split("/")
+    if len(parts) >= 3 and parts[-1] == "robot" and parts[-3] == "robot":
+        return parts[-2]
+    return _local(iri)

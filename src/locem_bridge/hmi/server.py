@@ -29,11 +29,12 @@ import time
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Dict, List, Optional, Tuple
-from urllib.parse import unquote, urlsplit
+from urllib.parse import parse_qs, unquote, urlsplit
 
 from .backend import HmiBackend
 from .errors import BackendRefused, BackendUnavailable, RequestError, ServerStartError
 from .hub import StateHub
+from .pemkre_view import match_view
 
 LOG = logging.getLogger("locem_bridge.hmi.server")
 STATIC_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "static")
@@ -60,6 +61,8 @@ ENDPOINTS = [
     ("GET", "/api/kpis", "KPI tables"),
     ("GET", "/api/walls", "walls with a picture"),
     ("GET", "/api/walls/<wall_id>.png", "the current picture of one wall"),
+    ("GET", "/api/match?process=<iri>", "how each task of a process is matched to this robot's skills: the chosen "
+     "skill and the rejected candidates with reasons"),
 ]
 
 
@@ -373,6 +376,8 @@ class HmiServer:
                 return h._json(200, {"kpis": self.hub.state().get("kpis", {})})
             if path == "/api/walls":
                 return h._json(200, {"walls": self.hub.state().get("walls", [])})
+            if path == "/api/match":
+                return self._match(h)
             m = WALL_PNG.match(path)
             if m:
                 return self._wall(h, unquote(m.group(1)))
@@ -384,8 +389,8 @@ class HmiServer:
             m = PROMPT_REPLY.match(path)
             if m:
                 return self._reply(h, unquote(m.group(1)))
-        if any(p == path for _m, p, _w in ENDPOINTS) or PROMPT_REPLY.match(path) or WALL_PNG.match(path):
-            allow = ", ".join(sorted({m for m, p, _ in ENDPOINTS if p == path} or
+        if any(p.split("?")[0] == path for _m, p, _w in ENDPOINTS) or PROMPT_REPLY.match(path) or WALL_PNG.match(path):
+            allow = ", ".join(sorted({m for m, p, _ in ENDPOINTS if p.split("?")[0] == path} or
                                      ({"POST"} if PROMPT_REPLY.match(path) else {"GET"})))
             raise RequestError(405, "method_not_allowed", "%s %s is not supported; allowed: %s" % (
                 method, path, allow), allow=allow)
@@ -425,6 +430,33 @@ class HmiServer:
         self.hub.note("started %s" % name)
         self.hub.refresh_now()
         h._json(200, {"ok": True, "started": iri, "result": result})
+
+    def _match(self, h: _Handler) -> None:
+        query = parse_qs(urlsplit(h.path).query)
+        unknown = sorted(set(query) - {"process"})
+        if unknown:
+            raise RequestError(400, "unknown_field", "unknown query parameter(s) %s; allowed: process" %
+                               ", ".join(unknown))
+        iri = (query.get("process") or [""])[0]
+        if not iri:
+            raise RequestError(400, "missing_field", "query parameter 'process' (an abstract process IRI) is "
+                               "required: /api/match?process=<iri>")
+        fn = getattr(self.backend, "match_process", None)
+        if fn is None:
+            raise RequestError(404, "no_matching", "this HMI's backend does not offer skill matching (it has no "
+                               "match_process); the ROS HMI asks PEMKRE's <pemkre>/match service")
+        known = self.hub.processes()
+        if not any(p["iri"] == iri for p in known):
+            known = self.hub.refresh_processes()
+        if not any(p["iri"] == iri for p in known):
+            raise RequestError(404, "unknown_process", "no process %r; processes: %s" % (
+                iri, ", ".join(p["iri"] for p in known) or "none"))
+        raw = fn(iri)
+        try:
+            view = match_view(raw)
+        except ValueError as err:
+            raise RequestError(502, "bad_match", "the backend's process match is malformed: %s" % err)
+        h._json(200, {"match": view})
 
     def _stop(self, h: _Handler) -> None:
         # the emergency path: whatever the body holds (or fails to hold), the robot is stopped

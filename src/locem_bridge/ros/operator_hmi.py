@@ -13,6 +13,8 @@ interfaces (names relative to the node's namespace unless absolute):
   ``kpi_by_task_type`` for the running specific process) and progress (``feature_status``: joints while the
   running process tapes, areas while it sprays or sands; see ``WorkFollower``). When PEMKRE is not up the page
   says so and the rest keeps working.
+- ``<pemkre>/match`` (``locem_bridge/PemkreMatchProcess``) -> the page's skill matching of a process (the chosen
+  skill per task and the rejected candidates with reasons); PEMKRE's refusal (no resource model) is shown as such.
 - wall pictures: every ``<wall_id>.png`` in ``~pictures_dir``, and, when the simulated worksite runs, its
   pictures refreshed every ``~sim_picture_period`` s through ``<sim>/save_outcome`` into a private folder
   (:class:`locem_bridge.hmi.pictures.SimPictures`);
@@ -53,7 +55,8 @@ from locem_bridge.hmi.hicem_view import WorkFollower
 from locem_bridge.hmi.pemkre_view import KPI_QUERIES, processes_from_ontologies, rows_from_result, work_progress
 from locem_bridge.hmi.sim_hands import HandsError, hand_actions
 from locem_bridge.msg import HicemState
-from locem_bridge.srv import HicemOperatorReply, HicemStartProcess, HicemStop, JsonCall, PemkreQuery
+from locem_bridge.srv import (HicemOperatorReply, HicemStartProcess, HicemStop, JsonCall, PemkreMatchProcess,
+                              PemkreQuery)
 from locem_bridge.ros.calls import timed
 from locem_bridge.ros.params import as_list, package_share, param
 from locem_bridge.ros.startup import config_guard
@@ -95,6 +98,7 @@ class RosHmiBackend:
         self._progress_at = 0.0
         self._follower = WorkFollower()             # which work the running process does (fed every state)
         self._query = rospy.ServiceProxy(self.pemkre + "/query", PemkreQuery)
+        self._match = rospy.ServiceProxy(self.pemkre + "/match", PemkreMatchProcess)
         self.sim = rospy.resolve_name(sim_ns).rstrip("/")
         if str(sim_hands).lower() not in ("auto", "true", "false"):
             raise HmiError("~sim_hands must be auto, true or false, got %r" % (sim_hands,))
@@ -254,6 +258,13 @@ class RosHmiBackend:
                            self.hicem + "/operator_reply")
         if not resp.success:
             raise BackendRefused(resp.message or "HICEM refused the answer")
+
+    def match_process(self, iri: str) -> Any:
+        """PEMKRE's skill matching of the abstract process ``iri`` (JSON text, read by the page's ``match_view``)."""
+        resp = _timed_call(lambda: self._match(process=iri), self.call_timeout, self.pemkre + "/match")
+        if not resp.success:
+            raise BackendRefused("PEMKRE match refused (%s): %s" % (resp.code, resp.message))
+        return resp.match
 
     def kpis(self) -> Dict[str, List[Dict[str, Any]]]:
         with self._lock:

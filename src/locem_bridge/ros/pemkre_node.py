@@ -8,6 +8,7 @@ next action            ``~next_action``                ``locem_bridge/PemkreNext
 report a task status   ``~set_task_status``            ``locem_bridge/PemkreSetTaskStatus``
 predefined query       ``~query``                      ``locem_bridge/PemkreQuery``
 world update (SCAN)    ``~update_world``               ``locem_bridge/PemkreUpdateWorld``
+skill matching         ``~match``                      ``locem_bridge/PemkreMatchProcess``
 =====================  ==============================  =====================================
 
 Lifecycle: ``main()`` inits the node, then :meth:`PemkreNode.start` opens the store and loads the ontologies
@@ -39,7 +40,8 @@ from locem_bridge.pemkre.errors import PemkreError
 from locem_bridge.pemkre.store_factory import open_store
 from locem_bridge.pemkre.terms import bindings_from_strings
 from locem_bridge.ros.params import package_share, param
-from locem_bridge.srv import (PemkreNextAction, PemkreNextActionResponse, PemkreQuery, PemkreQueryResponse,
+from locem_bridge.srv import (PemkreMatchProcess, PemkreMatchProcessResponse, PemkreNextAction,
+                              PemkreNextActionResponse, PemkreQuery, PemkreQueryResponse,
                               PemkreSetTaskStatus, PemkreSetTaskStatusResponse, PemkreStartProcess,
                               PemkreStartProcessResponse, PemkreUpdateWorld, PemkreUpdateWorldResponse)
 from locem_bridge.ros.startup import config_guard
@@ -79,6 +81,7 @@ class PemkreNode:
                           _guard(PemkreSetTaskStatusResponse, self._status)),
             rospy.Service("~query", PemkreQuery, _guard(PemkreQueryResponse, self._query)),
             rospy.Service("~update_world", PemkreUpdateWorld, _guard(PemkreUpdateWorldResponse, self._world)),
+            rospy.Service("~match", PemkreMatchProcess, _guard(PemkreMatchProcessResponse, self._match)),
         ]
 
     # ---------------------------------------------------------------- handlers
@@ -129,6 +132,15 @@ class PemkreNode:
         assert self.engine is not None
         resp.changed = self.engine.update_world(req.scan)
         resp.message = "%d world triple(s) changed" % resp.changed
+
+    def _match(self, req: Any, resp: Any) -> None:
+        assert self.engine is not None
+        m = self.engine.match_process(req.process)
+        resp.match = json.dumps(m.to_dict())
+        nodes = list(m.nodes)
+        problems = m.problems()
+        resp.message = ("%d task node(s), all matched" % len(nodes) if not problems else
+                        "%d of %d task node(s) not matched: %s" % (len(problems), len(nodes), "; ".join(problems)))
 
     def shutdown(self) -> None:
         for s in self._services:

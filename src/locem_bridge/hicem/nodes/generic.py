@@ -2,8 +2,8 @@
 
 Health and devices: CheckHealth (the HEM's view), CheckDevicesUp (devices back after a failure, from LOCEM's
 STATUS), WaitForDevices (STATUS until they are, bounded), CheckSafetyStop (a latched safety stop in STATUS).
-LOCEM: SendLocemCommand, ComposeSkillCommand (a basic skill's command from the task parameters). Data store (HDM/HDICT through the HDH): ReadDataStore, WriteDataStore, IngestScan,
-MarkFeature. Operator and flow: WaitForOperator, Log, CheckEqual, SelectEntry.
+LOCEM: SendLocemCommand, ComposeSkillCommand (a basic skill's command from the task parameters). Data store
+(HDM/HDICT through the HDH): ReadDataStore, WriteDataStore, IngestScan, MarkFeature. Operator and flow: WaitForOperator, Log, CheckEqual, SelectEntry.
 
 No node holds a number of its own: distances, speeds, offsets and timeouts arrive through ports, fed from the
 blackboard (``{@cfg....}`` = the HICEM parameters the controller loads, ``param_*`` = PEMKRE parameters) or

@@ -147,8 +147,77 @@
           .then(function () { b.disabled = false; });
       });
       li.appendChild(b);
+      var m = el("button", {"type": "button", "class": "match-button", "data-iri": p.iri,
+                            "title": "which skill realizes each task of this process"}, "Skills");
+      m.addEventListener("click", function () { showMatch(p); });
+      li.appendChild(m);
       list.appendChild(li);
     });
+  }
+
+  // ---------------------------------------------------------------- skill matching (GET /api/match)
+  function kindText(kind, operator) { return " (" + kind + (operator ? ", operator" : "") + ")"; }
+  function renderMatch(p, view) {
+    var box = $("match-result");
+    box.textContent = "";
+    $("match-process").textContent = (p.name || localName(p.iri)) + (view.robot_name ? " on " + view.robot_name : "") +
+      (view.ok ? "" : " – not every task can be realized");
+    var t = el("table", {"class": "match", "id": "match-table", "data-process": p.iri});
+    var hr = el("tr");
+    ["Task", "Capability", "Chosen skill", "Rejected candidates"].forEach(function (c) { hr.appendChild(el("th", {}, c)); });
+    t.appendChild(hr);
+    view.tasks.forEach(function (k) {
+      var tr = el("tr", {"data-task": k.task, "data-action": k.action_type, "class": k.ok ? "" : "unmatched"});
+      var task = el("td", {"title": k.node}, k.action_type || k.task);
+      task.appendChild(el("div", {"class": "kind"}, k.task));
+      tr.appendChild(task);
+      tr.appendChild(el("td", {}, k.capability || "– (its action type's tree)"));
+      var chosen = el("td", {"class": "chosen"});
+      if (k.chosen) {
+        chosen.setAttribute("data-skill", k.chosen.name);
+        chosen.setAttribute("data-kind", k.chosen.kind);
+        chosen.appendChild(el("span", {"class": "chosen-name"}, k.chosen.name));
+        chosen.appendChild(el("span", {"class": "kind"}, kindText(k.chosen.kind, k.chosen.operator)));
+        if (k.chosen.steps.length) {
+          var ol = el("ol", {"class": "steps"});
+          k.chosen.steps.forEach(function (s) {
+            ol.appendChild(el("li", {"data-skill": s.name}, s.name + (s.arguments ? " " + s.arguments : "") +
+                              kindText(s.kind, s.operator) + (s.capability ? " for " + s.capability : "")));
+          });
+          chosen.appendChild(ol);
+        }
+      } else {
+        chosen.textContent = k.capability ? "none: " + (k.problem || "no skill realizes " + k.capability) : "–";
+      }
+      tr.appendChild(chosen);
+      var rej = el("td", {"class": "rejected"});
+      if (!k.rejected.length) rej.appendChild(el("span", {"class": "muted"}, "none"));
+      else {
+        var ul = el("ul");
+        k.rejected.forEach(function (r) {
+          ul.appendChild(el("li", {"data-candidate": r.name}, r.name + " (" + r.kind + "): " + r.reason));
+        });
+        rej.appendChild(ul);
+      }
+      tr.appendChild(rej);
+      t.appendChild(tr);
+    });
+    box.appendChild(t);
+  }
+  function showMatch(p) {
+    $("match-process").textContent = (p.name || localName(p.iri)) + " – asking PEMKRE…";
+    fetch("/api/match?process=" + encodeURIComponent(p.iri))
+      .then(function (r) {
+        return r.json().then(function (data) {
+          if (!r.ok) throw new Error((data && data.error && data.error.message) || ("HTTP " + r.status));
+          hideError();
+          renderMatch(p, data.match);
+        });
+      })
+      .catch(function (err) {
+        $("match-process").textContent = (p.name || localName(p.iri)) + " – no matching";
+        showError(err.message || String(err));
+      });
   }
 
   function renderWalls(walls) {
