@@ -29,7 +29,8 @@ def test_export_writes_turtle_that_round_trips_the_skill_count(tmp_path, shipped
     onto = URIRef("https://locem-bridge.example.org/robot/rbkairos_ur10e")
     assert (onto, RDF.type, OWL.Ontology) in g
     assert {str(i) for i in g.objects(onto, OWL.imports)} == {"https://locem-bridge.example.org/ont/skill",
-                                                              "https://locem-bridge.example.org/ont/ppr"}
+                                                              "https://locem-bridge.example.org/ont/ppr",
+                                                              "https://locem-bridge.example.org/ont/plasterboard"}
     catalog = (tmp_path / "model" / "catalog-v001.xml").read_text()
     assert 'name="https://locem-bridge.example.org/ont/skill"' in catalog and "skill.ttl" in catalog
     # the model with the vocabulary closes under OWL 2 RL without inconsistency, in constructs PEMKRE supports

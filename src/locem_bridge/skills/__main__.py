@@ -1,6 +1,7 @@
 """``python -m locem_bridge.skills export --robot FILE [--trees DIR ...] [--ontologies FILE ...] --out FILE.ttl``
 
-Writes the robot's generated resource model as Turtle. The file imports ``skill.ttl`` and ``ppr.ttl`` by IRI;
+Writes the robot's generated resource model as Turtle. The file imports ``skill.ttl``, ``ppr.ttl`` and the ontologies
+declaring its capabilities (``plasterboard.ttl``) by IRI;
 a Protégé catalog (``catalog-v001.xml``) written beside it maps those IRIs (and the other shipped ontologies') to
 the files, so Protégé opens it without a network. A bad robot file, command declaration or tree declaration
 prints one line ``FILE: KEY: PROBLEM`` and exits 2; nothing is written then.

@@ -20,7 +20,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 import numpy as np
 from rdflib import Graph, URIRef
-from rdflib.namespace import RDF, RDFS
+from rdflib.namespace import OWL, RDF, RDFS
 
 from ..common.config_errors import ConfigError
 from ..common.geometry import rotvec_to_matrix
@@ -28,8 +28,8 @@ from ..bridges.robot import ALL_DEVICES
 from ..common.paths import shipped_dir
 from ..pemkre.vocab import PLB, PPR, SK
 from .errors import SkillModelError
-from .model import BASIC, COMPOSITE, DEVICE_CLASSES, KINEMATICS, Device, Frame, ResourceModel, Skill, SkillParameter, \
-    Tool
+from .model import BASIC, COMPOSITE, DEVICE_CLASSES, KINEMATICS, PPR_ONTOLOGY, SKILL_ONTOLOGY, Device, Frame, \
+    ResourceModel, Skill, SkillParameter, Tool
 from .trees import read_tree_skills
 from .units import UNITS
 
@@ -89,6 +89,9 @@ def build_resource_model(robot_file: str, tree_dirs: Sequence[str] = (), overrid
             name=tree.tree_id, kind=COMPOSITE, summary=tree.summary, capability=capability, parameters=params,
             devices=tuple(sorted(used)), invokes=tuple(c for c in tree.commands if c in by_name),
             involves_operator=tree.operator, offered=not missing, reason=reason, source=tree.file))
+    # the exported file imports the ontologies that declare the capabilities it names (Protégé shows them typed)
+    model.imports = sorted({onto.defined_in[s.capability] for s in model.skills()
+                            if s.capability in onto.defined_in} - {SKILL_ONTOLOGY, PPR_ONTOLOGY})
     return model
 
 
@@ -100,6 +103,7 @@ class _Ontologies:
             files = default_ontology_files()
         self.graph = Graph()
         self.prefixes: Dict[str, str] = {"sk": str(SK), "plb": str(PLB), "ppr": str(PPR)}
+        self.defined_in: Dict[str, str] = {}        # capability IRI -> IRI of the ontology that declares it
         for f in files:
             g = Graph()
             try:
@@ -110,6 +114,10 @@ class _Ontologies:
                 if pfx and pfx not in self.prefixes:
                     self.prefixes[pfx] = str(ns)
             self.graph += g
+            header = next(iter(g.subjects(RDF.type, OWL.Ontology)), None)
+            for c in g.subjects(RDF.type, SK.Capability):
+                if header is not None:
+                    self.defined_in.setdefault(str(c), str(header))
         self.capabilities = {str(c) for c in self.graph.subjects(RDF.type, SK.Capability)}
 
     def _names(self) -> List[str]:

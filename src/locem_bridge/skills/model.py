@@ -137,6 +137,8 @@ class ResourceModel:
     basic_skills: List[Skill] = field(default_factory=list)
     composite_skills: List[Skill] = field(default_factory=list)
     tree_dirs: List[str] = field(default_factory=list)
+    #: IRIs of further ontologies the exported model imports (those declaring the capabilities it names)
+    imports: List[str] = field(default_factory=list)
 
     # -- lookups ---------------------------------------------------------------------------------------
     @property
@@ -184,7 +186,8 @@ class ResourceModel:
     # -- RDF view --------------------------------------------------------------------------------------
     def to_graph(self, header: bool = True) -> Graph:
         """The model as RDF (no blank nodes). ``header``: an ``owl:Ontology`` for the robot that imports
-        ``skill.ttl`` and ``ppr.ttl`` by IRI (what Protégé needs; harmless in a store)."""
+        ``skill.ttl``, ``ppr.ttl`` and the ontologies declaring its capabilities by IRI (what Protégé needs;
+        harmless in a store)."""
         g = Graph()
         g.bind("sk", Namespace(str(SK)))
         g.bind("ppr", Namespace(str(PPR)))
@@ -201,6 +204,8 @@ class ResourceModel:
             g.add((onto, RDFS.label, Literal("Resource model of %s (generated)" % self.robot_name, lang="en")))
             g.add((onto, OWL.imports, URIRef(SKILL_ONTOLOGY)))
             g.add((onto, OWL.imports, URIRef(PPR_ONTOLOGY)))
+            for extra in self.imports:
+                g.add((onto, OWL.imports, URIRef(extra)))
         g.add((robot, RDF.type, PPR.Robot))
         g.add((robot, RDF.type, OWL.NamedIndividual))
         g.add((robot, RDFS.label, Literal(self.robot_name)))
