@@ -20,14 +20,16 @@ Parameters: ``~store_path`` (directory of the persistent store; default ``$ROS_H
 ``~store`` (``journal`` default, ``rocksdb``, ``memory``), ``~fsync`` (journal: flush each change to disk),
 ``~ontology_dir`` (default: the package's ``ontologies/``), ``~extra_ontology_dirs`` (an integrator's folders of
 Turtle loaded beside it, separated by ``:`` or ``,``), ``~trees_dir`` and ``~extra_trees_dirs`` (the tree folders
-HICEM runs, for the robot's resource model), ``~site_namespace``, ``~log_namespace``,
+HICEM runs, for the robot's resource model), ``~robot`` (the robot YAML: its resource model -- generated from it,
+the LOCEM registry and the tree folders -- is loaded into the store and every process is matched to the robot's
+skills; empty = no matching), ``~site_namespace``, ``~log_namespace``,
 ``~reasoning_max_seconds``, ``~fresh`` (delete the store first: tests and demos only).
 """
 import gc
 import json
 import os
 import threading
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 import rospkg
 import rospy
@@ -45,6 +47,19 @@ from locem_bridge.srv import (PemkreMatchProcess, PemkreMatchProcessResponse, Pe
                               PemkreSetTaskStatus, PemkreSetTaskStatusResponse, PemkreStartProcess,
                               PemkreStartProcessResponse, PemkreUpdateWorld, PemkreUpdateWorldResponse)
 from locem_bridge.ros.startup import config_guard
+
+
+def resource_model(robot_file: str, tree_dirs: Sequence[str], ontology_files: Sequence[str]) -> Any:
+    """The robot's resource model graph for PEMKRE's matching, or None without a robot file (no matching).
+
+    One place for the PEMKRE node and HICEM's embedded engine; a bad robot file or tree stops the node with
+    ``FILE: KEY: PROBLEM`` before anything is loaded.
+    """
+    if not robot_file:
+        return None
+    from locem_bridge.skills import build_resource_model
+
+    return build_resource_model(robot_file, list(tree_dirs), ontology_files=list(ontology_files)).to_graph()
 
 
 def _guard(response_cls: Callable[[], Any], body: Callable[[Any, Any], None]) -> Callable[[Any], Any]:
@@ -166,6 +181,7 @@ def main() -> None:
     tree_dirs = [param("trees_dir", os.path.join(package_share(), "trees"))] + \
         split_folders(param("extra_trees_dirs", ""))
     folder_files(tree_dirs, ".xml", "trees folder")
+    model = resource_model(param("robot", ""), tree_dirs, files)
 
     def factory() -> ProcessEngine:
         store = open_store(kind, path, param("fsync", False), param("fresh", False))
@@ -173,7 +189,8 @@ def main() -> None:
             return ProcessEngine(store, files,
                                  site_namespace=param("site_namespace", "") or None,
                                  log_namespace=param("log_namespace", "") or None,
-                                 reasoning_max_seconds=param("reasoning_max_seconds", 5.0))
+                                 reasoning_max_seconds=param("reasoning_max_seconds", 5.0),
+                                 resource_model=model)
         except ConfigError as exc:          # a process-model error names no file: name the folder it came from
             store.close()
             raise exc.in_file(onto_dir)
@@ -189,8 +206,9 @@ def main() -> None:
     gc.collect()
     gc.freeze()
     assert node.engine is not None
-    rospy.loginfo("PEMKRE ready on %s (store %s at %s): processes %s; running: %s", rospy.resolve_name("~next_action"),
-                  kind, path, ", ".join(node.engine.processes()), node.engine.active_process() or "none")
+    rospy.loginfo("PEMKRE ready on %s (store %s at %s): processes %s; running: %s; %s", rospy.resolve_name("~next_action"),
+                  kind, path, ", ".join(node.engine.processes()), node.engine.active_process() or "none",
+                  "tasks matched to the skills of %s" % param("robot", "") if model is not None else "no matching")
     rospy.spin()
 
 
