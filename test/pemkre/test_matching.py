@@ -261,3 +261,22 @@ def test_loading_the_model_again_writes_nothing_and_bad_input_is_refused(make_en
     e.load_resource_model(model_of("diffdrive"))         # replaces kairos: its skills are gone from the store
     assert e.store.value(URIRef(robot("kairos")), SK.providesSkill) is None
     assert e.match_process(str(PLB.TapingProcess)).robot == robot("diffdrive")
+
+
+def test_the_shipped_robot_model_matches_every_shipped_process(make_engine):
+    from locem_bridge.skills import build_resource_model
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    g = build_resource_model(os.path.join(root, "config", "robots", "rbkairos_ur10e.yaml")).to_graph()
+    e = make_engine(resource_model=g)
+    for process in (PLB.TapingProcess, PLB.SprayingProcess, PLB.SandingProcess):
+        pm = e.match_process(str(process))
+        assert pm.ok, pm.problems()
+        assert pm.robot.endswith("/robot/rbkairos_ur10e/robot")
+        for n in pm.nodes:                               # every task runs the tree named like its action type
+            assert (n.realization.kind, n.realization.name, n.realization.skill_kind) == (
+                "skill", n.action_type, "composite"), n
+    get_tool = node(e.match_process(str(PLB.TapingProcess)), "taping_getTool")
+    assert get_tool.realization.involves_operator
+    assert [(r.name, r.reason) for r in get_tool.rejected] == [
+        ("tmpl_getToolAutomatically", "step 2: no skill of this robot realizes sk:cap_ChangeToolAutomatically")]
