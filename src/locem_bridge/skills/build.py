@@ -35,9 +35,6 @@ from .units import UNITS
 
 #: resources a command may occupy that are not devices of their own (the tool on the flange)
 NON_DEVICE_RESOURCES = ("tool",)
-#: reach of UR arm models (flange from the base axis, m; manufacturer data) when robot.arm has no `reach`
-ARM_REACH: Dict[str, float] = {"ur3": 0.5, "ur3e": 0.5, "ur5": 0.85, "ur5e": 0.85, "ur10": 1.3, "ur10e": 1.3,
-                               "ur16e": 0.9, "ur20": 1.75, "ur30": 1.3}
 _DATATYPE = {"float": "double", "int": "integer", "bool": "boolean", "enum": "string", "name": "string",
              "command": "string"}
 
@@ -216,12 +213,7 @@ def _hardware(model: ResourceModel, robot: Mapping[str, Any], devices: Sequence[
         arm_parent = "device_lift"
     arm = robot["arm"]
     model_name = str(arm.get("model", ""))
-    reach = arm.get("reach")
-    if reach is None:
-        if model_name.lower() not in ARM_REACH:
-            raise SkillModelError("the reach of arm model %r is not known; give robot.arm.reach (m)" % model_name,
-                                  file=path, key="robot.arm.model", allowed=sorted(ARM_REACH))
-        reach = ARM_REACH[model_name.lower()]
+    reach = arm["reach"]                        # robot.arm.reach (checked by the robot file's loader)
     mount = arm["mount"]
     xyz = _vec3(mount["xyz"])
     if arm_parent in ("frame_pedestal", "device_lift"):
