@@ -7,7 +7,8 @@ Every layer that reads those folders lists them here, the same way:
 
 - :func:`split_folders`: ``"a:b"``, ``"a, b"`` or ``["a", "b"]`` -> ``["a", "b"]`` (empty entries dropped).
 - :func:`folder_files`: the files of each folder ending in a suffix, each folder sorted, folders in the order
-  given (a folder named twice is read once); a folder that does not exist (or is not a folder) raises :class:`ConfigError` naming it.
+  given (a folder named twice is read once); a folder that does not exist (or is not a folder) raises
+  :class:`ConfigError` naming it.
 """
 import os
 import re
@@ -33,7 +34,6 @@ def folder_files(folders: Sequence[str], suffix: str, what: str, exclude: Sequen
         if not os.path.isdir(path):
             raise ConfigError("%s does not exist" % what if not os.path.exists(path) else
                               "%s is not a folder" % what, file=path)
-        files += [f for f in sorted(os.path.join(path, f) for f in os.listdir(path)
-                                    if f.endswith(suffix) and f not in exclude and os.path.isfile(os.path.join(path, f)))
-                  if f not in files]       # a folder named twice is read once
+        found = sorted(os.path.join(path, f) for f in os.listdir(path) if f.endswith(suffix) and f not in exclude)
+        files += [f for f in found if os.path.isfile(f) and f not in files]      # a folder named twice: read once
     return files

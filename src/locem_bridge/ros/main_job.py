@@ -189,8 +189,8 @@ def arguments(argv: Optional[List[str]] = None) -> argparse.Namespace:
     parser.add_argument("--validate-lines", action="store_true", help="the operator validates every joint first")
     parser.add_argument("--reject", default="", help="comma list of joint ids the automatic operator rejects")
     parser.add_argument("--site", default="", help="site YAML (default: config/sites/default.yaml)")
-    parser.add_argument("--robot", default="", metavar="NAME|FILE", help="robot: a name under config/robots/ (e.g. rbkairos_ur10e) or a "
-                        "robot YAML's path (default: rbkairos_ur10e)")
+    parser.add_argument("--robot", default="", metavar="NAME|FILE", help="robot: a name under config/robots/ "
+                        "(e.g. rbkairos_ur10e) or a robot YAML's path (default: rbkairos_ur10e)")
     parser.add_argument("--ontologies", action="append", default=[], metavar="DIR", help="a folder of your own "
                         "Turtle files, loaded by PEMKRE beside the package's ontologies/ (repeat for several)")
     parser.add_argument("--trees", action="append", default=[], metavar="DIR", help="a folder of your own tree "
