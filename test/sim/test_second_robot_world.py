@@ -104,3 +104,17 @@ def test_the_ur5e_stand_in_runs_on_the_robot_files_urdf_with_its_limits(second):
             world._place_robot()
             near = pb.getClosestPoints(world.arm_body, world.base_body, 0.01, physicsClientId=world._cid)
         assert not near, "%s: arm within 1 cm of the base/column" % name
+
+
+def test_with_the_lift_the_ur5e_covers_the_site_joints_heights_from_two_lift_heights():
+    """Measured reach (sim/reach.py: stand-in IK + clearance from the chassis and the lift column): the taping tool
+    facing a wall 0.55 m ahead of the arm axis spans < 1.9 m from one height, so z 0.10..2.0 m (the default site's
+    joints) needs the lift: its bottom reaches down to 0.10 m, its top up to 2.0 m; sideways about +-0.7 m."""
+    from locem_bridge.sim.reach import reach_table
+    rows = reach_table(load_robot(DIFF_YAML), distances=(0.55,), step=0.05, tools=("taping_tool",))
+    by_height = {r["mount_z"]: r for r in rows}
+    bottom, top = min(by_height), max(by_height)
+    assert by_height[bottom]["z_min"] <= 0.10 and by_height[top]["z_max"] >= 2.0, rows
+    for r in rows:
+        assert r["z_max"] - r["z_min"] < 1.9, r                  # one height cannot cover 0.10..2.0
+        assert r["y_min"] <= -0.7 and r["y_max"] >= 0.7, r

@@ -288,6 +288,27 @@ class World:
         with self._lock:
             return self._mount_z if self.lift is not None else None
 
+    def arm_pose_clear(self, q: Sequence[float], mount_z: Optional[float] = None, clearance: float = 0.01,
+                       floor: float = 0.05) -> bool:
+        """Whether joint positions ``q`` (with the arm mount at height ``mount_z``, default: where it is) keep every
+        arm link ``clearance`` m away from the base body (chassis, wheels, pedestal / lift column) and every arm link
+        origin ``floor`` m above the floor. The scene is put back as it was (for reach studies, :mod:`.reach`)."""
+        c = self._cid
+        with self._lock:
+            keep_q, keep_z = list(self._q), self._mount_z
+            try:
+                self._q = [float(v) for v in q]
+                if mount_z is not None:
+                    self._mount_z = float(mount_z)
+                self._place_robot()
+                if pb.getClosestPoints(self.arm_body, self.base_body, clearance, physicsClientId=c):
+                    return False
+                return all(pb.getLinkState(self.arm_body, j, physicsClientId=c)[4][2] >= floor
+                           for j in range(pb.getNumJoints(self.arm_body, physicsClientId=c)))
+            finally:
+                self._q, self._mount_z = keep_q, keep_z
+                self._place_robot()
+
     def arm_base_pose(self) -> Tuple[List[float], List[float]]:
         """Position and quaternion (x, y, z, w) of the UR controller ``base`` frame in map (the placement the
         last :meth:`_place_robot` cached)."""
