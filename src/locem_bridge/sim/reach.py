@@ -7,9 +7,11 @@ horizontal, pointing at a wall whose surface is perpendicular to x) and each arm
 middle and top; the fixed mount without a lift), a grid point counts as reachable when the UR stand-in's IK
 (pinocchio on the robot file's URDF, joint limits, the branch nearest ``wall_ready`` as the wall commands use)
 reaches it AND the arm keeps 1 cm from the base body (chassis, wheels, pedestal / lift column) AND every arm link
-origin stays 5 cm above the floor (:meth:`~locem_bridge.sim.world.World.arm_pose_clear`). Reported: the TCP's
-lowest and highest reachable z above the floor (at y = 0) and its lateral band (y at the mount's height).
-Walls and other robots are not considered.
+origin stays 5 cm above the floor AND no arm link's bounding box comes within 1 cm of the wall the tool works on
+(at the TCP for a contact tool, ``standoff`` ahead of it for the spray gun)
+(:meth:`~locem_bridge.sim.world.World.arm_pose_clear`). Reported: the TCP's lowest and highest reachable z above
+the floor (at y = 0) and its lateral band (y at the mount's height); ``flange_distance`` = flange ahead of
+base_footprint (the robot file's ``wall_work.flange_distance``).
 
     python3 -m locem_bridge.sim.reach --robot config/robots/diffdrive_ur5e.yaml [--distance 0.55 ...] [--step 0.025]
 """
@@ -56,20 +58,25 @@ def reach_table(robot_cfg: Dict[str, Any], distances: Sequence[float] = (0.45, 0
     try:
         world.set_base_pose(0.0, 0.0, 0.0)
 
-        def reachable(point: List[float], length: float, mount_z: float) -> bool:
+        mount_x = float(arm["mount"]["xyz"][0])
+
+        def reachable(point: List[float], length: float, mount_z: float, wall_x: float) -> bool:
             try:
                 q = kin.ik(_ur_pose(point), seed, tcp_pose=[0.0, 0.0, length, 0.0, 0.0, 0.0])
             except KinematicsError:
                 return False
-            return world.arm_pose_clear(q, mount_z)
+            return world.arm_pose_clear(q, mount_z, wall_x=wall_x)
 
         for tool in tools or sorted(robot["tools"]):
             length = float(robot["tools"][tool]["tcp"][2])
+            wall_x = mount_x + float(robot["tools"][tool].get("standoff", 0.0))
             for d in distances:
                 for h in heights or mount_heights(robot):
-                    zs = [z for z in np.arange(-h, 1.2, step) if reachable([d, 0.0, z], length, h)]
-                    ys = [y for y in np.arange(-1.0, 1.0 + 1e-9, step) if reachable([d, y, 0.0], length, h)]
+                    zs = [z for z in np.arange(-h, 1.2, step) if reachable([d, 0.0, z], length, h, wall_x + d)]
+                    ys = [y for y in np.arange(-1.0, 1.0 + 1e-9, step)
+                          if reachable([d, y, 0.0], length, h, wall_x + d)]
                     rows.append({"tool": tool, "distance": d, "mount_z": h,
+                                 "flange_distance": round(mount_x + d - length, 3),
                                  "z_min": round(h + zs[0], 3) if zs else None,
                                  "z_max": round(h + zs[-1], 3) if zs else None,
                                  "y_min": round(ys[0], 3) if ys else None, "y_max": round(ys[-1], 3) if ys else None})
@@ -90,11 +97,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     mount_x = cfg["robot"]["arm"]["mount"]["xyz"][0]
     print("%s: TCP D m ahead of the arm axis (arm axis %.2f m ahead of base_footprint), tool facing +x"
           % (cfg["robot"]["name"], mount_x))
-    print("%-12s %5s %8s %15s %15s" % ("tool", "D", "mount z", "TCP z (floor)", "y at mount z"))
+    print("%-12s %5s %8s %8s %15s %15s" % ("tool", "D", "flange", "mount z", "TCP z (floor)", "y at mount z"))
     for r in reach_table(cfg, args.distance, args.step):
         fmt = lambda a, b: "unreachable" if a is None else "%.2f..%.2f" % (a, b)   # noqa: E731
-        print("%-12s %5.2f %8.2f %15s %15s" % (r["tool"], r["distance"], r["mount_z"], fmt(r["z_min"], r["z_max"]),
-                                                fmt(r["y_min"], r["y_max"])))
+        print("%-12s %5.2f %8.2f %8.2f %15s %15s" % (r["tool"], r["distance"], r["flange_distance"], r["mount_z"],
+                                                     fmt(r["z_min"], r["z_max"]), fmt(r["y_min"], r["y_max"])))
     return 0
 
 

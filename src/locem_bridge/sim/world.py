@@ -289,10 +289,12 @@ class World:
             return self._mount_z if self.lift is not None else None
 
     def arm_pose_clear(self, q: Sequence[float], mount_z: Optional[float] = None, clearance: float = 0.01,
-                       floor: float = 0.05) -> bool:
+                       floor: float = 0.05, wall_x: Optional[float] = None) -> bool:
         """Whether joint positions ``q`` (with the arm mount at height ``mount_z``, default: where it is) keep every
-        arm link ``clearance`` m away from the base body (chassis, wheels, pedestal / lift column) and every arm link
-        origin ``floor`` m above the floor. The scene is put back as it was (for reach studies, :mod:`.reach`)."""
+        arm link ``clearance`` m away from the base body (chassis, wheels, pedestal / lift column), every arm link
+        origin ``floor`` m above the floor and, with ``wall_x``, every arm link's bounding box ``clearance`` m short
+        of a wall at map x = ``wall_x`` (perpendicular to x, ahead). The scene is put back as it was (for reach
+        studies, :mod:`.reach`)."""
         c = self._cid
         with self._lock:
             keep_q, keep_z = list(self._q), self._mount_z
@@ -302,6 +304,10 @@ class World:
                     self._mount_z = float(mount_z)
                 self._place_robot()
                 if pb.getClosestPoints(self.arm_body, self.base_body, clearance, physicsClientId=c):
+                    return False
+                if wall_x is not None and any(
+                        pb.getAABB(self.arm_body, j, physicsClientId=c)[1][0] > wall_x - clearance
+                        for j in range(pb.getNumJoints(self.arm_body, physicsClientId=c))):
                     return False
                 return all(pb.getLinkState(self.arm_body, j, physicsClientId=c)[4][2] >= floor
                            for j in range(pb.getNumJoints(self.arm_body, physicsClientId=c)))
