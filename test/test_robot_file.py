@@ -89,3 +89,44 @@ def test_an_inconsistent_differential_base_or_lift_is_refused_naming_the_key(tmp
     with pytest.raises(RobotFileError) as caught:
         load_robot(path)
     assert line in str(caught.value), str(caught.value)
+
+
+def _with_changer(d, **changes):
+    rack_file = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "tool_changer_rack.yaml")
+    with open(rack_file) as handle:
+        d["robot"]["tool_changer"] = yaml.safe_load(handle)["tool_changer"]
+    for key, value in changes.items():
+        d["robot"]["tool_changer"][key] = value
+
+
+@pytest.mark.parametrize("changes,line", [
+    ({"rack": {"taping_tool": {"slot": 1, "pose": [0.0] * 6}, "drill": {"slot": 2, "pose": [0.0] * 6}}},
+     "robot.tool_changer.rack.drill: 'drill' is not a tool of this robot (robot.tools) (allowed: sander, spray_gun, "
+     "taping_tool)"),
+    ({"rack": {"taping_tool": {"slot": 1, "pose": [0.0] * 6}, "sander": {"slot": 1, "pose": [0.0] * 6}}},
+     "robot.tool_changer.rack.taping_tool.slot: slot 1 is sander's already; one tool per slot"),
+    ({"rack": {"sander": {"slot": 9, "pose": [0.0] * 6}}},
+     "robot.tool_changer.rack.sander.slot: 9 is out of range (allowed: <= 8)"),
+    ({"rack": {"sander": {"slot": 1, "pose": [0.0] * 5}}},
+     "robot.tool_changer.rack.sander.pose: must be a list of 6 finite numbers, found [0.0, 0.0, 0.0, 0.0, 0.0]"),
+    ({"safe_pose": "nowhere"},
+     "robot.tool_changer.safe_pose: 'nowhere' is not allowed (allowed: home, scan, stow, tool_change, wall_ready)"),
+    ({"port": 5020}, "robot.tool_changer.port: 127.0.0.1:5020 is the compressor's address; the tool changer is a "
+                     "device of its own"),
+    ({"gripper": 1}, "robot.tool_changer.gripper: unknown key (allowed: device_id, host, lock_timeout, port, "
+                     "protocol, rack, safe_pose, sim, timeout)"),
+])
+def test_a_bad_tool_changer_section_is_refused_with_file_and_key(tmp_path, changes, line):
+    path = _bad_copy(tmp_path, lambda d: _with_changer(d, **changes))
+    with pytest.raises(RobotFileError) as caught:
+        load_robot(path)
+    assert str(caught.value) == "%s: %s" % (path, line)
+
+
+def test_the_shipped_robot_has_no_tool_changer_and_the_test_rack_loads():
+    assert "tool_changer" not in load_robot()["robot"]
+    rack_file = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "tool_changer_rack.yaml")
+    with open(rack_file) as handle:
+        tc = load_robot(None, yaml.safe_load(handle))["robot"]["tool_changer"]
+    assert {t: s["slot"] for t, s in tc["rack"].items()} == {"taping_tool": 1, "spray_gun": 2, "sander": 3}
+    assert tc["sim"] == {"lock_time": 0.3, "slot_tolerance": 0.01} and tc["lock_timeout"] == 3.0

@@ -2,7 +2,8 @@
 
 A robot file describes one robot: base (kinematics ``mecanum`` or ``differential``, limits, CAN drives), pedestal,
 optional lift (the arm's vertical axis), arm (model, mount, named poses,
-UR controller address), tools, compressor (Modbus address, limits) and scanner. The bridges
+UR controller address), tools, compressor (Modbus address, limits), scanner and, optionally, an automatic tool
+changer with its rack (``tool_changer``). The bridges
 (:func:`locem_bridge.bridges.config.load_robot_config`), the simulated worksite
 (:func:`locem_bridge.sim.config.load_robot`), the pre-flight (:mod:`locem_bridge.config_check`) and the main job
 all load it through :func:`load_robot`; each passes its own error type (``error=``), so a problem is one line
@@ -31,7 +32,8 @@ UR_RTDE_PORTS = {"dashboard_port": 29999, "script_port": 30003, "rtde_port": 300
 # loader reads is added here too, with its check in :func:`validate_robot`.
 ROBOT_KEYS: Dict[str, Sequence[str]] = {
     "": ("robot",),
-    "robot": ("name", "namespace", "base", "pedestal", "lift", "arm", "tools", "compressor", "scanner"),
+    "robot": ("name", "namespace", "base", "pedestal", "lift", "arm", "tools", "compressor", "scanner",
+              "tool_changer"),
     "robot.base": ("kind", "frame", "control_rate", "localisation_window", "named_poses", "chassis", "wheel",
                    "limits", "drives", "eds", "deadline"),
     "robot.base.chassis": ("length", "width", "height", "clearance", "mass"),
@@ -77,6 +79,10 @@ ROBOT_KEYS: Dict[str, Sequence[str]] = {
     "robot.compressor.sim": ("time_constant", "max_pressure", "valve_drop", "idle_current", "current_per_bar",
                              "overpressure_limit"),
     "robot.scanner": ("backend", "mount", "range", "fov"),
+    "robot.tool_changer": ("protocol", "host", "port", "device_id", "timeout", "lock_timeout", "safe_pose", "rack",
+                           "sim"),
+    "rack_slot": ("slot", "pose"),
+    "robot.tool_changer.sim": ("lock_time", "slot_tolerance"),
     "robot.scanner.mount": ("xyz", "yaw"),
 }
 
@@ -390,4 +396,49 @@ def _validate(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str,
     smount["yaw"] = get(smount, "yaw", "robot.scanner.mount", float, default=0.0)
     sc["range"] = get(sc, "range", "robot.scanner", float, lo=0.1, hi=100.0)
     sc["fov"] = get(sc, "fov", "robot.scanner", float, lo=0.01, hi=2 * math.pi)
+    if "tool_changer" in robot:
+        _tool_changer(robot)
     return data
+
+
+#: the most rack slots a tool changer has (one tool-present input per slot, see sim/modbus/tool_changer.py)
+MAX_RACK_SLOTS = 8
+
+
+def _tool_changer(robot: Dict[str, Any]) -> None:
+    """``robot.tool_changer``: the automatic tool changer (Modbus TCP) and its rack of named arm poses, one slot
+    per tool of ``robot.tools`` (bridges/modbus_tool_changer.py, bridges/commands_changer.py)."""
+    p = "robot.tool_changer"
+    tc = mapping(robot, "tool_changer", "robot", ROBOT_KEYS[p])
+    _backend(tc, "protocol", p, "tool_changer", "modbus_tcp")
+    get(tc, "host", p, str)
+    tc["port"] = get(tc, "port", p, int, lo=1, hi=65535)
+    tc["device_id"] = get(tc, "device_id", p, int, default=1, lo=0, hi=247)
+    comp = robot.get("compressor", {})
+    if (tc["host"], tc["port"]) == (comp.get("host"), comp.get("port")):
+        raise ConfigError("%s:%d is the compressor's address; the tool changer is a device of its own"
+                          % (tc["host"], tc["port"]), key=p + ".port")
+    tc["timeout"] = get(tc, "timeout", p, float, default=0.5, lo=0.01, hi=5.0)
+    tc["lock_timeout"] = get(tc, "lock_timeout", p, float, default=3.0, lo=0.1, hi=60.0)
+    poses = robot["arm"].get("named_poses", {})
+    get(tc, "safe_pose", p, str, choices=sorted(poses))
+    rack = get(tc, "rack", p, dict)
+    tools = sorted(robot.get("tools", {}))
+    if not rack:
+        raise ConfigError("must hold one slot per tool", key=p + ".rack", allowed=tools)
+    slots: Dict[int, str] = {}
+    for name in list(rack):
+        sp = "%s.rack.%s" % (p, name)
+        if name not in tools:
+            raise ConfigError("%r is not a tool of this robot (robot.tools)" % (name,), key=sp, allowed=tools)
+        slot = item(rack[name], sp, ROBOT_KEYS["rack_slot"])
+        number = get(slot, "slot", sp, int, lo=1, hi=MAX_RACK_SLOTS)
+        if number in slots:
+            raise ConfigError("slot %d is %s's already; one tool per slot" % (number, slots[number]),
+                              key=sp + ".slot")
+        slots[number] = name
+        slot["pose"] = vec(slot, "pose", sp, 6)
+    csim = mapping(tc, "sim", p, ROBOT_KEYS[p + ".sim"], default={})
+    csim["lock_time"] = get(csim, "lock_time", p + ".sim", float, default=0.3, lo=0.0, hi=10.0)
+    csim["slot_tolerance"] = get(csim, "slot_tolerance", p + ".sim", float, default=0.01, lo=0.0001, hi=0.2)
+    tc["sim"] = csim

@@ -2,7 +2,8 @@
 compressor never loads pymodbus, and the API documentation never loads a device library.
 
 The robot YAML picks each backend: ``robot.arm.backend`` (default ``ur_rtde``), ``robot.compressor.protocol``
-(``modbus_tcp``), ``robot.base.drives.profile`` (``cia402``), the lift (``robot.lift``) ``cia402``, ``robot.scanner.backend`` (default ``sim``).
+(``modbus_tcp``), ``robot.tool_changer.protocol`` (``modbus_tcp``), ``robot.base.drives.profile`` (``cia402``), the
+lift (``robot.lift``) ``cia402``, ``robot.scanner.backend`` (default ``sim``).
 A new device type is a new module plus one line here.
 """
 
@@ -14,6 +15,7 @@ from .errors import BridgeConfigError
 BACKENDS: Dict[str, Dict[str, str]] = {
     "arm": {"ur_rtde": "locem_bridge.bridges.ur_arm:UrRtdeArm"},
     "compressor": {"modbus_tcp": "locem_bridge.bridges.modbus_compressor:ModbusCompressor"},
+    "tool_changer": {"modbus_tcp": "locem_bridge.bridges.modbus_tool_changer:ModbusToolChanger"},
     "base": {"cia402": "locem_bridge.bridges.cia402_base:Cia402Base"},
     "lift": {"cia402": "locem_bridge.bridges.cia402_lift:Cia402Lift"},
     "scanner": {"sim": "locem_bridge.bridges.sim_scanner:SiteScanner"},

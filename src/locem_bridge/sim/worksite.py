@@ -9,7 +9,9 @@ robot), ``modbus_port``, ``can_interface``, ``can_channel``, ``can_port``, ``tim
 ``heartbeat_process`` (drive heartbeats from a helper process; default: on ``udp_multicast``/``socketcan``, see
 :mod:`.heartbeat`), ``arm_pose`` (named pose the arm starts in; default ``home``).
 
-Operator calls (tools are changed by a person on the real site): :meth:`mount_tool`, :meth:`remove_tool`,
+A robot file with a ``tool_changer`` section gets the tool changer stand-in too (:mod:`.modbus.tool_changer`, its own
+Modbus TCP server on ``robot.tool_changer.port``): it mounts and parks tools in the world as its lock couples and
+releases them at the rack slots. Operator calls (tools are changed by a person on the real site): :meth:`mount_tool`, :meth:`remove_tool`,
 :meth:`mark_manual_taping`. Perception: :meth:`scan`. Results: :meth:`outcome` (numbers) and
 :meth:`save_outcome` (``outcome.json`` + one PNG per wall).
 """
@@ -28,6 +30,7 @@ from .config import load_robot, load_site, resolve_relative
 from .can.drives import DriveSet, lift_drive
 from .errors import DeviceStandInError, SimConfigError, SimStateError
 from .modbus.modbus_server import CompressorServer
+from .modbus.tool_changer import ToolChangerModel, WorldRack, tool_changer_server
 from .world import World, resolve_arm_urdf
 
 log = logging.getLogger(__name__)
@@ -53,6 +56,8 @@ class Worksite:
         if host is not None:
             robot["arm"]["controller"]["host"] = host
             robot["compressor"]["host"] = host
+            if "tool_changer" in robot:
+                robot["tool_changer"]["host"] = host
         if modbus_port is not None:
             robot["compressor"]["port"] = int(modbus_port)
         can_cfg = robot["base"]["drives"]["can"]
@@ -74,6 +79,8 @@ class Worksite:
         self.clock: Optional[SimClock] = None
         self.compressor: Optional[CompressorModel] = None
         self.modbus: Optional[CompressorServer] = None
+        self.changer: Optional[ToolChangerModel] = None
+        self.changer_server: Any = None
         self.drives: Optional[DriveSet] = None
         self.lift: Any = None
         self.ur: Any = None
@@ -113,6 +120,11 @@ class Worksite:
                 self.arm = KinematicArm(q0)
             self.world = World(self.site_cfg, self.robot_cfg, self.clock, arm=self.arm, drives=self.drives,
                                compressor=self.compressor, lift=self.lift)
+            tc = robot.get("tool_changer")
+            if tc is not None:                   # the changer's rack slots are flange positions of the world's arm
+                self.changer = ToolChangerModel(tc, self.clock.now, WorldRack(self.world, tc))
+                self.changer_server = tool_changer_server(self.changer, tc["host"], tc["port"], tc["device_id"])
+                self.changer_server.start()
             if self.ur is not None:              # the arm feels the walls (force mode, actual_TCP_force)
                 self.ur.set_contact_provider(self.world.wall_contact)
             if self.ur is not None and self.protective_stop_on_collision:
@@ -163,6 +175,9 @@ class Worksite:
             self.drives.stop()
             self.drives = None
         self.lift = None
+        if self.changer_server is not None:
+            self.changer_server.stop()
+            self.changer_server = None
         if self.modbus is not None:
             self.modbus.stop()
             self.modbus = None
@@ -182,6 +197,9 @@ class Worksite:
         if self.modbus is not None:
             out["compressor_modbus_tcp"] = "%s:%d (device id %d)" % (self.modbus.host, self.modbus.port,
                                                                       self.modbus.device_id)
+        if self.changer_server is not None:
+            out["tool_changer_modbus_tcp"] = "%s:%d (device id %d)" % (
+                self.changer_server.host, self.changer_server.port, self.changer_server.device_id)
         if self.drives is not None:
             can_cfg = robot["base"]["drives"]["can"]
             out["base_drives_can"] = "%s channel %s%s, node ids %s" % (
@@ -201,6 +219,12 @@ class Worksite:
         if self.modbus is None:
             raise SimStateError("the worksite runs no compressor stand-in")
         return self.modbus.state()
+
+    def tool_changer_state(self) -> Dict[str, Any]:
+        """The tool changer stand-in's own view: lock, coupled tool, rack slots, fault, link, lock/unlock history."""
+        if self.changer_server is None:
+            raise SimStateError("the worksite runs no tool changer stand-in (the robot file has no tool_changer)")
+        return self.changer_server.state()
 
     def _need_world(self) -> World:
         if self.world is None:
@@ -223,12 +247,14 @@ class Worksite:
         return self._need_world().scan()
 
     # -- fault injection --------------------------------------------------------------------------------------
-    FAULTS = ("compressor_overpressure", "compressor_motor", "compressor_link_drop", "drive_fault",
+    FAULTS = ("compressor_overpressure", "compressor_motor", "compressor_link_drop", "tool_changer_link_drop",
+              "drive_fault",
               "drive_heartbeat_loss", "arm_protective_stop", "arm_emergency_stop")
 
     def inject_fault(self, kind: str, **kw: Any) -> None:
         """Inject a fault. ``kind`` is one of :attr:`FAULTS`; keyword arguments:
-        ``compressor_link_drop``: ``duration`` (wall s, None = until :meth:`clear_fault`), ``mode`` close|silent;
+        ``compressor_link_drop``, ``tool_changer_link_drop``: ``duration`` (wall s, None = until :meth:`clear_fault`),
+        ``mode`` close|silent;
         ``drive_fault``: ``node_id``, ``error_code`` (default 0x2310); ``drive_heartbeat_loss``: ``node_id``;
         ``arm_*``: ``reason``."""
         self._need_world()
@@ -238,6 +264,9 @@ class Worksite:
             self.compressor.inject_motor_fault()
         elif kind == "compressor_link_drop":
             self.modbus.drop_link(duration=kw.get("duration"), mode=kw.get("mode", "close"))
+        elif kind == "tool_changer_link_drop":
+            self.tool_changer_state()            # refuses when there is none
+            self.changer_server.drop_link(duration=kw.get("duration"), mode=kw.get("mode", "close"))
         elif kind == "drive_fault":
             self.drives.drive(int(kw["node_id"])).inject_fault(int(kw.get("error_code", 0x2310)))
         elif kind == "drive_heartbeat_loss":
@@ -262,6 +291,8 @@ class Worksite:
         self._need_world()
         if kind == "compressor_link_drop":
             self.modbus.restore_link()
+        elif kind == "tool_changer_link_drop" and self.changer_server is not None:
+            self.changer_server.restore_link()
         elif kind == "drive_heartbeat_loss":
             self.drives.drive(int(kw["node_id"])).restore()
         elif kind == "arm_emergency_stop":

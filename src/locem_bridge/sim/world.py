@@ -402,8 +402,8 @@ class World:
         return q
 
     # -- tools (operator) --------------------------------------------------------------------------------------
-    def mount_tool(self, name: str) -> None:
-        """The operator mounts ``name`` on the flange (exactly one tool at a time)."""
+    def mount_tool(self, name: str, by: str = "operator") -> None:
+        """The operator (or the tool changer, ``by``) mounts ``name`` on the flange (exactly one tool at a time)."""
         if name not in TOOL_NAMES:
             raise SimStateError("unknown tool %r, allowed: %s" % (name, ", ".join(TOOL_NAMES)))
         with self._lock:
@@ -413,10 +413,11 @@ class World:
             self._place_tool()
             self._tcp_prev = None
             self._dirty = True
-        log.info("operator mounted %s", name)
+        log.info("%s mounted %s", by, name)
 
-    def remove_tool(self) -> Optional[str]:
-        """The operator removes the mounted tool; returns its name (None when nothing was mounted)."""
+    def remove_tool(self, by: str = "operator") -> Optional[str]:
+        """The operator (or the tool changer, ``by``) removes the mounted tool; returns its name (None when nothing
+        was mounted)."""
         with self._lock:
             name = self.mounted_tool
             if name is None:
@@ -425,8 +426,25 @@ class World:
                                                [0, 0, 0, 1], physicsClientId=self._cid)
             self.mounted_tool = None
             self._tcp_prev = None
-        log.info("operator removed %s", name)
+        log.info("%s removed %s", by, name)
         return name
+
+    def flange_in_mount(self, q: Optional[Sequence[float]] = None) -> List[float]:
+        """Where the flange (``tool0``) is in the arm's ``base_link`` frame for joint positions ``q`` (default: the
+        arm source's current ones): the tool changer stand-in's rack slots (:mod:`.modbus.tool_changer`)."""
+        if q is None:
+            q = self.arm_source.joint_positions() if self.arm_source is not None else self._q
+        c = self._cid
+        with self._lock:
+            for j, qv in zip(self.arm_joints, q):
+                pb.resetJointState(self.arm_body, j, float(qv), physicsClientId=c)
+            fpos, _ = self._tool_frame()
+            for j, qv in zip(self.arm_joints, self._q):
+                pb.resetJointState(self.arm_body, j, qv, physicsClientId=c)
+            bpos, born = pb.getBasePositionAndOrientation(self.arm_body, physicsClientId=c)
+            ipos, iorn = pb.invertTransform(bpos, born)
+            pos, _ = pb.multiplyTransforms(ipos, iorn, fpos, [0, 0, 0, 1])
+        return [float(v) for v in pos]
 
     def tool_active(self) -> bool:
         """Whether the mounted tool's process is on (digital output / valve + pressure in range)."""

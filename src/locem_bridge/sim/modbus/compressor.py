@@ -236,6 +236,9 @@ class CompressorRegisterMap:
     :param wall: monotonic wall clock of the watchdog (seconds).
     """
 
+    #: the names of each table's addresses, 0-based (the server adapters serve exactly these)
+    COILS, DISCRETE_INPUTS, HOLDING_REGISTERS, INPUT_REGISTERS = COILS, DISCRETE_INPUTS, HOLDING_REGISTERS, INPUT_REGISTERS
+
     def __init__(self, model: CompressorModel, wall: Callable[[], float] = time.monotonic) -> None:
         self.model = model
         self._wall = wall

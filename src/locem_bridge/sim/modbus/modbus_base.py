@@ -68,19 +68,25 @@ class CompressorServerBase:
     :param host: address to bind (e.g. ``127.0.0.1``).
     :param port: TCP port to bind.
     :param device_id: Modbus unit id answered; requests to any other id are refused with exception 4.
+    :param register_map: the device's register map (default: the compressor's, :class:`CompressorRegisterMap`
+        of ``model``); any map with the same methods and table names (``COILS``, ``DISCRETE_INPUTS``,
+        ``HOLDING_REGISTERS``, ``INPUT_REGISTERS``) is served alike, e.g. the tool changer's
+        (:mod:`.tool_changer`).
+    :param name: the device's name in log lines, errors and the thread's name.
     """
 
     #: which pymodbus line the adapter talks to, e.g. ``"3.16"`` (set by subclasses)
     pymodbus_line = ""
 
     def __init__(self, model: CompressorModel, host: str = "127.0.0.1", port: int = 5020,
-                 device_id: int = 1) -> None:
+                 device_id: int = 1, register_map: Any = None, name: str = "compressor") -> None:
+        self.name = name
         if not 0 <= int(device_id) <= 247:
-            raise DeviceStandInError("compressor device_id %r not allowed, allowed 0..247" % (device_id,))
+            raise DeviceStandInError("%s device_id %r not allowed, allowed 0..247" % (name, device_id))
         if not 0 <= int(port) <= 65535:
-            raise DeviceStandInError("compressor port %r not allowed, allowed 0..65535" % (port,))
+            raise DeviceStandInError("%s port %r not allowed, allowed 0..65535" % (name, port))
         self.model = model
-        self.map = CompressorRegisterMap(model)
+        self.map = register_map if register_map is not None else CompressorRegisterMap(model)
         self.host, self.port, self.device_id = host, int(port), int(device_id)
         self.refused = 0
         self.requests = 0
@@ -117,7 +123,7 @@ class CompressorServerBase:
     def _refused(self, function_code: int, address: int, exc: RegisterAccessError) -> int:
         """Count and log a refused request; returns its Modbus exception code."""
         self.refused += 1
-        log.warning("compressor %s:%d refused fc=%d address=%d: %s (exception %d)",
+        log.warning("%s %s:%d refused fc=%d address=%d: %s (exception %d)", self.name,
                     self.host, self.port, function_code, address, exc, exc.exception_code)
         return exc.exception_code
 
@@ -163,19 +169,20 @@ class CompressorServerBase:
     def start(self, timeout: float = 5.0) -> None:
         """Bind and serve; raises DeviceStandInError when the address cannot be bound."""
         if self._thread is not None:
-            raise DeviceStandInError("compressor server already started")
+            raise DeviceStandInError("%s server already started" % self.name)
         self._loop = asyncio.new_event_loop()
         started = threading.Event()
         box: List[BaseException] = []
-        self._thread = threading.Thread(target=self._run, args=(started, box), name="compressor-modbus", daemon=True)
+        self._thread = threading.Thread(target=self._run, args=(started, box), name="%s-modbus" % self.name,
+                                        daemon=True)
         self._thread.start()
         if not started.wait(timeout) or box:
             self._thread.join(1.0)
             self._thread = None
-            raise DeviceStandInError("compressor Modbus stand-in cannot listen on %s:%d: %s"
-                                     % (self.host, self.port, bind_problem(self.host, self.port)
+            raise DeviceStandInError("%s Modbus stand-in cannot listen on %s:%d: %s"
+                                     % (self.name, self.host, self.port, bind_problem(self.host, self.port)
                                         or (box[0] if box else "timeout")))
-        log.info("compressor Modbus TCP stand-in listening on %s:%d (device id %d, pymodbus %s line)", self.host,
+        log.info("%s Modbus TCP stand-in listening on %s:%d (device id %d, pymodbus %s line)", self.name, self.host,
                  self.port, self.device_id, self.pymodbus_line)
 
     def stop(self) -> None:
@@ -198,7 +205,7 @@ class CompressorServerBase:
     # -- link faults ---------------------------------------------------------------------------------------
     def _call(self, coro_fn: Any) -> None:
         if self._loop is None or self._thread is None:
-            raise DeviceStandInError("compressor server is not running")
+            raise DeviceStandInError("%s server is not running" % self.name)
         fut = asyncio.run_coroutine_threadsafe(coro_fn(), self._loop)
         fut.result(5.0)
 
@@ -215,7 +222,7 @@ class CompressorServerBase:
             else:
                 self._link_up.clear()
             self.link_state = "dropped_" + mode
-            log.warning("compressor link dropped (%s)%s", mode, "" if duration is None else " for %.2f s" % duration)
+            log.warning("%s link dropped (%s)%s", self.name, mode, "" if duration is None else " for %.2f s" % duration)
             if duration is not None:
                 self._restore_handle = self._loop.call_later(duration, lambda: self._loop.create_task(self._restore()))
         self._call(_drop)
@@ -228,7 +235,7 @@ class CompressorServerBase:
             await self._open()
         self._link_up.set()
         self.link_state = "up"
-        log.warning("compressor link restored")
+        log.warning("%s link restored", self.name)
 
     def restore_link(self) -> None:
         """Bring a dropped link back now."""

@@ -25,7 +25,7 @@ from typing import Any, List, Optional, Sequence, Tuple
 
 import pymodbus
 
-from .compressor import COILS, DISCRETE_INPUTS, CompressorModel, RegisterAccessError
+from .compressor import CompressorModel, RegisterAccessError
 from ..errors import DeviceStandInError
 from .modbus_base import CompressorServerBase, log, parse_version
 
@@ -42,7 +42,6 @@ EXC_DEVICE_FAILURE = 4
 
 _TABLES = {1: "coils", 5: "coils", 15: "coils", 2: "discrete_inputs",
            3: "holding", 6: "holding", 16: "holding", 22: "holding", 23: "holding", 4: "input"}
-_BIT_NAMES = {"coils": COILS, "discrete_inputs": DISCRETE_INPUTS}
 
 # exception code of the first refusal met while executing the current request (one asyncio task per request)
 _refusal: contextvars.ContextVar = contextvars.ContextVar("locem_compressor_modbus_refusal", default=None)
@@ -65,7 +64,7 @@ class _DeviceContext(ModbusBaseSlaveContext):
         self._server = server
 
     def __str__(self) -> str:
-        return "compressor stand-in (device id %d)" % self._server.device_id
+        return "%s stand-in (device id %d)" % (self._server.name, self._server.device_id)
 
     def reset(self) -> None:
         """Nothing to reset: the values live in the model."""
@@ -103,8 +102,8 @@ class _UnknownDeviceContext(ModbusBaseSlaveContext):
     def _refuse(self, fc_as_hex: int) -> None:
         if _refused_already():
             return
-        log.warning("compressor %s:%d refused fc=%d for unit id %d: this stand-in is unit id %d (exception %d)",
-                    self._server.host, self._server.port, fc_as_hex, self._unit, self._server.device_id,
+        log.warning("%s %s:%d refused fc=%d for unit id %d: this stand-in is unit id %d (exception %d)",
+                    self._server.name, self._server.host, self._server.port, fc_as_hex, self._unit, self._server.device_id,
                     EXC_DEVICE_FAILURE)
         _note_refusal(EXC_DEVICE_FAILURE)
 
@@ -139,8 +138,9 @@ class LegacyCompressorServer(CompressorServerBase):
 
     pymodbus_line = "3.6"
 
-    def __init__(self, model: CompressorModel, host: str = "127.0.0.1", port: int = 5020, device_id: int = 1) -> None:
-        super().__init__(model, host, port, device_id)
+    def __init__(self, model: CompressorModel, host: str = "127.0.0.1", port: int = 5020, device_id: int = 1,
+                 register_map: Any = None, name: str = "compressor") -> None:
+        super().__init__(model, host, port, device_id, register_map, name)
 
     # -- register map access (called by _DeviceContext inside the request's task) --------------------------
     def _read(self, function_code: int, address: int, count: int) -> List[Any]:
@@ -148,7 +148,7 @@ class LegacyCompressorServer(CompressorServerBase):
         try:
             if table is None:
                 raise RegisterAccessError(2, "function code %d has no table in this device" % function_code)
-            names = _BIT_NAMES.get(table)
+            names = {"coils": self.map.COILS, "discrete_inputs": self.map.DISCRETE_INPUTS}.get(table)
             if names is None:
                 return list(self.map.read_registers(table, address, count))
             if address < 0 or address >= len(names):

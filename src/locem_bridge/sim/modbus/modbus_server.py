@@ -27,7 +27,7 @@ from typing import Any, List, Optional
 
 import pymodbus
 
-from .compressor import COILS, DISCRETE_INPUTS, HOLDING_REGISTERS, INPUT_REGISTERS, CompressorModel, RegisterAccessError
+from .compressor import CompressorModel, RegisterAccessError
 from ..errors import DeviceStandInError
 from .modbus_base import CompressorServerBase, parse_version
 
@@ -56,11 +56,12 @@ class Pymodbus316CompressorServer(CompressorServerBase):
 
     pymodbus_line = "3.16"
 
-    def __init__(self, model: CompressorModel, host: str = "127.0.0.1", port: int = 5020, device_id: int = 1) -> None:
+    def __init__(self, model: CompressorModel, host: str = "127.0.0.1", port: int = 5020, device_id: int = 1,
+                 register_map: Any = None, name: str = "compressor") -> None:
         if LEGACY_API:
             raise DeviceStandInError("the pymodbus 3.16 adapter cannot run on the installed pymodbus %s; use "
                                      "locem_bridge.sim.modbus.modbus_server.CompressorServer" % pymodbus.__version__)
-        super().__init__(model, host, port, device_id)
+        super().__init__(model, host, port, device_id, register_map, name)
 
     # -- pymodbus glue -------------------------------------------------------------------------------------
     def _device(self) -> SimDevice:
@@ -87,15 +88,15 @@ class Pymodbus316CompressorServer(CompressorServerBase):
                 else:
                     raise RegisterAccessError(2, "function code %d cannot write" % function_code)
             if function_code in (1, 5, 15):
-                table, names = "coils", COILS
+                table, names = "coils", self.map.COILS
             elif function_code == 2:
-                table, names = "discrete_inputs", DISCRETE_INPUTS
+                table, names = "discrete_inputs", self.map.DISCRETE_INPUTS
             else:
                 table = "holding" if function_code in (3, 6, 16, 23) else "input"
                 if set_values is None:
                     self.map.read_registers(table, address, count)          # refuses addresses not in the map
-                regs = self.map.read_registers(table, 0, len(HOLDING_REGISTERS if table == "holding"
-                                                             else INPUT_REGISTERS))
+                size = len(self.map.HOLDING_REGISTERS if table == "holding" else self.map.INPUT_REGISTERS)
+                regs = self.map.read_registers(table, 0, size) if size else []
                 current_registers[:len(regs)] = regs
                 return None
             if set_values is None and address >= len(names):
