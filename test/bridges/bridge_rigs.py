@@ -6,6 +6,8 @@ import time
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 ROBOT_YAML = os.path.join(REPO, "config", "robots", "rbkairos_ur10e.yaml")
+#: a tool changer section for the shipped robot (overrides), the tests' own
+TOOL_CHANGER_RACK = os.path.join(REPO, "test", "data", "tool_changer_rack.yaml")
 
 _counter = itertools.count(1)
 
@@ -192,6 +194,43 @@ class StandInArmSource:
 
     def digital_output(self, index):
         return bool(self.standin.get_standard_digital_outputs()[index])
+
+
+def robot_with_changer(port=None):
+    """The shipped robot plus the tests' tool changer section (test/data/tool_changer_rack.yaml), on ``port``
+    (default: a free one)."""
+    import yaml
+    from locem_bridge.bridges.config import load_robot_config
+    with open(TOOL_CHANGER_RACK) as handle:
+        overrides = yaml.safe_load(handle)
+    overrides["tool_changer"]["port"] = port or free_port()
+    return load_robot_config(ROBOT_YAML, overrides)
+
+
+class ToolChangerRig:
+    """The tool changer stand-in (model + Modbus server) bound to a PyBullet world whose arm is a settable
+    :class:`~locem_bridge.sim.arm_source.KinematicArm` (the flange goes to a rack slot by setting its joints)."""
+
+    def __init__(self, robot, time_scale=10.0):
+        from locem_bridge.sim.arm_source import KinematicArm
+        from locem_bridge.sim.clock import SimClock
+        from locem_bridge.sim.config import load_site
+        from locem_bridge.sim.modbus.tool_changer import ToolChangerModel, WorldRack, tool_changer_server
+        from locem_bridge.sim.world import World
+        self.cfg = robot["tool_changer"]
+        self.clock = SimClock(time_scale)
+        self.arm = KinematicArm(robot["arm"]["named_poses"]["home"])
+        self.world = World(load_site(SHORT_WALL), {"robot": robot}, self.clock, arm=self.arm, gui=False)
+        self.model = ToolChangerModel(self.cfg, self.clock.now, WorldRack(self.world, self.cfg))
+        self.server = tool_changer_server(self.model, "127.0.0.1", self.cfg["port"], self.cfg["device_id"])
+        self.server.start()
+
+    def to_slot(self, tool):
+        self.arm.set_joint_positions(self.cfg["rack"][tool]["pose"])
+
+    def close(self):
+        self.server.stop()
+        self.world.close()
 
 
 class WorksiteRig:

@@ -9,15 +9,17 @@ import os
 import typing
 
 import pytest
+import yaml
 
 from locem_bridge.bridges import backends
 from locem_bridge.bridges.commands_arm import ArmCommands
+from locem_bridge.bridges.config import load_robot_config
 from locem_bridge.bridges.errors import NotSupported
 from locem_bridge.bridges.interfaces import INTERFACES, Arm
 from locem_bridge.bridges.robot import build_robot
 from locem_bridge.common.locem_codes import Code
 
-from bridge_rigs import SHORT_WALL
+from bridge_rigs import ROBOT_YAML, SHORT_WALL, TOOL_CHANGER_RACK
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 BRIDGES = os.path.join(REPO, "src", "locem_bridge", "bridges")
@@ -27,7 +29,7 @@ CONCRETE = {target.partition(":")[0] for table in backends.BACKENDS.values() for
     "locem_bridge.bridges.ur_worker"}
 #: how the command modules name a device handle -> its interface
 HANDLES = {"arm": "arm", "_arm": "arm", "base": "base", "compressor": "compressor", "comp": "compressor",
-           "scanner": "scanner", "lift": "lift"}
+           "scanner": "scanner", "lift": "lift", "changer": "tool_changer"}
 
 
 def _all_backends():
@@ -78,9 +80,10 @@ def test_every_backend_implements_its_interface_completely(kind, name, cls):
 
 
 def test_built_backends_set_every_attribute_their_interface_annotates(robot):
-    from locem_bridge.bridges.config import load_robot_config
     second = build_robot(load_robot_config(os.path.join(REPO, "config", "robots", "diffdrive_ur5e.yaml")),
                          site=SHORT_WALL)                 # the robot with a lift
+    with open(TOOL_CHANGER_RACK) as handle:             # the shipped robot plus a tool changer: every kind
+        robot = load_robot_config(ROBOT_YAML, yaml.safe_load(handle))
     built = build_robot(robot, site=SHORT_WALL)          # built, never started: no device is contacted
     assert sorted(set(built.backends) | set(second.backends)) == sorted(INTERFACES)
     assert "lift" not in built.backends                  # the shipped robot has no lift section

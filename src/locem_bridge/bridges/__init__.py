@@ -1,14 +1,16 @@
-"""Device backends behind LOCEM: UR arm over RTDE, compressor over Modbus TCP, mobile base over CAN (CiA 402).
+"""Device backends behind LOCEM: UR arm over RTDE, compressor and tool changer over Modbus TCP, mobile base over CAN
+(CiA 402).
 
 Layout (one concept per module):
 
 * :mod:`.errors`      one exception hierarchy; every error carries the LOCEM code it maps to;
 * :mod:`.config`      the robot YAML as the bridges read it (addresses, ports, CAN ids, tools, named poses);
-* :mod:`.interfaces`  the whole interface of each device kind (arm, compressor, base, scanner) with its
+* :mod:`.interfaces`  the whole interface of each device kind (arm, compressor, base, scanner, tool changer) with its
   optional capability groups; the command sets use nothing else of a backend;
 * :mod:`.backends`    the name -> backend table, imported lazily (no device library is loaded until used);
 * :mod:`.ur_arm` + :mod:`.ur_worker`  ur_rtde in a supervised child process;
 * :mod:`.modbus_compressor`  pymodbus client with polling, retries and the valve-closed-on-return rule;
+* :mod:`.modbus_tool_changer`  the same pattern for the tool changer (a coupled tool stays locked on return);
 * :mod:`.cia402_base` + :mod:`locem_bridge.common.base_kinematics` + :mod:`locem_bridge.common.can_bus`  four CiA 402 drives
   through canopen's ``BaseNode402``;
 * :mod:`.sim_scanner`  the SCAN source of the simulated worksite (perception stand-in on the site YAML);

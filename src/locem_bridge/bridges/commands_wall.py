@@ -152,8 +152,10 @@ def wall_specs(tools: Tuple[str, ...]) -> Tuple[CommandSpec, ...]:
 
 
 def specs_for(robot: Mapping[str, Any]) -> Tuple[CommandSpec, ...]:
-    """The wall commands of the robot section ``robot`` (a loaded robot file's ``robot``)."""
-    return wall_specs(tuple(robot.get("tools", {})))
+    """The wall commands of the robot section ``robot`` (a loaded robot file's ``robot``); a robot with a
+    ``tool_changer`` has no MOUNT_TOOL (CHANGE_TOOL, bridges/commands_changer.py)."""
+    return tuple(s for s in wall_specs(tuple(robot.get("tools", {})))
+                 if not ("tool_changer" in robot and s.name == "MOUNT_TOOL"))
 
 
 class HookedWaiter:
@@ -456,14 +458,21 @@ class WallCommands:
         self.home_via: Optional[str] = arm_cfg.get("home_via") or None
         flange = arm_cfg.get("wall_ready_flange")
         self.ready_flange: Optional[List[float]] = [float(v) for v in flange] if flange else None
+        #: a robot with an automatic tool changer: its tools carry changer plates, only the changer couples them
+        #: (CHANGE_TOOL, bridges/commands_changer.py), so MOUNT_TOOL is not offered
+        self.changer_fitted = "tool_changer" in robot_cfg
 
     def specs(self) -> Iterable[CommandSpec]:
-        return wall_specs(tuple(self.tools))
+        specs = wall_specs(tuple(self.tools))
+        return tuple(s for s in specs if not (self.changer_fitted and s.name == "MOUNT_TOOL"))
 
     def handlers(self) -> Dict[str, Any]:
-        return {"SCAN": self.scan, "MOUNT_TOOL": self.mount_tool, "APPLY_TAPE_START": self.apply_tape_start,
+        out = {"SCAN": self.scan, "MOUNT_TOOL": self.mount_tool, "APPLY_TAPE_START": self.apply_tape_start,
                 "APPLY_TAPE": self.apply_tape, "SPRAY_AREA": self.spray_area, "SAND_AREA": self.sand_area,
                 "WALL_READY": self.wall_ready, "HOME": self.home}
+        if self.changer_fitted:
+            del out["MOUNT_TOOL"]
+        return out
 
     def stop(self) -> None:
         self._outputs_off()
@@ -489,8 +498,9 @@ class WallCommands:
 
     def _need_tool(self, tool: str) -> None:
         if self.active_tool != tool:
-            raise NotReady("the %s is needed but the active tool is %s; mount it and send MOUNT_TOOL %s"
-                           % (tool, self.active_tool or "none", tool))
+            raise NotReady("the %s is needed but the active tool is %s; %s"
+                           % (tool, self.active_tool or "none", "send CHANGE_TOOL tool=%s" % tool
+                              if self.changer_fitted else "mount it and send MOUNT_TOOL %s" % tool))
         self._apply_tool()
 
     def _apply_tool(self) -> None:
@@ -583,15 +593,20 @@ class WallCommands:
         if tool not in self.tools:
             raise BadRequest("tool %s is not in robot.tools (%s)" % (tool, ", ".join(sorted(self.tools))),
                              argument="tool")
-        arm = self._need("arm")
         self._outputs_off()
-        cfg = self.tools[tool]
+        return self.activate_tool(tool)
+
+    def activate_tool(self, tool: Optional[str]) -> Dict[str, Any]:
+        """``tool`` is on the flange now (None: nothing is): its TCP offset and payload (none: the flange, 0 kg)
+        on the controller, the active tool of the wall commands; MOUNT_TOOL and CHANGE_TOOL end with it."""
+        arm = self._need("arm")
+        cfg = self.tools[tool] if tool is not None else {"tcp": [0.0] * 6, "mass": 0.0, "cog": [0.0] * 3}
         arm.set_tcp([float(v) for v in cfg["tcp"]])
         arm.set_payload(float(cfg["mass"]), [float(v) for v in cfg["cog"]])
         self.active_tool = tool
-        if self.tool_listener is not None:
+        if self.tool_listener is not None and tool is not None:
             self.tool_listener(tool)
-        return {"tool": tool, "tcp": cfg["tcp"], "mass": cfg["mass"]}
+        return {"tool": tool or "", "tcp": cfg["tcp"], "mass": cfg["mass"]}
 
     def apply_tape_start(self, ctx: Any, x0: float, y0: float, z0: float, x1: float, y1: float, z1: float,
                          nx: float, ny: float, nz: float, approach: float) -> Dict[str, Any]:
@@ -856,8 +871,13 @@ class WallCommands:
 
     def home(self, ctx: Any) -> Dict[str, Any]:
         self._outputs_off()
+        self.clear_of_wall(ctx)
+        return self._need("arm").move_joints(ctx, self._need("arm").named_pose("home"), 1.0, 1.4)
+
+    def clear_of_wall(self, ctx: Any) -> None:
+        """From a wall pose (tool pointing forward): the straight retract, then ``robot.arm.home_via``, so the
+        joint move that follows (HOME, CHANGE_TOOL) starts away from the wall."""
         arm = self._need("arm")
         if self.home_via and self._facing_forward():
             self._retract(ctx)
             arm.move_joints(ctx, arm.named_pose(self.home_via), 1.0, 1.4)
-        return arm.move_joints(ctx, arm.named_pose("home"), 1.0, 1.4)

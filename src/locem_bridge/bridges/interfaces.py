@@ -428,6 +428,53 @@ class Lift(Backend):
         """Brake to a stand now (a running :meth:`move_to` ends ``Aborted``). Never raises."""
 
 
+class ToolChanger(Backend):
+    """An automatic tool changer: a lock on the flange that couples the tool waiting in the rack slot the flange is
+    at, and releases the coupled tool into its own slot. Every tool carries a plate whose id is its rack slot
+    (``robot.tool_changer.rack.<tool>.slot``); the rack slots are named arm poses the commands drive to.
+
+    Reading: :meth:`read` (a fresh request) and :meth:`cached` (the latest poll) return ``locked``, ``unlocked``
+    (both false while the lock moves), ``busy``, ``coupled_tool_id`` (0 none), ``coupled_tool`` (its name, ""
+    none), ``fault_code``, ``fault`` (text, ``none``), ``fault_active``, ``present`` (tool -> it sits in its
+    slot) and ``flange_slot`` (the slot the flange is at, 0 none).
+
+    :meth:`lock` and :meth:`unlock` block until the device confirms (``locked`` / ``unlocked`` and not busy) and
+    return the reading; the device's interlocks (lock away from a slot or at an empty one, unlock away from the
+    coupled tool's slot) answer :class:`~.errors.DeviceFault` naming the fault, and so does no confirmation
+    within :attr:`lock_timeout`. Link handling as the compressor's: :class:`~.errors.NotConnected` until the
+    safe state after start is confirmed, :class:`~.errors.LinkDown` when no poll succeeded recently. The safe
+    state holds what is coupled: the lock is commanded to the state the device reports (a coupled tool stays
+    locked; a lock or unlock cut off by a link loss is not repeated).
+    """
+
+    kind = "tool_changer"
+
+    #: tool name -> its rack slot (= its plate id), ``robot.tool_changer.rack``
+    slots: Mapping[str, int]
+    #: s, how long a lock or unlock may take before it fails (``robot.tool_changer.lock_timeout``)
+    lock_timeout: float
+
+    @abc.abstractmethod
+    def read(self) -> Dict[str, Any]:
+        """A fresh reading (see the class docstring)."""
+
+    @abc.abstractmethod
+    def cached(self) -> Dict[str, Any]:
+        """The latest polled reading, never blocking (``{}`` before the first poll)."""
+
+    @abc.abstractmethod
+    def lock(self, waiter: Waiter) -> Dict[str, Any]:
+        """Lock on the tool of the slot the flange is at; the reading once locked."""
+
+    @abc.abstractmethod
+    def unlock(self, waiter: Waiter) -> Dict[str, Any]:
+        """Release the coupled tool into its slot (the flange must be at it); the reading once unlocked."""
+
+    @abc.abstractmethod
+    def check_link(self) -> None:
+        """Raise :class:`~.errors.LinkDown` unless a poll succeeded recently."""
+
+
 class Scanner(abc.ABC):
     """Wall feature detection behind SCAN (no link of its own: built, never started)."""
 
@@ -440,4 +487,5 @@ class Scanner(abc.ABC):
 
 
 #: the interface of each device kind of :data:`.backends.BACKENDS`
-INTERFACES: Dict[str, type] = {"arm": Arm, "compressor": Compressor, "base": Base, "lift": Lift, "scanner": Scanner}
+INTERFACES: Dict[str, type] = {"arm": Arm, "compressor": Compressor, "base": Base, "lift": Lift, "scanner": Scanner,
+                               "tool_changer": ToolChanger}

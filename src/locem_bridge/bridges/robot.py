@@ -24,11 +24,12 @@ from .backends import backend_class
 from .config import need, resolve_path
 from .interfaces import Backend
 
-ALL_DEVICES = ("arm", "compressor", "base", "lift", "scanner")
+ALL_DEVICES = ("arm", "compressor", "base", "lift", "scanner", "tool_changer")
 
 
 class Robot:
-    """The backends (``arm``, ``compressor``, ``base``, ``lift``, ``scanner``) and command sets of one robot."""
+    """The backends (``arm``, ``compressor``, ``base``, ``lift``, ``scanner``, ``tool_changer``) and command sets of
+    one robot."""
 
     def __init__(self) -> None:
         self.backends: Dict[str, Any] = {}
@@ -43,7 +44,7 @@ class Robot:
                 backend.start()
 
     def close(self) -> None:
-        for kind in ("base", "lift", "arm", "compressor"):
+        for kind in ("base", "lift", "arm", "compressor", "tool_changer"):
             backend = self.backends.get(kind)
             if backend is not None:
                 try:
@@ -67,6 +68,7 @@ def _build_robot(robot_cfg: Mapping[str, Any], devices: Sequence[str], site: Any
                  named_base_poses: Optional[Mapping[str, Sequence[float]]]) -> Robot:
     from .commands_arm import ArmCommands
     from .commands_base import BaseCommands, LiftCommands
+    from .commands_changer import ToolChangerCommands
     from .commands_compressor import CompressorCommands
     from .commands_wall import WallCommands
     from ..robot_facts import tcp_bound
@@ -96,9 +98,13 @@ def _build_robot(robot_cfg: Mapping[str, Any], devices: Sequence[str], site: Any
     if "scanner" in devices and "scanner" in robot_cfg and site:
         cls = backend_class("scanner", str(robot_cfg["scanner"].get("backend", "sim")))
         robot.backends["scanner"] = cls(robot_cfg["scanner"], site)
+    if "tool_changer" in devices and "tool_changer" in robot_cfg:
+        cls = backend_class("tool_changer", str(robot_cfg["tool_changer"].get("protocol", "modbus_tcp")))
+        robot.backends["tool_changer"] = cls(robot_cfg["tool_changer"])
     if "arm" in robot.backends:
-        robot.command_sets.append(WallCommands(robot_cfg, arm=robot.backends.get("arm"),
-                                               base=robot.backends.get("base"),
-                                               compressor=robot.backends.get("compressor"),
-                                               scanner=robot.backends.get("scanner")))
+        wall = WallCommands(robot_cfg, arm=robot.backends.get("arm"), base=robot.backends.get("base"),
+                            compressor=robot.backends.get("compressor"), scanner=robot.backends.get("scanner"))
+        robot.command_sets.append(wall)
+        if "tool_changer" in robot_cfg:            # CHANGE_TOOL instead of MOUNT_TOOL (NOT_READY without a backend)
+            robot.command_sets.append(ToolChangerCommands(robot_cfg, wall, robot.backends.get("tool_changer")))
     return robot

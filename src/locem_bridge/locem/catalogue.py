@@ -16,6 +16,7 @@ DECLARATION_MODULES: Tuple[str, ...] = (
     "locem_bridge.bridges.commands_compressor",
     "locem_bridge.bridges.commands_base",
     "locem_bridge.bridges.commands_wall",
+    "locem_bridge.bridges.commands_changer",
 )
 
 

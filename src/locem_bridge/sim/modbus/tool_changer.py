@@ -181,9 +181,10 @@ class ToolChangerModel:
         """The lock coil written: lock (1) or unlock (0), with the interlocks of the module docstring."""
         with self._lock:
             self.update()
+            if not self.busy:
+                self.fault_code = FAULT_NONE         # every command clears the last one's refusal
             if self.busy or lock == self.commanded:
                 return
-            self.fault_code = FAULT_NONE
             here = self.rack.slot_at()
             if lock:
                 if here == 0:
