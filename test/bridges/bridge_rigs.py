@@ -273,6 +273,13 @@ class WorksiteRig:
         self.drives.start()
         self.world = World(copy.deepcopy(self.site), {"robot": self.robot}, self.clock,
                            arm=StandInArmSource(self.standin), drives=self.drives, compressor=self.model, gui=False)
+        self.changer = self.changer_server = None
+        if "tool_changer" in self.robot:          # the tool changer stand-in, its rack on the world's arm
+            from locem_bridge.sim.modbus.tool_changer import ToolChangerModel, WorldRack, tool_changer_server
+            tc = self.robot["tool_changer"]
+            self.changer = ToolChangerModel(tc, self.clock.now, WorldRack(self.world, tc))
+            self.changer_server = tool_changer_server(self.changer, "127.0.0.1", tc["port"], tc["device_id"])
+            self.changer_server.start()
         self.world.start()
 
     def running(self):
@@ -307,6 +314,8 @@ class WorksiteRig:
         return float((cells >= self.world.outcome.target).mean())
 
     def close(self):
+        if self.changer_server is not None:
+            self.changer_server.stop()
         self.world.close()
         self.drives.stop()
         self.server.stop()
