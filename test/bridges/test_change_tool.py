@@ -8,6 +8,7 @@ import pytest
 from locem_bridge.bridges.robot import build_robot
 from locem_bridge.bridges.config import load_robot_config
 from locem_bridge.common.locem_codes import Code
+from locem_bridge.locem.catalogue import all_specs
 from locem_bridge.locem.core import LocemCore
 
 from bridge_rigs import ROBOT_YAML, SHORT_WALL, WorksiteRig, robot_with_changer, rtde_payload
@@ -32,6 +33,8 @@ def test_a_robot_with_a_tool_changer_offers_change_tool_instead_of_mount_tool():
             for command_set in built.command_sets:
                 core.install(command_set)
             assert offered in _names(core) and absent not in _names(core)
+            declared = {spec.name for spec in all_specs(robot)}    # the catalogue (API doc, resource model)
+            assert offered in declared and absent not in declared
             r = core.dispatcher.execute("%s sander" % absent)
             assert r.code == Code.INVALID_COMMAND, (r.code, r.message)
         finally:
