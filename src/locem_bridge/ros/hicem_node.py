@@ -9,8 +9,8 @@ Interfaces (relative to the node, ``/hicem/...`` when the node is named ``hicem`
   periodic ``STATUS`` (LOCEM's heartbeat), listens to ``diagnostics`` and ``<locem>/status``, and talks to
   PEMKRE through ``<pemkre>/*`` services (``~pemkre: ros``) or an engine embedded in this process
   (``~pemkre: embedded``, store at ``~pemkre_store``, the package's Turtle plus ``~extra_ontology_dirs``, tasks
-  matched to the skills of the robot YAML ``~robot``, the one HICEM reads its facts from; for single-process runs
-  and tests).
+  matched to the skills of the robot YAML ``~robot`` when it is set, the one HICEM reads its facts from; for
+  single-process runs and tests).
 
 Parameters: ``~params_file`` (HICEM parameters YAML; default ``config/hicem/plasterboard.yaml`` of the package),
 ``~trees_dir``, ``~extra_trees_dirs`` (an integrator's tree folders loaded beside it, separated by ``:`` or ``,``;
@@ -63,9 +63,8 @@ def _pemkre_client(kind: str) -> Any:
                              split_folders(param("extra_ontology_dirs", "")), ".ttl", "ontology folder")
         # matched to the skills of ~robot (its resource model from the same tree folders HICEM runs), as the node
         from .pemkre_node import resource_model
-        share = package_share()
-        model = resource_model(param("robot", os.path.join(share, "config", "robots", "rbkairos_ur10e.yaml")),
-                               [param("trees_dir", os.path.join(share, "trees"))] +
+        # (only when ~robot is set: a test node with its own trees and no robot runs unmatched, as before)
+        model = resource_model(param("robot", ""), [param("trees_dir", os.path.join(package_share(), "trees"))] +
                                split_folders(param("extra_trees_dirs", "")), files)
         return EngineClient(ProcessEngine(open_store("rocksdb", store_path), files, resource_model=model))
     raise HicemError("~pemkre must be 'ros' or 'embedded', got %r" % kind)
