@@ -2,9 +2,11 @@
 
 ``use_case/`` holds what an integrator writes: Turtle (its own task type, parameter and process over the scanned
 world), a tree XML (shipped nodes, LOCEM commands and the shipped subtrees, no include) and a job YAML.
-- The real PEMKRE engine loads the shipped Turtle plus that folder, HICEM the shipped trees plus that folder, and
-  the spot-taping process runs against the LOCEM test double's scanned site: one joint per wall, each taped
-  from its middle outwards in pieces, the other joints untouched.
+- The real PEMKRE engine loads the shipped Turtle plus that folder and the robot's resource model generated from
+  the shipped trees plus that folder (PEMKRE matches the use case's task to the use case's tree), HICEM the
+  shipped trees plus that folder, and the spot-taping process runs against the LOCEM test double's scanned site:
+  one joint per wall, each taped from its middle outwards in pieces, the other joints untouched. A resource model
+  generated without the use case's tree folder offers no skill for its task: start_process refuses, saying why.
 - ``tools/main.sh``'s pre-flight (``python -m locem_bridge.ros.main_job``) refuses, in one line naming what is
   wrong and before anything starts: a folder that does not exist, a Turtle file declaring a shipped ontology IRI
   (both files named), a BehaviorTree ID defined twice (both files and lines), a job naming a process the loaded
@@ -29,24 +31,38 @@ from locem_bridge.hicem.executive import create_executive
 from locem_bridge.hicem.pemkre_local import EngineClient
 from locem_bridge.hicem.xml_loader import TreeLibrary
 from locem_bridge.pemkre import OxigraphStore, ProcessEngine
-from locem_bridge.pemkre.errors import OntologyError
+from locem_bridge.pemkre.errors import OntologyError, UnmatchableProcessError
 from locem_bridge.pemkre.ontology import load_files
 from locem_bridge.pemkre.vocab import PPR, SITE as SITE_NS
+from locem_bridge.skills import build_resource_model
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 USE_CASE = os.path.join(REPO, "test", "integrator", "use_case")
 SHIPPED_TREES = os.path.join(REPO, "trees")
 SHIPPED_TURTLE = os.path.join(REPO, "ontologies")
 PROCESS = "https://integrator.example.org/ont/spot-taping#SpotTapingProcess"
+ROBOT = os.path.join(REPO, "config", "robots", "rbkairos_ur10e.yaml")
+TURTLE = folder_files([SHIPPED_TURTLE, USE_CASE], ".ttl", "ontology folder")
 
 
 def _floats(command):
     return [float(w) for w in command.split()[1:] if "=" not in w]
 
 
+def _resource_model(tree_dirs):
+    """The shipped robot's resource model generated from these tree folders and the Turtle of both folders (as the
+    PEMKRE node and the pre-flight generate it)."""
+    return build_resource_model(ROBOT, tree_dirs, ontology_files=TURTLE).to_graph()
+
+
 def test_the_use_case_runs_beside_the_shipped_files(tmp_path):
     store = OxigraphStore(str(tmp_path / "pemkre_db"))
-    engine = ProcessEngine(store, folder_files([SHIPPED_TURTLE, USE_CASE], ".ttl", "ontology folder"))
+    engine = ProcessEngine(store, TURTLE, resource_model=_resource_model([SHIPPED_TREES, USE_CASE]))
+    # PEMKRE matches the integrator's task type to the integrator's tree: the composite skill SPOT_TAPE_JOINT
+    # realizes spot:cap_TapeJointInPieces
+    tape = [n for n in engine.match_process(PROCESS).nodes if n.node.endswith("#tape")][0]
+    assert (tape.capability, tape.realization.name, tape.realization.skill_kind) == \
+        ("https://integrator.example.org/ont/spot-taping#cap_TapeJointInPieces", "SPOT_TAPE_JOINT", "composite")
     library = TreeLibrary(params().node_registry())
     library.load_directories([SHIPPED_TREES, USE_CASE])
     locem = LocemDouble()
@@ -81,6 +97,20 @@ def test_the_use_case_runs_beside_the_shipped_files(tmp_path):
         for joint, status in (("wall_1_joint_1", PPR.processed), ("wall_2_joint_1", PPR.processed),
                               ("wall_1_joint_2", PPR.unprocessed)):
             assert engine.store.value(SITE_NS[joint], PPR.tapingStatus) == status, joint
+    finally:
+        store.close()
+
+
+def test_without_the_integrators_trees_the_resource_model_has_no_skill_for_the_task_and_pemkre_says_so(tmp_path):
+    """The resource model must see the tree folders HICEM runs: generated from the shipped trees alone, no skill
+    realizes the use case's capability, and start_process refuses the process naming the task and why."""
+    store = OxigraphStore(str(tmp_path / "pemkre_db"))
+    try:
+        engine = ProcessEngine(store, TURTLE, resource_model=_resource_model([SHIPPED_TREES]))
+        with pytest.raises(UnmatchableProcessError) as err:
+            engine.start_process(PROCESS, {})
+        assert "spot-taping#tape" in str(err.value) and "cap_TapeJointInPieces" in str(err.value), str(err.value)
+        assert engine.active_process() is None                            # nothing written
     finally:
         store.close()
 
