@@ -1,12 +1,13 @@
 #!/usr/bin/env python3
-"""rostest: the /pemkre/* services -- a taping run with operator validation, queries, KPIs, bad input."""
+"""rostest: the /pemkre/* services -- a taping run with operator validation (each task naming the skill of the
+shipped robot that realizes it), queries, KPIs, the skill matching of a process (/pemkre/match), bad input."""
 import json
 import unittest
 
 import rospy
 import rostest
-from locem_bridge.srv import (PemkreNextAction, PemkreQuery, PemkreSetTaskStatus, PemkreStartProcess,
-                              PemkreUpdateWorld)
+from locem_bridge.srv import (PemkreMatchProcess, PemkreNextAction, PemkreQuery, PemkreSetTaskStatus,
+                              PemkreStartProcess, PemkreUpdateWorld)
 
 from rostest_support import rosservice_call
 
@@ -28,13 +29,14 @@ class PemkreServicesTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
         rospy.init_node("pemkre_services_test", anonymous=True)
-        for name in ("start_process", "next_action", "set_task_status", "query", "update_world"):
+        for name in ("start_process", "next_action", "set_task_status", "query", "update_world", "match"):
             rospy.wait_for_service("/pemkre/" + name, timeout=60)
         cls.start = staticmethod(rospy.ServiceProxy("/pemkre/start_process", PemkreStartProcess))
         cls.next = staticmethod(rospy.ServiceProxy("/pemkre/next_action", PemkreNextAction))
         cls.status = staticmethod(rospy.ServiceProxy("/pemkre/set_task_status", PemkreSetTaskStatus))
         cls.query = staticmethod(rospy.ServiceProxy("/pemkre/query", PemkreQuery))
         cls.world = staticmethod(rospy.ServiceProxy("/pemkre/update_world", PemkreUpdateWorld))
+        cls.match = staticmethod(rospy.ServiceProxy("/pemkre/match", PemkreMatchProcess))
 
     def test_a_taping_run_with_operator_validation(self):
         w = self.world(json.dumps(SCAN))
@@ -57,6 +59,8 @@ class PemkreServicesTest(unittest.TestCase):
                 self.assertEqual(s, "<%s>" % a.task)      # N-Triples about the task
                 params[local(p.strip("<>"))] = local(o.strip("<>"))
             seen.append((a.action_type, params))
+            # the shipped robot realizes every taping task with the tree of its action type
+            self.assertEqual((a.skill, a.skill_kind), (a.action_type, "composite"))
             self.assertTrue(self.status(a.task, "in_progress", "", "").success)
             detail = ""
             if a.action_type == "VALIDATE_TAPE_LINE":
@@ -80,6 +84,30 @@ class PemkreServicesTest(unittest.TestCase):
         by_type = {r["actionType"]["value"]: r for r in json.loads(kpi.results)["results"]["bindings"]}
         self.assertEqual(by_type["VALIDATE_TAPE_LINE"]["count"]["value"], "2")
         self.assertEqual(by_type["MANUAL_TAPING"]["manualFallbacks"]["value"], "1")
+
+    def test_c_the_skill_matching_of_a_process_explains_each_task(self):
+        reply = rosservice_call("/pemkre/match", "{process: '%s'}" % TAPING)
+        self.assertTrue(reply["success"], reply)
+        self.assertRegex(reply["message"], r"^\d+ task node\(s\), all matched$")
+        m = json.loads(reply["match"])
+        self.assertTrue(m["ok"])
+        self.assertEqual(m["process"], TAPING)
+        self.assertTrue(m["robot"].startswith("https://locem-bridge.example.org/robot/"), m["robot"])
+        by_type = {n["action_type"]: n for n in m["nodes"]}
+        self.assertLessEqual({"SCAN", "GET_TOOL", "VALIDATE_TAPE_LINE", "TAPE_LINE", "MANUAL_TAPING", "GO_HOME"},
+                             set(by_type))
+        get_tool = by_type["GET_TOOL"]
+        self.assertEqual((get_tool["realization"]["name"], get_tool["realization"]["skill_kind"]),
+                         ("GET_TOOL", "composite"))
+        self.assertTrue(get_tool["realization"]["involves_operator"])
+        # the tool-changer template is a candidate this robot cannot run, and the answer says why
+        tmpl = [r for r in get_tool["rejected"] if r["kind"] == "template"]
+        self.assertEqual([r["name"] for r in tmpl], ["tmpl_getToolAutomatically"])
+        self.assertIn("cap_ChangeToolAutomatically", tmpl[0]["reason"])
+        r = self.match("https://example.org/Nope")
+        self.assertFalse(r.success)
+        self.assertEqual(r.code, "UNKNOWN_PROCESS")
+        self.assertIn("TapingProcess", r.message)
 
     def test_b_bad_input_is_refused_with_a_code_and_the_node_keeps_serving(self):
         cases = [
