@@ -186,7 +186,7 @@ class Recorder:
         self.counts["hicem_state"] += 1
         self.rec.hicem_states.append((self._stamp(m), {"process": m.process, "phase": m.phase,
                                                        "action_type": m.action_type, "task": m.task,
-                                                       "detail": m.detail}))
+                                                       "skill": getattr(m, "skill", ""), "detail": m.detail}))
 
     def _prompt(self, m: Any) -> None:
         self.counts["prompts"] += 1
@@ -280,8 +280,9 @@ def print_time(t: Dict[str, Any], steps: List[Tuple[str, str]]) -> None:
               "command); PEMKRE %.1f s" % (t["locem_commands_s"], t["device_s"], t["arm_moving_s"],
                                            t["base_moving_s"], t["device_outside_commands_s"], t["pemkre_calls_s"]))
     if t["actions"]:
-        print("   per HICEM action:  " + "; ".join("%s x%d %.1f s (device %.1f)" % (
-            k, v["count"], v["wall_s"], v["device_s"]) for k, v in t["actions"].items()))
+        print("   per HICEM action:  " + "; ".join("%s%s x%d %.1f s (device %.1f)" % (
+            k, " [skill %s]" % ", ".join(v["skills"]) if v.get("skills", [k]) not in ([k], []) else "", v["count"],
+            v["wall_s"], v["device_s"]) for k, v in t["actions"].items()))
     if t["commands"]:
         print("   per LOCEM command: " + "; ".join("%s x%d %.1f s (device %.1f%s)" % (
             k, v["count"], v["total_s"], v["device_s"], ", %d not ok" % v["failed"] if v["failed"] else "")

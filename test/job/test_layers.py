@@ -107,3 +107,13 @@ def test_actions_are_counted_per_task_with_their_device_time():
     assert actions["TAPE_LINE"]["count"] == 1
     assert abs(actions["TAPE_LINE"]["wall_s"] - 16.0) < 1e-6    # 12..28
     assert abs(actions["TAPE_LINE"]["device_s"] - 6.0) < 1e-6
+
+
+def test_actions_name_the_skills_pemkre_matched_their_tasks_to():
+    rec = taping_recording()
+    p = TAPING[1]
+    rec.hicem_states[3:6] = [(t, dict(s, skill="TAPE_LINE")) for t, s in rec.hicem_states[3:6]]
+    rec.hicem_states.insert(6, (27.5, dict(st(p, "running", "CHANGE_TOOL", "t2"), skill="CHANGE_TOOL")))
+    actions = analyse(rec)["actions"]
+    assert actions["TAPE_LINE"]["skills"] == ["TAPE_LINE"] and actions["CHANGE_TOOL"]["skills"] == ["CHANGE_TOOL"]
+    assert analyse(taping_recording())["actions"]["TAPE_LINE"]["skills"] == []     # no matching: none named

@@ -3,7 +3,7 @@
 ROS-free. The job benchmark records, while ``plasterboard.launch`` runs, plain time-stamped tuples into a
 :class:`JobRecording` (``time.time()`` seconds):
 
-- ``hicem_states``: ``(stamp, {"process", "phase", "action_type", "task"})`` from ``/hicem/state``;
+- ``hicem_states``: ``(stamp, {"process", "phase", "action_type", "task"[, "skill"]})`` from ``/hicem/state``;
 - ``prompts``: ``(stamp, prompt_id, event)`` from ``/hicem/prompts`` (``opened`` | ``answered`` | ``cancelled``);
 - ``locem_events``: ``(stamp, command_id, name, interface, state)`` from ``/locem/status``;
 - ``arm_samples`` / ``base_samples``: ``(stamp, moving)`` from ``joint_states`` and the simulator's ground truth
@@ -177,7 +177,8 @@ def command_table(rec: JobRecording, device: Sequence[Interval]) -> Dict[str, Di
 
 def action_table(rec: JobRecording, device: Sequence[Interval]) -> Dict[str, Dict[str, float]]:
     """Per HICEM high-level action type: ``count`` (tasks), ``wall_s`` (from the action's first state to the
-    next action or process end), ``device_s``."""
+    next action or process end), ``device_s``, ``skills`` (the skills PEMKRE matched its tasks to, as HICEM's
+    state named them; empty without matching)."""
     spans = phase_spans(rec.hicem_states, rec.end, keys=("process", "action_type", "task"))
     by_type: Dict[str, Dict[str, Any]] = {}
     for s in spans:
@@ -186,8 +187,12 @@ def action_table(rec: JobRecording, device: Sequence[Interval]) -> Dict[str, Dic
         e = by_type.setdefault(s["action_type"], {"tasks": set(), "spans": []})
         e["tasks"].add(s["task"])
         e["spans"].append((s["start"], s["end"]))
+    skills: Dict[str, set] = {}
+    for _stamp, state in rec.hicem_states:
+        if state.get("action_type") and state.get("skill"):
+            skills.setdefault(state["action_type"], set()).add(state["skill"])
     return {name: {"count": len(e["tasks"]), "wall_s": total(e["spans"]),
-                   "device_s": total(intersect(e["spans"], device))}
+                   "device_s": total(intersect(e["spans"], device)), "skills": sorted(skills.get(name, ()))}
             for name, e in sorted(by_type.items())}
 
 
