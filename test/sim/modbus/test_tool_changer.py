@@ -142,3 +142,57 @@ def test_an_empty_slot_and_addresses_outside_the_map_are_refused(changer):
     assert client.write_coil(2, True, device_id=DEV).isError()
     assert client.write_register(0, 1, device_id=DEV).isError()
     assert client.read_coils(0, count=1, device_id=DEV + 1).isError()        # another unit id
+
+
+# -- the second robot (config/robots/diffdrive_ur5e.yaml) carries the changer ----------------------------------------
+DIFF_YAML = os.path.join(os.path.dirname(RACK), "..", "..", "config", "robots", "diffdrive_ur5e.yaml")
+
+
+def test_the_second_robots_worksite_runs_its_tool_changer_and_every_slot_is_clear_of_the_robot(site_cfg, port):
+    import socket
+    import numpy as np
+    import pybullet as pb
+    from locem_bridge.sim.worksite import Worksite
+
+    host = "127.0.0.1"
+    with socket.socket() as s:                           # the changer's port is the file's: take a free address
+        for last in range(2, 250):
+            host = "127.66.%d.%d" % (1 + os.getpid() % 250, last)
+            try:
+                s.bind((host, 5022))
+                break
+            except OSError:
+                continue
+    ws = Worksite(site_cfg, load_robot(DIFF_YAML), host=host, modbus_port=port, can_interface="virtual",
+                  can_channel="changer-%d" % os.getpid(), with_ur=False, time_scale=10.0)
+    ws.start()
+    client = ModbusTcpClient(host, port=5022, timeout=0.5, retries=0)
+    try:
+        assert ws.endpoints()["tool_changer_modbus_tcp"] == "%s:5022 (device id 1)" % host
+        cfg = ws.robot_cfg["robot"]["tool_changer"]
+        slots = ws.changer.rack.slots
+        assert min(np.linalg.norm(slots[a] - slots[b]) for a in slots for b in slots if a < b) > 0.1
+        assert client.connect()
+        world = ws.world
+        for tool, slot in sorted(cfg["rack"].items(), key=lambda kv: kv[1]["slot"]):
+            ws.arm.set_joint_positions(slot["pose"])
+            assert client.write_coil(0, True, device_id=1).isError() is False
+            end = time.monotonic() + 2.0
+            while world.mounted_tool != tool and time.monotonic() < end:
+                time.sleep(0.01)
+            assert world.mounted_tool == tool
+            with world._lock:                            # the arm and the coupled tool clear the chassis and column
+                world._q = list(slot["pose"])
+                world._place_robot()
+                near = pb.getClosestPoints(world.arm_body, world.base_body, 0.01, physicsClientId=world._cid)
+                near += pb.getClosestPoints(world.tool_bodies[tool], world.base_body, 0.01, physicsClientId=world._cid)
+            assert not near, "%s at slot %d touches the robot" % (tool, slot["slot"])
+            client.write_coil(0, False, device_id=1)
+            end = time.monotonic() + 2.0
+            while world.mounted_tool is not None and time.monotonic() < end:
+                time.sleep(0.01)
+            assert world.mounted_tool is None
+        assert ws.tool_changer_state()["operations"] == 6
+    finally:
+        client.close()
+        ws.stop()
