@@ -280,3 +280,32 @@ def test_the_shipped_robot_model_matches_every_shipped_process(make_engine):
     assert get_tool.realization.involves_operator
     assert [(r.name, r.reason) for r in get_tool.rejected] == [
         ("tmpl_getToolAutomatically", "step 2: no skill of this robot realizes sk:cap_ChangeToolAutomatically")]
+
+
+def test_the_shipped_robot_with_a_tool_changer_gets_its_tools_through_the_template(make_engine):
+    import yaml
+    from locem_bridge.skills import build_resource_model
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    with open(os.path.join(root, "test", "data", "tool_changer_rack.yaml")) as handle:
+        overrides = yaml.safe_load(handle)                # the tests' tool changer section on the shipped robot
+    g = build_resource_model(os.path.join(root, "config", "robots", "rbkairos_ur10e.yaml"),
+                             overrides=overrides).to_graph()
+    e = make_engine(resource_model=g)
+    pm = e.match_process(str(PLB.SprayingProcess))
+    assert pm.ok, pm.problems()
+    get_tool = node(pm, "spraying_getTool")
+    assert [(s.name, s.skill_kind, s.arguments) for s in get_tool.realization.steps] == [
+        ("WALL_READY", "basic", []), ("CHANGE_TOOL", "basic", [("tool", "{tool}")])]
+    assert [(r.name, r.kind) for r in get_tool.rejected] == [("GET_TOOL", "composite")]
+    assert "MOUNT_TOOL" in get_tool.rejected[0].reason
+    e.update_world(scan_result(areas_per_wall=1))
+    e.start_process(str(PLB.SprayingProcess))
+    steps = []
+    for _ in range(2):
+        a, _ = _step(e)
+        steps.append((a.skill, a.skill_kind, a.params()))
+    assert steps == [("WALL_READY", "basic", {}), ("CHANGE_TOOL", "basic", {"tool": "spray_gun"})]
+    a = e.next_action()
+    assert (a.action_type, a.skill, a.skill_kind) == ("SPRAY_AREA", "SPRAY_AREA", "composite")
+    assert e.store.objects(URIRef(pm.robot), PPR.mountedTool) == [URIRef(pm.robot[:-len("robot")] + "spray_gun")]
