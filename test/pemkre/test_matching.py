@@ -309,3 +309,38 @@ def test_the_shipped_robot_with_a_tool_changer_gets_its_tools_through_the_templa
     a = e.next_action()
     assert (a.action_type, a.skill, a.skill_kind) == ("SPRAY_AREA", "SPRAY_AREA", "composite")
     assert e.store.objects(URIRef(pm.robot), PPR.mountedTool) == [URIRef(pm.robot[:-len("robot")] + "spray_gun")]
+
+
+def test_a_restarted_engine_resumes_the_stored_model_of_the_same_key(tmp_path):
+    path = str(tmp_path / "db")
+    store = JournaledStore(path)
+    e = ProcessEngine(store)
+    e.load_resource_model(model_of("diffdrive"), key="inputs-1")
+    store.close()
+    store = JournaledStore(path)
+    try:
+        e = ProcessEngine(store)
+        assert not e.resume_resource_model("inputs-2") and not e.matching    # other inputs: build it again
+        assert e.resume_resource_model("inputs-1") and e.matching
+        real = node(e.match_process(str(PLB.TapingProcess)), "taping_getTool").realization
+        assert real.kind == "template"
+    finally:
+        store.close()
+
+
+def test_a_recover_task_whose_tree_may_prompt_is_no_operator_intervention(make_engine):
+    e = make_engine(resource_model=model_of("kairos"))
+    e.update_world(scan_result(areas_per_wall=1))
+    sp = e.start_process(str(PLB.SprayingProcess))
+    seen = []
+    for _ in range(10):
+        a = e.next_action()
+        if a.status != "action":
+            break
+        seen.append(a.action_type)
+        e.set_task_status(a.task, "in_progress")
+        failed = a.action_type == "SPRAY_AREA" and seen.count("SPRAY_AREA") == 1
+        e.set_task_status(a.task, "failed" if failed else "succeeded", "compressor link lost" if failed else "")
+    assert seen == ["GET_TOOL", "SPRAY_AREA", "RECOVER", "SPRAY_AREA", "GO_HOME"]
+    by_type = {r["actionType"]: r["operatorInterventions"] for r in compute_kpis(e, sp)["task_types"]}
+    assert by_type == {"GET_TOOL": 1, "SPRAY_AREA": 0, "RECOVER": 0, "GO_HOME": 0}

@@ -91,6 +91,8 @@ _M_statusRequest = META.statusRequestId
 _M_startRequest = META.startRequestId
 #: The hash of the resource model stored in G_RESOURCES (a model loaded again unchanged writes nothing).
 _M_resourceHash = META.resourceModelHash
+#: The fingerprint of what the stored resource model was built from (given by the loader; see resume_resource_model).
+_M_resourceKey = META.resourceModelKey
 #: Schema closures by ontology hash, shared by the engines of one process (a closure is never modified).
 _CLOSURE_CACHE: Dict[str, Graph] = {}
 
@@ -331,13 +333,29 @@ class ProcessEngine:
             return str(self._active) if self._active is not None else None
 
     # ================================================================= capability matching
-    def load_resource_model(self, graph: Optional[Graph], robot: Optional[str] = None) -> int:
+    def resume_resource_model(self, key: str, robot: Optional[str] = None) -> bool:
+        """Match with the resource model already in the store when it was loaded with the same ``key`` (a
+        fingerprint of what it was built from): a restarted node need not build it again. False: load it."""
+        with self._lock:
+            stored = self.store.value(META.ontology, _M_resourceKey, (G_META,))
+            if not key or stored is None or str(stored) != key or \
+                    next(iter(self.store.quads(None, None, None, (G_RESOURCES,))), None) is None:
+                return False
+            if robot:
+                self._robot = check_iri(robot, "robot IRI")
+            self._catalog = None
+            self._matches.clear()
+            self._matching = True
+            return True
+
+    def load_resource_model(self, graph: Optional[Graph], robot: Optional[str] = None, key: str = "") -> int:
         """Put a resource model (skills, devices, tools of one or more robots) into the store and match from now on.
 
         The model replaces the one stored before (graph ``G_RESOURCES``; inferences follow in the same atomic
         change; a model equal to the stored one writes nothing). ``robot`` names the robot processes run on
-        (default: the one given at construction, else the model's first robot by IRI). ``None`` turns matching
-        off (the stored model stays). Returns the number of triples of the model.
+        (default: the one given at construction, else the model's first robot by IRI); ``key`` is remembered for
+        :meth:`resume_resource_model`. ``None`` turns matching off (the stored model stays). Returns the number of
+        triples of the model.
         """
         with self._lock:
             if graph is not None and not isinstance(graph, Graph):
@@ -353,7 +371,8 @@ class ProcessEngine:
             digest = hashlib.sha256("\n".join(sorted("%s %s %s" % (s.n3(), p.n3(), o.n3())
                                                      for s, p, o in triples)).encode("utf-8")).hexdigest()
             stored = self.store.value(META.ontology, _M_resourceHash, (G_META,))
-            if stored is None or str(stored) != digest:
+            stored_key = self.store.value(META.ontology, _M_resourceKey, (G_META,))
+            if stored is None or str(stored) != digest or str(stored_key or "") != key:
                 cs = ChangeSet()
                 cs.remove += list(self.store.quads(None, None, None, (G_RESOURCES,)))
                 cs.add += [(s, p, o, G_RESOURCES) for s, p, o in triples]
@@ -361,6 +380,9 @@ class ProcessEngine:
                                          max_triples=self._schema_bounds[1])
                 cs.remove += list(self.store.quads(META.ontology, _M_resourceHash, None, (G_META,)))
                 cs.add.append((META.ontology, _M_resourceHash, Literal(digest), G_META))
+                cs.remove += list(self.store.quads(META.ontology, _M_resourceKey, None, (G_META,)))
+                if key:
+                    cs.add.append((META.ontology, _M_resourceKey, Literal(key), G_META))
                 self.store.apply(cs)
             self._matching = True
             self._catalog_now()
