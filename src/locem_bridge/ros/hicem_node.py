@@ -61,12 +61,13 @@ def _pemkre_client(kind: str) -> Any:
         from locem_bridge.pemkre.ontology import default_ontology_dir
         files = folder_files([default_ontology_dir()] +
                              split_folders(param("extra_ontology_dirs", "")), ".ttl", "ontology folder")
-        # matched to the skills of ~robot (its resource model from the same tree folders HICEM runs), as the node
-        from .pemkre_node import resource_model
-        # (only when ~robot is set: a test node with its own trees and no robot runs unmatched, as before)
-        model = resource_model(param("robot", ""), [param("trees_dir", os.path.join(package_share(), "trees"))] +
-                               split_folders(param("extra_trees_dirs", "")), files)
-        return EngineClient(ProcessEngine(open_store("rocksdb", store_path), files, resource_model=model))
+        engine = ProcessEngine(open_store("rocksdb", store_path), files)
+        # matched to the skills of ~robot (its resource model from the same tree folders HICEM runs), as the node;
+        # only when ~robot is set: a test node with its own trees and no robot runs unmatched, as before
+        from .pemkre_node import match_robot
+        match_robot(engine, param("robot", ""), [param("trees_dir", os.path.join(package_share(), "trees"))] +
+                    split_folders(param("extra_trees_dirs", "")), files)
+        return EngineClient(engine)
     raise HicemError("~pemkre must be 'ros' or 'embedded', got %r" % kind)
 
 

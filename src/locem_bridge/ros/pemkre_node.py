@@ -26,6 +26,7 @@ skills; empty = no matching), ``~site_namespace``, ``~log_namespace``,
 ``~reasoning_max_seconds``, ``~fresh`` (delete the store first: tests and demos only).
 """
 import gc
+import hashlib
 import json
 import os
 import threading
@@ -49,17 +50,44 @@ from locem_bridge.srv import (PemkreMatchProcess, PemkreMatchProcessResponse, Pe
 from locem_bridge.ros.startup import config_guard
 
 
-def resource_model(robot_file: str, tree_dirs: Sequence[str], ontology_files: Sequence[str]) -> Any:
-    """The robot's resource model graph for PEMKRE's matching, or None without a robot file (no matching).
+def resource_model_key(robot_file: str, tree_dirs: Sequence[str], ontology_files: Sequence[str]) -> str:
+    """A fingerprint of everything the robot's resource model is built from: the robot file, the tree files, the
+    ontology files (contents) and the package's sources (size and mtime). Equal keys: the model is the same."""
+    import locem_bridge
 
-    One place for the PEMKRE node and HICEM's embedded engine; a bad robot file or tree stops the node with
-    ``FILE: KEY: PROBLEM`` before anything is loaded.
+    h = hashlib.sha256()
+    files = [robot_file] + list(ontology_files)
+    for d in tree_dirs:
+        files += sorted(os.path.join(d, f) for f in os.listdir(d) if f.endswith(".xml"))
+    for path in files:
+        with open(path, "rb") as fh:
+            h.update(path.encode() + b"\0" + fh.read() + b"\0")
+    root = os.path.dirname(os.path.abspath(locem_bridge.__file__))
+    for base, dirs, names in sorted(os.walk(root)):
+        dirs.sort()
+        for name in sorted(n for n in names if n.endswith(".py")):
+            st = os.stat(os.path.join(base, name))
+            h.update(("%s %d %d\n" % (os.path.join(base, name), st.st_size, st.st_mtime_ns)).encode())
+    return h.hexdigest()
+
+
+def match_robot(engine: ProcessEngine, robot_file: str, tree_dirs: Sequence[str],
+                ontology_files: Sequence[str]) -> bool:
+    """Match the engine's processes to the skills of ``robot_file`` (no robot file: no matching, False).
+
+    The resource model is generated (skills.build_resource_model) unless the store holds the one built from the same
+    inputs (a respawned node starts at once). One place for the PEMKRE node and HICEM's embedded engine; a bad
+    robot file or tree raises ``FILE: KEY: PROBLEM`` before anything is loaded.
     """
     if not robot_file:
-        return None
-    from locem_bridge.skills import build_resource_model
+        return False
+    key = resource_model_key(robot_file, tree_dirs, ontology_files)
+    if not engine.resume_resource_model(key):
+        from locem_bridge.skills import build_resource_model
 
-    return build_resource_model(robot_file, list(tree_dirs), ontology_files=list(ontology_files)).to_graph()
+        model = build_resource_model(robot_file, list(tree_dirs), ontology_files=list(ontology_files)).to_graph()
+        engine.load_resource_model(model, key=key)
+    return True
 
 
 def _guard(response_cls: Callable[[], Any], body: Callable[[Any, Any], None]) -> Callable[[Any], Any]:
@@ -181,22 +209,27 @@ def main() -> None:
     tree_dirs = [param("trees_dir", os.path.join(package_share(), "trees"))] + \
         split_folders(param("extra_trees_dirs", ""))
     folder_files(tree_dirs, ".xml", "trees folder")
-    model = resource_model(param("robot", ""), tree_dirs, files)
+    robot_file = param("robot", "")
 
     def factory() -> ProcessEngine:
         store = open_store(kind, path, param("fsync", False), param("fresh", False))
         try:
-            return ProcessEngine(store, files,
-                                 site_namespace=param("site_namespace", "") or None,
-                                 log_namespace=param("log_namespace", "") or None,
-                                 reasoning_max_seconds=param("reasoning_max_seconds", 5.0),
-                                 resource_model=model)
+            engine = ProcessEngine(store, files,
+                                   site_namespace=param("site_namespace", "") or None,
+                                   log_namespace=param("log_namespace", "") or None,
+                                   reasoning_max_seconds=param("reasoning_max_seconds", 5.0))
         except ConfigError as exc:          # a process-model error names no file: name the folder it came from
             store.close()
             raise exc.in_file(onto_dir)
         except Exception:
             store.close()
             raise
+        try:
+            match_robot(engine, robot_file, tree_dirs, files)
+        except Exception:
+            store.close()
+            raise
+        return engine
 
     node = PemkreNode(factory)
     node.start()
@@ -208,7 +241,7 @@ def main() -> None:
     assert node.engine is not None
     rospy.loginfo("PEMKRE ready on %s (store %s at %s): processes %s; running: %s; %s", rospy.resolve_name("~next_action"),
                   kind, path, ", ".join(node.engine.processes()), node.engine.active_process() or "none",
-                  "tasks matched to the skills of %s" % param("robot", "") if model is not None else "no matching")
+                  "tasks matched to the skills of %s" % robot_file if node.engine.matching else "no matching")
     rospy.spin()
 
 
