@@ -206,3 +206,21 @@ def test_stop_during_lift_brakes_the_axis_and_ends_the_command_aborted(diff, cor
     held = diff.world.lift_height()
     time.sleep(0.5)
     assert abs(diff.world.lift_height() - held) < 1e-6 and held < 1.4 - 0.05
+
+
+def test_wall_targets_in_the_arm_frame_follow_the_lift_height(diff, core):
+    """A map point a wall command works on lands in the arm's base frame at the lift's height now: after LIFT the
+    same point is lower in the arm frame by exactly the lift's travel, nothing else changes."""
+    from locem_bridge.bridges.commands_wall import WallCommands
+    wall = WallCommands(diff.robot, base=diff.base, lift=diff.lift)
+    x, y, th = diff.base.pose()
+    point = [x + 0.9 * math.cos(th), y + 0.9 * math.sin(th), 1.2]
+    normal = [-math.cos(th), -math.sin(th), 0.0]
+    before = wall.to_arm(point, normal)
+    z0 = diff.lift.height()
+    assert run(core, "LIFT z=1.25").success
+    after = wall.to_arm(point, normal)
+    rise = diff.lift.height() - z0
+    assert rise == pytest.approx(1.25 - z0, abs=diff.robot["lift"]["tolerance"])
+    assert after[2] == pytest.approx(before[2] - rise, abs=1e-9)
+    assert after[:2] == pytest.approx(before[:2], abs=1e-9) and after[3:] == pytest.approx(before[3:], abs=1e-9)

@@ -3,7 +3,8 @@ ROS action call"): SCAN, MOUNT_TOOL, APPLY_TAPE_START, APPLY_TAPE, SPRAY_AREA, S
 
 Every number comes from HICEM (line endpoints, area rectangle, wall normal, offsets, speeds) in the ``map``
 frame; LOCEM never knows feature ids. Geometry: the map point is expressed in the UR ``base`` frame through the
-base odometry pose and ``robot.arm.mount``; the TCP faces the wall (tool z axis against the inward wall
+base odometry pose and ``robot.arm.mount`` (on a robot with a lift, at the lift's height now: wall commands
+take the map points as they are, whatever the lift height; HICEM lifts first); the TCP faces the wall (tool z axis against the inward wall
 normal, tool x axis horizontal). Approaches to a wall are straight moves when the tool already faces the way
 the target does (from the ``wall_ready`` pose HICEM drives in), otherwise a joint move to the controller's IK
 solution first; the work itself is straight moves (MOVE_L semantics, 1 mm accuracy). HOME from a wall pose
@@ -33,7 +34,7 @@ from .commands_compressor import wait_for_pressure
 from .errors import BadRequest, BridgeError
 from locem_bridge.common.geometry import angle_between, invert, matrix_to_pose, pose_to_matrix
 from .geometry import arm_base_in_footprint, planar, tool_frame_facing
-from .interfaces import Arm, Base, Compressor, Scanner, Waiter
+from .interfaces import Arm, Base, Compressor, Lift, Scanner, Waiter
 
 CATEGORY = "wall"
 EXT = 100.0
@@ -446,10 +447,13 @@ class WallCommands:
     name = "wall"
 
     def __init__(self, robot_cfg: Mapping[str, Any], arm: Optional[Arm] = None, base: Optional[Base] = None,
-                 compressor: Optional[Compressor] = None, scanner: Optional[Scanner] = None) -> None:
+                 compressor: Optional[Compressor] = None, scanner: Optional[Scanner] = None,
+                 lift: Optional[Lift] = None) -> None:
         self.tools = dict(robot_cfg.get("tools", {}))
         mount = robot_cfg.get("arm", {}).get("mount", {})
-        self.mount = arm_base_in_footprint(mount.get("xyz", [0.0, 0.0, 0.0]), mount.get("rpy", [0.0, 0.0, 0.0]))
+        self._mount = arm_base_in_footprint(mount.get("xyz", [0.0, 0.0, 0.0]), mount.get("rpy", [0.0, 0.0, 0.0]))
+        #: the lift carrying the arm (robot.lift): the arm's base frame is at its height, not at mount.xyz's z
+        self.lift = lift
         self.arm, self.base, self.compressor, self.scanner = arm, base, compressor, scanner
         self.active_tool: Optional[str] = None
         #: called with the tool after every MOUNT_TOOL (the LOCEM node keeps it for a respawned LOCEM)
@@ -515,6 +519,15 @@ class WallCommands:
         arm.set_tcp([float(v) for v in cfg["tcp"]])
         arm.set_payload(float(cfg["mass"]), [float(v) for v in cfg["cog"]])
 
+    @property
+    def mount(self) -> np.ndarray:
+        """base_footprint <- arm base_link now: ``robot.arm.mount``, raised to the lift's height on a lift."""
+        if self.lift is None:
+            return self._mount
+        moved = self._mount.copy()
+        moved[2, 3] = self.lift.height()
+        return moved
+
     def to_arm(self, point: Sequence[float], normal: Sequence[float]) -> List[float]:
         """TCP pose (arm base frame) at a map ``point`` facing the wall with inward ``normal``."""
         x, y, th = self._need("base").pose()
@@ -562,8 +575,10 @@ class WallCommands:
         if not self._facing_forward():
             return
         length = float(self.tools.get(self.active_tool or "", {}).get("tcp", [0.0, 0.0, 0.0])[2])
-        point = [self.ready_flange[0] + length, self.ready_flange[1], self.ready_flange[2]]
-        pose = matrix_to_pose(invert(self.mount).dot(tool_frame_facing(point, [-1.0, 0.0, 0.0])))
+        mount = self.mount                       # wall_ready_flange is given for the configured mount: it rides along
+        point = [self.ready_flange[0] + length, self.ready_flange[1],
+                 self.ready_flange[2] + float(mount[2, 3] - self._mount[2, 3])]
+        pose = matrix_to_pose(invert(mount).dot(tool_frame_facing(point, [-1.0, 0.0, 0.0])))
         self._need("arm").move_linear(ctx, pose, APPROACH_SPEED, 1.2)
 
     def _facing_forward(self) -> bool:

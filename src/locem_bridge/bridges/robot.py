@@ -103,7 +103,8 @@ def _build_robot(robot_cfg: Mapping[str, Any], devices: Sequence[str], site: Any
         robot.backends["tool_changer"] = cls(robot_cfg["tool_changer"])
     if "arm" in robot.backends:
         wall = WallCommands(robot_cfg, arm=robot.backends.get("arm"), base=robot.backends.get("base"),
-                            compressor=robot.backends.get("compressor"), scanner=robot.backends.get("scanner"))
+                            compressor=robot.backends.get("compressor"), scanner=robot.backends.get("scanner"),
+                            lift=robot.backends.get("lift"))
         robot.command_sets.append(wall)
         if "tool_changer" in robot_cfg:            # CHANGE_TOOL instead of MOUNT_TOOL (NOT_READY without a backend)
             robot.command_sets.append(ToolChangerCommands(robot_cfg, wall, robot.backends.get("tool_changer")))
