@@ -15,7 +15,7 @@ and holds). Deadline (:class:`~.errors.MotionTimeout`, the lift halted first)::
 
     deadline = scale x (trapezoid time of the move at max_velocity / acceleration) + margin
 
-(``robot.lift.deadline``, defaults 1.0 and 5 s). A silent drive (no heartbeat for ``heartbeat_ms`` x 2) or a
+(``robot.lift.deadline``, defaults 1.0 and 5 s). A silent drive (no heartbeat for ``heartbeat_ms`` x 3) or a
 FAULT statusword latches a fault: moves end with :class:`~.errors.DeviceFault` (``HARDWARE_ERROR``); the supervisor
 enables the drive again once its heartbeat is back (a drive FAULT needs the fault reset of a new enable: the next
 LIFT after the heartbeat returns, or a restart of LOCEM).
@@ -39,7 +39,7 @@ SW_SETPOINT_ACK = 0x1000
 CW_ENABLE = 0x0F
 CW_NEW_SETPOINT = 0x10 | 0x20          # new set-point + change set immediately (absolute target)
 CW_HALT = 0x100
-HEARTBEAT_FACTOR = 2.0
+HEARTBEAT_FACTOR = 3.0          # a position-mode axis finishes its move by itself: no need to trip early
 
 
 class Cia402Lift(Lift):
