@@ -36,6 +36,11 @@ class DiffRig:
         self.robot = load_robot_config(DIFF_YAML)
         self.cfg = copy.deepcopy(self.robot["base"])
         self.cfg["drives"]["can"] = {"interface": "virtual", "channel": "diff-%s" % uuid.uuid4().hex[:8]}
+        # stand-ins and bridges share this process: a long pytest session's pauses (~0.35 s seen) must not read as
+        # a silent drive, so the consumers here wait 0.6 s (the robot file's 0.2 s / 0.3 s are for the real bus)
+        self.cfg["drives"]["consumer_timeout_factor"] = 6.0
+        lift_cfg = copy.deepcopy(self.robot["lift"])
+        lift_cfg["drive"]["heartbeat_ms"] = 200
         self.clock = SimClock(time_scale)
         self.lift_drive = lift_drive(self.robot, resolve_path(self.robot, self.robot["lift"]["eds"]), self.clock.now)
         self.drives = DriveSet(self.cfg["drives"], resolve_path(self.robot, self.cfg["eds"]), self.clock.now,
@@ -47,7 +52,7 @@ class DiffRig:
         self.world.start()
         self.base = Cia402Base(self.cfg, resolve_path(self.robot, self.cfg["eds"]),
                                initial_pose=tuple(self.world.base_pose()))
-        self.lift = Cia402Lift(self.robot["lift"], self.cfg["drives"]["can"],
+        self.lift = Cia402Lift(lift_cfg, self.cfg["drives"]["can"],
                                resolve_path(self.robot, self.robot["lift"]["eds"]))
         self.base.start()
         self.lift.start()
@@ -203,6 +208,7 @@ def test_stop_during_lift_brakes_the_axis_and_ends_the_command_aborted(diff, cor
     assert run(core, "STOP").success
     assert execution.wait(3.0).code.value == "ABORTED"
     assert wait_until(lambda: diff.lift_drive.velocity == 0.0, timeout=2.0)
+    time.sleep(0.2)                                           # a world step or two: the world shows where it stands
     held = diff.world.lift_height()
     time.sleep(0.5)
     assert abs(diff.world.lift_height() - held) < 1e-6 and held < 1.4 - 0.05
