@@ -261,8 +261,9 @@ class WorksiteRig:
             self.robot["base"]["drives"]["can"] = {"interface": "virtual",
                                                    "channel": "wall-%s" % uuid.uuid4().hex[:8]}
         self.address = self.robot["arm"]["controller"]["host"]
-        # model ur10: the kinematics of the URDF the world draws (robot.arm.description), so both agree
-        self.standin = StandInProcess(self.address, time_scale=time_scale, model="ur10",
+        # model ur10 / ur5: the kinematics of the URDF the world draws (robot.arm.description), so both agree
+        model = "ur5" if str(robot["arm"].get("model", "")).startswith("ur5") else "ur10"
+        self.standin = StandInProcess(self.address, time_scale=time_scale, model=model,
                                       q0=robot["arm"]["named_poses"]["home"]).start()
         self.model = CompressorModel(self.robot["compressor"], self.clock.now)
         self.server = CompressorServer(self.model, "127.0.0.1", self.robot["compressor"]["port"],

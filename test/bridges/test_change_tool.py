@@ -1,6 +1,7 @@
 """CHANGE_TOOL through LOCEM's dispatcher with every bridge against the stand-ins (UR controller, compressor, CAN
 drives, tool changer) and the PyBullet world: the shipped robot plus the tests' tool changer section
 (test/data/tool_changer_rack.yaml). The tool the changer couples is the tool the world works with."""
+import os
 import time
 
 import pytest
@@ -11,7 +12,7 @@ from locem_bridge.common.locem_codes import Code
 from locem_bridge.locem.catalogue import all_specs
 from locem_bridge.locem.core import LocemCore
 
-from bridge_rigs import ROBOT_YAML, SHORT_WALL, WorksiteRig, robot_with_changer, rtde_payload
+from bridge_rigs import ROBOT_YAML, SHORT_WALL, WorksiteRig, free_port, robot_with_changer, rtde_payload
 
 JOINT = "wall_1_joint_1"      # the horizontal joint at z = 1.25 m, x 1.8 .. 3.0, y = 3.6
 NORMAL = "0 -1 0"
@@ -122,3 +123,37 @@ def test_bad_change_tool_input_is_refused_naming_the_allowed_tools_and_nothing_m
     assert rig.world.mounted_tool is None
     # no lock or unlock reached the device, no refusal either
     assert rig.changer.snapshot()["operations"] == 0 and rig.changer.history() == []
+
+
+@pytest.mark.slow
+def test_change_tool_on_the_second_robot_ur5e_on_a_differential_base(core):
+    """config/robots/diffdrive_ur5e.yaml as shipped (its own rack poses), addresses moved to the test's: the
+    UR5e stand-in reaches every slot through 'tool_change' without touching a wall, and the world swaps the tool."""
+    pytest.importorskip("rtde_control")
+    diff = load_robot_config(os.path.join(os.path.dirname(ROBOT_YAML), "diffdrive_ur5e.yaml"),
+                             {"compressor": {"host": "127.0.0.1"},
+                              "tool_changer": {"host": "127.0.0.1", "port": free_port()}})
+    rig = WorksiteRig(diff)
+    rig.world.set_base_pose(2.4, 2.0, 1.5708)          # 1.6 m from the wall: room to turn the arm to the rack
+    time.sleep(0.2)
+    built = build_robot(rig.robot, devices=("arm", "compressor", "base", "scanner", "tool_changer"),
+                        site=rig.site_path, initial_pose=tuple(rig.world.base_pose()))
+    built.start()
+    try:
+        for command_set in built.command_sets:
+            core.install(command_set)
+        for kind in ("arm", "base", "tool_changer"):
+            assert built.get(kind).wait_ready(20.0), (kind, built.get(kind).health())
+        assert "MOUNT_TOOL" not in _names(core)
+        before = rig.world.collisions
+        for tool, previous, tcp_z in (("taping_tool", "", 0.22), ("sander", "taping_tool", 0.14)):
+            r = core.dispatcher.execute("CHANGE_TOOL tool=%s" % tool)
+            assert r.success, r.message
+            assert r.result["previous"] == previous and rig.world.mounted_tool == tool
+            assert rig.standin.get_tcp_offset()[2] == pytest.approx(tcp_z)
+        assert rig.changer.snapshot()["slots_present"] == {1: True, 2: True, 3: False}
+        assert rig.world.collisions == before, rig.world.collision_log
+        assert rig.nothing_running(), rig.running()
+    finally:
+        built.close()
+        rig.close()
