@@ -80,8 +80,9 @@ class PemkreClient(abc.ABC):
 
     @abc.abstractmethod
     def next_action(self) -> NextAction:
-        """Answer of docs/contracts.md: status action|ended|failed (+ action_type, task, parameters); a
-        :class:`NextAction` or its plain-object form (:meth:`NextAction.as_answer`)."""
+        """Answer of docs/contracts.md: status action|ended|failed (+ action_type, task, parameters, and the
+        matched skill and skill_kind when PEMKRE has a resource model); a :class:`NextAction` or its plain-object
+        form (:meth:`NextAction.as_answer`)."""
 
     @abc.abstractmethod
     def set_task_status(self, task: str, status: str, detail: str = "") -> None: ...
