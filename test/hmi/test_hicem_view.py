@@ -8,7 +8,9 @@ def test_snapshot_from_a_controller_state():
              "action_type": "VALIDATE_TAPE_LINE", "task": "http://example.org/run#task_7", "tree": "VALIDATE_TAPE_LINE",
              "node": "ask_valid", "path": "validate_tape_line/ask_valid", "phase": "running", "detail": ""}
     snap = snapshot_from_hicem(state, None, {"done": 1, "total": 3, "text": "joint 2 of 3"})
-    assert snap["action"] == "VALIDATE_TAPE_LINE (task_7)" and snap["node"] == "ask_valid"
+    assert snap["action"] == "VALIDATE_TAPE_LINE (task_7)" and snap["node"] == "ask_valid" and snap["skill"] == ""
+    basic = snapshot_from_hicem(dict(state, action_type="CHANGE_TOOL", skill="CHANGE_TOOL", tree="BASIC_SKILL"))
+    assert (basic["skill"], basic["tree"]) == ("CHANGE_TOOL", "BASIC_SKILL")
     assert snap["phase"] == "running" and snap["health"]["status"] == "unknown" and snap["progress"]["total"] == 3
     idle = snapshot_from_hicem({}, None)
     assert idle["phase"] == "idle" and idle["action"] == "" and idle["progress"] is None

@@ -128,3 +128,26 @@ def test_the_default_automatic_operator_resets_a_protective_stop_so_a_headless_j
     i_reset = locem.sent.index("RESET_ARM")
     assert "WALL_READY" not in locem.sent[:i_reset] and locem.sent[i_reset + 2] == "WALL_READY"
     assert ex.operator.interventions == len(auto.answers) and not auto.errors
+
+
+def test_the_page_names_the_skill_the_real_controller_runs():
+    """PEMKRE (its test double) matched GET_TOOL to the basic skill MOUNT_TOOL: the page's state shows that skill
+    and the generic tree HICEM runs it with, while the command takes its time on LOCEM."""
+    pemkre = PemkreDouble(skills={"GET_TOOL": ("MOUNT_TOOL", "basic")})
+    locem = LocemDouble(durations={"MOUNT_TOOL": 2.0})
+    ex = create_executive(pemkre, locem, None)
+    ex.health.heartbeat("locem")
+    beats = Heartbeats(ex.health)
+    backend = ExecutiveBackend.for_executive(ex, processes=[{"iri": PROCESS, "name": "Taping"}])
+    try:
+        with HmiServer(backend, "127.0.0.1", 0, poll_period_s=0.05, shutdown_poll_s=0.05) as srv:
+            assert post(srv.url, "/api/processes/start", {"iri": PROCESS}).status == 200
+            doc = wait_state(srv.url, lambda d: d["snapshot"]["tree"] == "BASIC_SKILL", timeout=15)
+            snap = doc["snapshot"]
+            assert snap["skill"] == "MOUNT_TOOL" and snap["action"].startswith("GET_TOOL (")
+            assert any(h.command == "MOUNT_TOOL tool=taping_tool" for h in locem.running())
+            assert post(srv.url, "/api/stop", {}).status == 200
+            assert ex.controller.join(5.0)
+    finally:
+        beats.stop()
+        ex.close()

@@ -47,8 +47,8 @@ All JSON bodies are UTF-8 objects. POSTs need ``Content-Type: application/json``
                                             (the backend's optional ``match_process``)
 ==========================================  ===================================================================
 
-Shapes: S = ``{"process", "phase", "action", "tree", "node", "detail": str, "health": {"status": "ok" | "degraded"
-| "fault" | "unknown", "detail": str}, "progress": {"done": int, "total": int, "text": str} | null}``;
+Shapes: S = ``{"process", "phase", "action", "skill", "tree", "node", "detail": str, "health": {"status": "ok" |
+"degraded" | "fault" | "unknown", "detail": str}, "progress": {"done": int, "total": int, "text": str} | null}``;
 P = ``{"id", "kind", "text": str, "choices": [str], "context": {...}}``; R = ``{"iri", "name", "description"}``;
 W = ``{"id": wall_id, "version": token, "url": "/api/walls/<id>.png?v=<token>" | ""}`` (empty url: the picture
 is not written yet); K = ``{table_name: [flat row objects]}``; E = ``{"time", "level", "text"}``;

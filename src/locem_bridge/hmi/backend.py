@@ -13,8 +13,8 @@ should return quickly, reading cached state where they can):
   when the executive declines (unknown IRI, a process already running).
 - ``stop()`` -> ``None``; must always be accepted (STOP is never refused), raise only when unreachable.
 - ``snapshot()`` -> ``{"process": str, "action": str, "tree": str, "node": str, "health": HEALTH,
-  "progress": PROGRESS}`` plus optional ``"phase"`` (idle, running, stopping, stopped, ended, failed) and
-  ``"detail"`` (free text); HEALTH is ``{"status": "ok" | "degraded" | "fault" | "unknown", "detail": str}`` (a
+  "progress": PROGRESS}`` plus optional ``"phase"`` (idle, running, stopping, stopped, ended, failed),
+  ``"skill"`` (the skill PEMKRE matched the running task to) and ``"detail"`` (free text); HEALTH is ``{"status": "ok" | "degraded" | "fault" | "unknown", "detail": str}`` (a
   plain string is accepted as the status); PROGRESS is ``{"done": int, "total": int, "text": str}`` or ``None``.
 - ``prompts()`` -> the OPEN prompts: ``[{"id": str, "kind": str, "text": str, "choices": [str, ...],
   "context": {...}}]`` (``context`` optional: e.g. ``{"line": "wall_1_joint_2"}``).
@@ -70,7 +70,7 @@ def normalize_snapshot(raw: Optional[Dict[str, Any]]) -> Dict[str, Any]:
     if not isinstance(raw, dict):
         raise TypeError("snapshot() must return a dict, got %s" % type(raw).__name__)
     snap = dict(raw)
-    for key in ("process", "action", "tree", "node", "phase", "detail"):
+    for key in ("process", "action", "skill", "tree", "node", "phase", "detail"):
         value = snap.get(key)
         snap[key] = "" if value is None else str(value)
     health = snap.get("health")

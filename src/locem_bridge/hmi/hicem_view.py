@@ -1,6 +1,6 @@
 """How HICEM's own state reads on the operator's screen: pure functions shared by every HICEM backend.
 
-HICEM's controller publishes a state dict (``process``, ``specific_process``, ``action_type``, ``task``,
+HICEM's controller publishes a state dict (``process``, ``specific_process``, ``action_type``, ``task``, ``skill``,
 ``tree``, ``node``, ``path``, ``phase``, ``detail``; the ROS adapter carries the same fields on ``/hicem/state``)
 and its health monitor a per-module snapshot (``{module: {"level", "message", "crucial", "fault"}}``). These
 functions turn them into the HMI snapshot of :mod:`locem_bridge.hmi.backend`. No I/O, no ROS.
@@ -58,6 +58,7 @@ def snapshot_from_hicem(state: Optional[Dict[str, Any]], modules: Optional[Dict[
     st = state or {}
     return {"process": str(st.get("process", "") or ""), "phase": str(st.get("phase", "") or "idle"),
             "action": action_label(str(st.get("action_type", "") or ""), str(st.get("task", "") or "")),
+            "skill": str(st.get("skill", "") or ""),
             "tree": str(st.get("tree", "") or ""), "node": str(st.get("node", "") or ""),
             "detail": str(st.get("detail", "") or ""),
             "health": health if health is not None else health_summary(modules),

@@ -71,6 +71,7 @@
     phase.textContent = s.phase || "idle";
     phase.className = "phase phase-" + (s.phase || "idle");
     setText("status-action", s.action);
+    setText("status-skill", s.skill);
     setText("status-tree", s.tree);
     setText("status-node", s.node);
     setText("status-detail", s.detail);
