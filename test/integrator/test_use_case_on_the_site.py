@@ -7,7 +7,10 @@ run report): one sample joint per plasterboard wall -- the first the scan report
 length (the two pieces of SPOT_TAPE_JOINT, taped from the joint's middle up and down, meet without a gap:
 coverage >= 0.99), every other joint is untouched (coverage 0), no collision; the only operator intervention is
 the tool mount of the shipped GET_TOOL. PEMKRE's execution log (the report's KPI rows) shows two SPOT_TAPE_JOINT
-tasks, both succeeded. One launch, about 30 s of wall clock at time scale 10.
+tasks, both succeeded. The PEMKRE node matches every task to the robot's resource model, generated from the
+shipped trees plus the use case's folder: the run gets past start_process only because that model offers the
+use case's tree as the skill for its task (without the folder it is refused, test_integrator_folders.py).
+One launch, about 30 s of wall clock at time scale 10.
 
 Needs the environment ``tools/test.sh`` prepares; starts device stand-ins: run it under the heavy lock
 (``flock /tmp/locem-heavy.lock bash tools/test.sh test/integrator/test_use_case_on_the_site.py``).
