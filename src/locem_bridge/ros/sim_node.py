@@ -18,6 +18,10 @@ service             args (JSON object)                                     resul
 ``~compressor``     ``{}``                                                 the compressor as the device knows
                                                                            it: state, watchdog, valve / motor
                                                                            history (Worksite.compressor_state)
+``~tool_changer``   ``{}``                                                 the tool changer as the device knows
+                                                                           it: lock, coupled tool, rack slots,
+                                                                           history (a robot file with a
+                                                                           ``tool_changer``; else an error)
 ==================  =====================================================  ======================================
 
 Topic ``~localisation`` (``geometry_msgs/PoseWithCovarianceStamped``, map frame, 5 Hz): the localisation a real
@@ -63,6 +67,7 @@ class SimNode:
             "outcome": lambda a: site.outcome(),
             "save_outcome": lambda a: site.save_outcome(_need(a, "folder")),
             "compressor": lambda a: site.compressor_state(),
+            "tool_changer": lambda a: site.tool_changer_state(),
         }
         for name, operation in operations.items():
             self._services.append(rospy.Service("~" + name, JsonCall, _serve(name, operation)))

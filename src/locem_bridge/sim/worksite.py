@@ -11,8 +11,8 @@ robot), ``modbus_port``, ``can_interface``, ``can_channel``, ``can_port``, ``tim
 
 A robot file with a ``tool_changer`` section gets the tool changer stand-in too (:mod:`.modbus.tool_changer`, its own
 Modbus TCP server on ``robot.tool_changer.port``): it mounts and parks tools in the world as its lock couples and
-releases them at the rack slots. Operator calls (tools are changed by a person on the real site): :meth:`mount_tool`, :meth:`remove_tool`,
-:meth:`mark_manual_taping`. Perception: :meth:`scan`. Results: :meth:`outcome` (numbers) and
+releases them at the rack slots (:meth:`tool_changer_state`). Operator calls (tools are changed by a person on the
+real site): :meth:`mount_tool`, :meth:`remove_tool`, :meth:`mark_manual_taping`. Perception: :meth:`scan`. Results: :meth:`outcome` (numbers) and
 :meth:`save_outcome` (``outcome.json`` + one PNG per wall).
 """
 from __future__ import annotations
@@ -301,7 +301,8 @@ class Worksite:
             self.ur.release_emergency_stop()
         else:
             raise SimStateError("fault %r is cleared through the device protocol or cannot be cleared here; "
-                                "clearable here: compressor_link_drop, drive_heartbeat_loss, arm_emergency_stop"
+                                "clearable here: compressor_link_drop, tool_changer_link_drop, drive_heartbeat_loss, "
+                                "arm_emergency_stop"
                                 % kind)
 
     # -- results -----------------------------------------------------------------------------------------------
