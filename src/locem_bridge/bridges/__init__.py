@@ -11,8 +11,9 @@ Layout (one concept per module):
 * :mod:`.ur_arm` + :mod:`.ur_worker`  ur_rtde in a supervised child process;
 * :mod:`.modbus_compressor`  pymodbus client with polling, retries and the valve-closed-on-return rule;
 * :mod:`.modbus_tool_changer`  the same pattern for the tool changer (a coupled tool stays locked on return);
-* :mod:`.cia402_base` + :mod:`locem_bridge.common.base_kinematics` + :mod:`locem_bridge.common.can_bus`  four CiA 402 drives
-  through canopen's ``BaseNode402``;
+* :mod:`.cia402_base` + :mod:`locem_bridge.common.base_kinematics` + :mod:`locem_bridge.common.can_bus`  the wheel drives
+  (mecanum: four, differential: two) through canopen's ``BaseNode402``;
+* :mod:`.cia402_lift`  the lift carrying the arm: one CiA 402 drive in profile position mode on the base's bus;
 * :mod:`.sim_scanner`  the SCAN source of the simulated worksite (perception stand-in on the site YAML);
 * :mod:`.geometry`    frames map -> base_footprint -> UR base, the wall-facing TCP frame (rotations:
   :mod:`locem_bridge.common.geometry`);
