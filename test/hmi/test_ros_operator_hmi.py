@@ -3,7 +3,8 @@ and of the simulator's operator services, on a private ROS master: the page's JS
 services, the automatic operator answers the prompts published in /hicem/state (one line rejected by
 ``_reject_lines``), the simulated operator's hands mount the tool and tape the rejected joint in the simulator
 before the answers go out, wall pictures come from the simulator, processes come from the shipped ontologies,
-and PEMKRE's absence is reported, not fatal. Needs the environment of tools/test.sh (skipped otherwise, like
+KPIs and the skill matching of a process come from the real PEMKRE node (with the shipped robot's resource
+model), and PEMKRE's absence is reported, not fatal. Needs the environment of tools/test.sh (skipped otherwise, like
 test/ros)."""
 import json
 import os
@@ -118,9 +119,10 @@ def test_operator_hmi_node_over_ros(ros, tmp_path):
     wait_state(url, lambda d: d["snapshot"]["phase"] == "stopped" and not d["prompts"], timeout=10)
 
 
-def test_kpis_from_the_real_pemkre_node(ros, tmp_path):
+def test_kpis_and_skill_matching_from_the_real_pemkre_node(ros, tmp_path):
+    robot = os.path.join(HERE, "..", "..", "config", "robots", "rbkairos_ur10e.yaml")
     ros.spawn(["rosrun", "locem_bridge", "pemkre_node", "_store_path:=%s" % (tmp_path / "pemkre_store"),
-               "_fresh:=true"], "pemkre")
+               "_fresh:=true", "_robot:=%s" % os.path.abspath(robot)], "pemkre")
     ros.wait_for_service("/pemkre/query", 120)
     log = str(tmp_path / "hicem_calls.jsonl")
     ros.spawn([sys.executable, os.path.join(HERE, "fake_hicem_ros_node.py"), "_log:=%s" % log], "fake_hicem")
@@ -135,6 +137,17 @@ def test_kpis_from_the_real_pemkre_node(ros, tmp_path):
     assert row["abstractProcess"] == TAPING and row["status"] == "running" and row["count"] == 0
     assert isinstance(row["count"], int) and doc["kpis"]["task_types"] == []
     assert "kpis()" not in doc["backend_error"]
+    # the page's skill matching through <pemkre>/match: the shipped robot's operator tree realizes GET_TOOL
+    r = get(url, "/api/match?process=" + TAPING.replace("#", "%23"))
+    assert r.status == 200, r
+    view = r.json["match"]
+    assert view["ok"] is True and view["robot_name"] == "rbkairos_ur10e"
+    get_tool = next(t for t in view["tasks"] if t["action_type"] == "GET_TOOL")
+    assert (get_tool["chosen"]["name"], get_tool["chosen"]["kind"], get_tool["chosen"]["operator"]) == (
+        "GET_TOOL", "composite", True)
+    assert [(c["name"], c["kind"]) for c in get_tool["rejected"]] == [("tmpl_getToolAutomatically", "template")]
+    r = get(url, "/api/match?process=" + "https://locem-bridge.example.org/ont/plasterboard%23SandingProcess")
+    assert r.status == 200 and r.json["match"]["process"].endswith("#SandingProcess")
 
 
 def _auto_operator_node(ros, tmp_path, port, name="operator_hmi"):
