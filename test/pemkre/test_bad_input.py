@@ -238,8 +238,9 @@ def test_binding_query_without_a_value(make_engine):
     # remove the taping tool from the world: GET_TOOL cannot be parameterized
     from locem_bridge.pemkre.store import G_WORLD, ChangeSet
     from rdflib.namespace import RDF
-    from locem_bridge.pemkre.vocab import PPR, SITE
-    e.store.apply(e.reasoner.infer(e.store, ChangeSet(remove=[(SITE.taping_tool, RDF.type, PPR.TapingTool, G_WORLD)])))
+    from locem_bridge.pemkre.vocab import BASE, PPR
+    tool = URIRef(BASE + "robot/rbkairos_ur10e/taping_tool")       # the default robot's (ontologies/default_robot.ttl)
+    e.store.apply(e.reasoner.infer(e.store, ChangeSet(remove=[(tool, RDF.type, PPR.TapingTool, G_WORLD)])))
     _rejected(e, e.next_action, BindingError, "'tool'", "taping_getTool", "p_tapingTool")
 
 

@@ -1,8 +1,9 @@
 """The taping process (Fig. 2 of the PEMKRE paper), one test per branch, on a real on-disk store."""
 from pemkre_testkit import json_dumps, run_process, scan_result
+from rdflib import Namespace
 
 from locem_bridge.pemkre import PLB, PPR
-from locem_bridge.pemkre.vocab import SITE
+from locem_bridge.pemkre.vocab import BASE, SITE
 
 TAPING = str(PLB.TapingProcess)
 
@@ -51,8 +52,9 @@ def test_validate_lines_false_tapes_straight_away_then_goes_home(make_engine):
     for j in (1, 2, 3):
         assert _status(e, "wall_1_joint_%d" % j) == PPR.processed
     # the robot's world state follows the effects of GET_TOOL and GO_HOME
-    assert e.store.value(SITE.robot, PPR.mountedTool) == SITE.taping_tool
-    assert e.store.value(SITE.robot, PPR.atLocation) == SITE.home
+    robot = Namespace(BASE + "robot/rbkairos_ur10e/")          # the default robot (ontologies/default_robot.ttl)
+    assert e.store.value(robot.robot, PPR.mountedTool) == robot.taping_tool
+    assert e.store.value(robot.robot, PPR.atLocation) == SITE.home
     assert e.check_consistency(full_inference=True) == []
 
 

@@ -15,13 +15,14 @@ Built by :func:`locem_bridge.skills.build.build_resource_model`; never edited by
 ``interface_<name>``          a skill interface (``/locem/command`` service, ``/locem/command_action`` action)
 ============================  ===========================================================================
 """
+import os
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from rdflib import Graph, Literal, Namespace, URIRef
 from rdflib.namespace import OWL, RDF, RDFS, XSD
 
-from ..pemkre.vocab import BASE, PLB, PPR, SK
+from ..pemkre.vocab import BASE, PLB, PPR, PROC, SK
 from .units import qudt_iri
 
 ROBOT_BASE = BASE + "robot/"
@@ -250,6 +251,36 @@ class ResourceModel:
             g.add((node, SK.endpoint, Literal(endpoint)))
         for s in self.skills():
             self._skill(g, s)
+        return g
+
+    def seed_graph(self) -> Graph:
+        """The robot's identity as a PEMKRE world seed (``proc:isWorldSeed``): the robot and its tools with their
+        classes, under the same IRIs as :meth:`to_graph`. What a PEMKRE without a resource model binds the robot
+        and tool parameters to; loading this robot's model on top adds to the same individuals."""
+        g = Graph()
+        g.bind("ppr", Namespace(str(PPR)))
+        g.bind("sk", Namespace(str(SK)))
+        g.bind("owl", OWL)
+        g.bind("proc", Namespace(str(PROC)))
+        g.bind(self.robot_name.replace("-", "_") if self.robot_name[:1].isalpha() else "robot",
+               Namespace(self.base_iri))
+        onto = URIRef(ROBOT_BASE + self.robot_name + "/seed")
+        g.add((onto, RDF.type, OWL.Ontology))
+        g.add((onto, RDFS.label, Literal("%s and its tools as world seed (generated from %s)"
+                                         % (self.robot_name, os.path.basename(self.robot_file)), lang="en")))
+        g.add((onto, PROC.isWorldSeed, Literal(True)))
+        g.add((onto, OWL.imports, URIRef(PPR_ONTOLOGY)))
+        g.add((onto, OWL.imports, URIRef(SKILL_ONTOLOGY)))
+        robot = self.robot_iri
+        g.add((robot, RDF.type, PPR.Robot))
+        g.add((robot, RDF.type, OWL.NamedIndividual))
+        g.add((robot, RDFS.label, Literal(self.robot_name)))
+        for t in self.tools:
+            node = self.iri(t.name)
+            g.add((robot, SK.hasTool, node))
+            g.add((node, RDF.type, URIRef(t.tool_class)))
+            g.add((node, RDF.type, OWL.NamedIndividual))
+            g.add((node, SK.toolName, Literal(t.name)))
         return g
 
     def _frame(self, g: Graph, f: Frame) -> None:
