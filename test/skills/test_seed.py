@@ -41,13 +41,11 @@ def test_the_shipped_seed_is_the_default_robots_generated_identity(tmp_path):
 
 
 def _get_tool(engine):
-    """Start the spraying process on a world with one pending area: its first action is GET_TOOL."""
+    """What the spraying process's GET_TOOL task node binds its parameters to (the robot may realize the task by a
+    template expansion whose steps take the same values)."""
     engine.update_world(SCAN)
-    engine.start_process(str(PLB.SprayingProcess))
-    action = engine.next_action()
-    assert action.action_type == "GET_TOOL"
-    params = Graph().parse(data=action.parameters, format="nt")
-    return {str(p).rsplit("#", 1)[-1]: o for _, p, o in params}
+    node = engine.model.processes[PLB.SprayingProcess].nodes[PLB.spraying_getTool]
+    return {prm.name: engine.store.select(prm.query)[0]["value"] for prm in node.parameters}
 
 
 @pytest.mark.parametrize("robot_file, overrides", [
