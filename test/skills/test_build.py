@@ -230,3 +230,20 @@ def test_the_second_robot_has_its_own_base_kinematics_reach_lift_and_lift_skill(
     shipped = build_resource_model(ROBOT, [TREES]).to_graph()
     both = {s for s in g.subjects() if "/robot/" in str(s)} & {s for s in shipped.subjects() if "/robot/" in str(s)}
     assert both == set()
+
+
+def test_on_the_tool_changer_robot_the_operators_tool_tree_is_not_offered_and_the_changer_skill_is():
+    m = build_resource_model(os.path.join(os.path.dirname(ROBOT), "diffdrive_ur5e.yaml"), [TREES])
+    change = m.skill("CHANGE_TOOL", "basic")
+    assert change.offered and change.capability == str(SK.cap_ChangeToolAutomatically)
+    assert "tool_changer" in change.devices and m.device("tool_changer").mounted_on == "frame_flange"
+    with pytest.raises(KeyError):
+        m.skill("MOUNT_TOOL", "basic")                  # only the changer couples this robot's tools
+    get_tool = m.skill("GET_TOOL", "composite")
+    assert not get_tool.offered
+    assert get_tool.reason == "invokes MOUNT_TOOL, which this robot's LOCEM does not register"
+    # the template's step capabilities are provided by this robot
+    g = m.to_graph()
+    assert (m.robot_iri, SK.providesCapability, SK.cap_ArmToWallReady) in g
+    assert (m.robot_iri, SK.providesCapability, SK.cap_ChangeToolAutomatically) in g
+    assert (m.robot_iri, SK.providesCapability, PLB.cap_GetTool) not in g

@@ -221,7 +221,7 @@ def _hardware(model: ResourceModel, robot: Mapping[str, Any], devices: Sequence[
     model.devices.append(Device("arm", "arm", protocol=str(arm.get("backend", "ur_rtde")), model=model_name,
                                 mounted_on=arm_parent, xyz=xyz, rpy=_vec3(mount["rpy"]), reach=float(reach)))
     model.frames.append(Frame("flange", "device_arm"))
-    if isinstance(robot.get("tool_changer"), Mapping):
+    if isinstance(robot.get("tool_changer"), Mapping) and "tool_changer" in devices:
         tc = robot["tool_changer"]
         model.devices.append(Device("tool_changer", "tool_changer", protocol=str(tc.get("protocol", "")),
                                     mounted_on="frame_flange"))
