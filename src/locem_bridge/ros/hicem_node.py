@@ -64,7 +64,7 @@ def _pemkre_client(kind: str) -> Any:
         engine = ProcessEngine(open_store("rocksdb", store_path), files)
         # matched to the skills of ~robot (its resource model from the same tree folders HICEM runs), as the node;
         # only when ~robot is set: a test node with its own trees and no robot runs unmatched, as before
-        from .pemkre_node import match_robot
+        from locem_bridge.pemkre.robot_model import match_robot
         match_robot(engine, param("robot", ""), [param("trees_dir", os.path.join(package_share(), "trees"))] +
                     split_folders(param("extra_trees_dirs", "")), files)
         return EngineClient(engine)

@@ -26,11 +26,10 @@ skills; empty = no matching), ``~site_namespace``, ``~log_namespace``,
 ``~reasoning_max_seconds``, ``~fresh`` (delete the store first: tests and demos only).
 """
 import gc
-import hashlib
 import json
 import os
 import threading
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Callable, Optional
 
 import rospkg
 import rospy
@@ -40,6 +39,7 @@ from locem_bridge.common.folders import folder_files, split_folders
 from locem_bridge.pemkre import ProcessEngine
 from locem_bridge.pemkre.engine import load_json
 from locem_bridge.pemkre.errors import PemkreError
+from locem_bridge.pemkre.robot_model import match_robot
 from locem_bridge.pemkre.store_factory import open_store
 from locem_bridge.pemkre.terms import bindings_from_strings
 from locem_bridge.ros.params import package_share, param
@@ -48,46 +48,6 @@ from locem_bridge.srv import (PemkreMatchProcess, PemkreMatchProcessResponse, Pe
                               PemkreSetTaskStatus, PemkreSetTaskStatusResponse, PemkreStartProcess,
                               PemkreStartProcessResponse, PemkreUpdateWorld, PemkreUpdateWorldResponse)
 from locem_bridge.ros.startup import config_guard
-
-
-def resource_model_key(robot_file: str, tree_dirs: Sequence[str], ontology_files: Sequence[str]) -> str:
-    """A fingerprint of everything the robot's resource model is built from: the robot file, the tree files, the
-    ontology files (contents) and the package's sources (size and mtime). Equal keys: the model is the same."""
-    import locem_bridge
-
-    h = hashlib.sha256()
-    files = [robot_file] + list(ontology_files)
-    for d in tree_dirs:
-        files += sorted(os.path.join(d, f) for f in os.listdir(d) if f.endswith(".xml"))
-    for path in files:
-        with open(path, "rb") as fh:
-            h.update(path.encode() + b"\0" + fh.read() + b"\0")
-    root = os.path.dirname(os.path.abspath(locem_bridge.__file__))
-    for base, dirs, names in sorted(os.walk(root)):
-        dirs.sort()
-        for name in sorted(n for n in names if n.endswith(".py")):
-            st = os.stat(os.path.join(base, name))
-            h.update(("%s %d %d\n" % (os.path.join(base, name), st.st_size, st.st_mtime_ns)).encode())
-    return h.hexdigest()
-
-
-def match_robot(engine: ProcessEngine, robot_file: str, tree_dirs: Sequence[str],
-                ontology_files: Sequence[str]) -> bool:
-    """Match the engine's processes to the skills of ``robot_file`` (no robot file: no matching, False).
-
-    The resource model is generated (skills.build_resource_model) unless the store holds the one built from the same
-    inputs (a respawned node starts at once). One place for the PEMKRE node and HICEM's embedded engine; a bad
-    robot file or tree raises ``FILE: KEY: PROBLEM`` before anything is loaded.
-    """
-    if not robot_file:
-        return False
-    key = resource_model_key(robot_file, tree_dirs, ontology_files)
-    if not engine.resume_resource_model(key):
-        from locem_bridge.skills import build_resource_model
-
-        model = build_resource_model(robot_file, list(tree_dirs), ontology_files=list(ontology_files)).to_graph()
-        engine.load_resource_model(model, key=key)
-    return True
 
 
 def _guard(response_cls: Callable[[], Any], body: Callable[[Any, Any], None]) -> Callable[[Any], Any]:
