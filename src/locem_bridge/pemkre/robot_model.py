@@ -9,6 +9,7 @@ import hashlib
 import os
 from typing import Sequence
 
+from ..common.paths import PYTHON_ROOT
 from .engine import ProcessEngine
 
 
@@ -25,7 +26,7 @@ def resource_model_key(robot_file: str, tree_dirs: Sequence[str], ontology_files
                 h.update(path.encode() + b"\0" + fh.read() + b"\0")
         except OSError:             # the generator says what is wrong with it, naming the file
             h.update(path.encode() + b"\0missing\0")
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))     # the locem_bridge package
+    root = os.path.join(PYTHON_ROOT, "locem_bridge")
     for base, dirs, names in sorted(os.walk(root)):
         dirs.sort()
         for name in sorted(n for n in names if n.endswith(".py")):
