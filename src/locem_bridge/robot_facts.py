@@ -18,7 +18,14 @@ HICEM puts the result on the root blackboard (:meth:`RobotFacts.blackboard_entri
 ``robot.work.<work>.base_standoff`` m, base centre to wall: flange_distance + tool length + tool standoff
 ``robot.work.<work>.tool_standoff`` m, TCP to wall while working (the tool's ``standoff``; 0 for contact tools)
 ``robot.work.<work>.work_width``    m, width worked by one pass: spray fan on the wall, pad diameter, tape width
-``robot.work.<work>.z_range``       m, [z_min, z_max] reached from one base pose (``wall_work.z_band``)
+``robot.lift.fitted``               true when the arm rides on a lift (``robot.lift``), else false
+``robot.lift.range``                m, [bottom, top] arm mount heights of the lift (``lift.range``); [] without one
+``robot.work.<work>.z_band``        m, [z_min, z_max] reached from one base pose and one lift height: with a lift,
+                                    at the lift's bottom (``wall_work.z_band``); the band rides up with the lift
+``robot.work.<work>.z_range``       m, [z_min, z_max] reached from one base pose: z_band, its top raised by the
+                                    lift's travel (top - bottom of ``lift.range``; 0 without a lift)
+``robot.work.<work>.band_height``   m, tallest strip worked from one lift height: z_band's span with a lift (areas
+                                    are raster in bands no taller); 0 without one (an area is one band)
 ``robot.work.<work>.lateral_reach`` m, to either side of the base axis (``wall_work.lateral_reach``)
 ``robot.work.<work>.segment_length``  m, longest line worked from one pose (``wall_work.line_length``)
 ``robot.work.<work>.section_width`` m, 2 x (lateral_reach - tuning lane_overrun); only with ``lane_overrun``
@@ -105,8 +112,10 @@ class RobotFacts:
     """Every derived robot fact: ``work`` (work name -> :class:`WorkFacts`), ``tools``, ``reach``, ``tcp_bound``."""
 
     def __init__(self, name: str, tools: List[str], reach: float, bound: float, work: Dict[str, WorkFacts],
-                 path: str = "") -> None:
+                 path: str = "", lift_range: Optional[List[float]] = None) -> None:
         self.name = name
+        #: [bottom, top] of the lift carrying the arm; None without a lift
+        self.lift_range = lift_range
         self.tools = tools
         self.reach = reach
         self.tcp_bound = bound
@@ -116,7 +125,9 @@ class RobotFacts:
     def blackboard_entries(self, prefix: str = "robot") -> Dict[str, Any]:
         """``robot.*`` entries (every leaf and every sub-mapping under its dotted path, as ``cfg.*``)."""
         out: Dict[str, Any] = {prefix + ".name": self.name, prefix + ".tools": list(self.tools),
-                               prefix + ".reach": self.reach, prefix + ".tcp_bound": self.tcp_bound}
+                               prefix + ".reach": self.reach, prefix + ".tcp_bound": self.tcp_bound,
+                               prefix + ".lift.fitted": self.lift_range is not None,
+                               prefix + ".lift.range": list(self.lift_range or [])}
         works: Dict[str, Any] = {}
         for name, facts in self.work.items():
             entry = dict(facts.entries, tool=facts.tool)
@@ -147,6 +158,9 @@ def derive(robot: Mapping[str, Any], tuning: Optional[Mapping[str, Any]] = None,
     process parameters (:data:`TUNING_KEYS`; the HICEM parameter sections): a bad value raises
     :class:`ConfigError` naming ``<work>.<key>``, as does a ``lane_overrun`` that leaves no strip to work."""
     tuning = tuning or {}
+    lift = robot.get("lift")
+    lift_range = [_r(z) for z in lift["range"]] if isinstance(lift, Mapping) else None
+    travel = lift_range[1] - lift_range[0] if lift_range else 0.0
     works: Dict[str, WorkFacts] = {}
     for name, tool in robot["tools"].items():
         ww = tool["wall_work"]
@@ -155,7 +169,9 @@ def derive(robot: Mapping[str, Any], tuning: Optional[Mapping[str, Any]] = None,
         entries: Dict[str, Any] = {
             "base_standoff": base_standoff(float(ww["flange_distance"]), length, standoff),
             "tool_standoff": standoff, "tool_length": length, "work_width": width,
-            "z_range": [_r(z) for z in ww["z_band"]], "lateral_reach": _r(ww["lateral_reach"]),
+            "z_band": [_r(z) for z in ww["z_band"]],
+            "z_range": [_r(ww["z_band"][0]), _r(ww["z_band"][1] + travel)], "lateral_reach": _r(ww["lateral_reach"]),
+            "band_height": _r(ww["z_band"][1] - ww["z_band"][0]) if lift_range else 0.0,
             "segment_length": _r(ww["line_length"]),
         }
         reach = float(ww["lateral_reach"])
@@ -173,7 +189,7 @@ def derive(robot: Mapping[str, Any], tuning: Optional[Mapping[str, Any]] = None,
                                   key="%s.lane_ratio" % work)
         works[work] = WorkFacts(work, name, entries)
     return RobotFacts(str(robot.get("name", "")), list(robot["tools"]), _r(robot["arm"]["reach"]), tcp_bound(robot),
-                      works, path)
+                      works, path, lift_range)
 
 
 def load_facts(robot_file: Optional[str] = None, tuning: Optional[Mapping[str, Any]] = None,

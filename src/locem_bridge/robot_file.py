@@ -65,7 +65,8 @@ ROBOT_KEYS: Dict[str, Sequence[str]] = {
     #                    (taping | spray | sand for the shipped trees), one tool per work
     #   flange_distance  m, flange ahead of the base centre along the wall normal while the tool works at the wall
     #   lateral_reach    m, how far to either side of the base's wall-normal axis the TCP reaches at the wall
-    #   z_band           m, [z_min, z_max]: heights the TCP reaches at the wall from one base pose
+    #   z_band           m, [z_min, z_max]: heights the TCP reaches at the wall from one base pose (with a lift:
+    #                    from one lift height, measured at the lift's bottom; the band rides up with the lift)
     #   line_length      m, longest straight line along the wall worked from one base pose (default
     #                    2 x lateral_reach)
     "wall_work": ("work", "flange_distance", "lateral_reach", "z_band", "line_length"),

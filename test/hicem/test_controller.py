@@ -80,7 +80,7 @@ def test_stop_halts_cleanly_mid_action(tmp_path):
         assert wait_for(lambda: s.ctrl.state()["node"] == "locem_command")
         st = s.ctrl.state()
         assert (st["tree"], st["action_type"], st["phase"]) == ("TAPE_LINE", "TAPE_LINE", "running")
-        assert st["path"] == "tape_line/apply_tape/guarded_command/locem_command"
+        assert st["path"] == "tape_line/one_pose_or_height_bands/from_one_pose/apply_tape/guarded_command/locem_command"
         with pytest.raises(ControllerError):
             s.ctrl.start_process(P)  # one process at a time
         s.ctrl.stop("operator pressed STOP")

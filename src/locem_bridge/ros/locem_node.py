@@ -226,7 +226,7 @@ def main() -> None:
     are built (lazily imported through :mod:`locem_bridge.bridges.backends`), installed into the core, and their
     state is published by :mod:`.locem_devices`. Parameters: ``~robot_config`` (path), ``~robot_overrides``
     (dict deep-merged into the ``robot`` section, e.g. another address), ``~devices`` (comma list, default
-    ``arm,compressor,base,scanner,tool_changer``; a device the robot file lacks is skipped), ``~site_config``
+    ``arm,compressor,base,lift,scanner,tool_changer``; a device the robot file lacks is skipped), ``~site_config``
     (site YAML for the simulated scanner), ``~initial_pose``
     ([x, y, theta] in map; default: the site's ``robot_start``, else the origin), ``~named_poses`` ({name: [x, y, theta]} for GOTO_TAG).
     Always: ``~grace``, ``~stop_timeout`` (s), ``~max_running`` (commands running at once, default 64; one more is
@@ -249,7 +249,7 @@ def main() -> None:
             from locem_bridge.sim.config import load_site
             pose = load_site(site_config)["site"]["robot_start"]
         robot = build_robot(robot_cfg,
-                            devices=as_list(param("devices", "arm,compressor,base,scanner,tool_changer")),
+                            devices=as_list(param("devices", "arm,compressor,base,lift,scanner,tool_changer")),
                             site=site_config,
                             initial_pose=tuple(float(v) for v in pose) if pose else None,
                             named_base_poses=param("named_poses", {}))

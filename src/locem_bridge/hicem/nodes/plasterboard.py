@@ -18,8 +18,8 @@ from py_trees.common import Status
 from ...common.geometry import wrap_angle
 from ..errors import HicemError, PortError
 from ..interfaces import local_name
-from ..node_base import Leaf
-from ..ports import ANY, FLOAT, FLOAT_LIST, INT, JSON, STRING, STRING_LIST, input_port, output_port
+from ..node_base import ConditionLeaf, Leaf
+from ..ports import ANY, BOOL, FLOAT, FLOAT_LIST, INT, JSON, STRING, STRING_LIST, input_port, output_port
 
 
 # Ports the taping and area nodes declare alike, declared once: the same name, type, default and meaning in each.
@@ -168,7 +168,7 @@ class GetTapeSegments(Leaf):
         input_port("z_range", FLOAT_LIST, "{@robot.work.taping.z_range}", "m",
                    "z_min;z_max, the height band the arm reaches with the tool facing the wall"),
         STANDOFF, LATERAL_OFFSET, YAW_OFFSET, SURFACE_OFFSET, MAX_TILT,
-        output_port("segments", JSON, None, "", "list of {approach, start, end, normal, length}"),
+        output_port("segments", JSON, None, "", "list of {approach, start, end, normal, length, z: [z_min, z_max]}"),
         output_port("count", INT, None, "", "number of pieces"),
         output_port("skipped", FLOAT, None, "m", "joint length outside the reachable band (not taped)"),
     )
@@ -220,10 +220,58 @@ class GetTapeSegments(Leaf):
             approach = [foot[0] + nx * d + t[0] * lat, foot[1] + ny * d + t[1] * lat, heading]
             segments.append({"approach": approach, "start": [a[k] + nrm[k] * off for k in range(3)],
                              "end": [b[k] + nrm[k] * off for k in range(3)], "normal": list(nrm),
-                             "length": math.dist(a, b)})
+                             "length": math.dist(a, b), "z": sorted((a[2], b[2]))})
         self.set("segments", segments)
         self.set("count", len(segments))
         self.set("skipped", max(0.0, total - sum(s["length"] for s in segments)))
+        return Status.SUCCESS
+
+
+class CheckLift(ConditionLeaf):
+    DESCRIPTION = ("SUCCESS when the robot's arm rides on a lift (robot fact robot.lift.fitted), FAILURE otherwise: "
+                   "trees work in height bands with LIFT on such a robot and skip LIFT (not registered) on others.")
+    PORTS = (input_port("fitted", BOOL, "{@robot.lift.fitted}", "", "the robot has a lift"),)
+
+    def on_tick(self) -> Status:
+        return Status.SUCCESS if self.get("fitted") else Status.FAILURE
+
+
+class GetLiftHeight(Leaf):
+    DESCRIPTION = ("The LIFT command that puts a piece of wall work spanning heights z (map z_min;z_max) inside "
+                   "the band the tool reaches from one lift height: band is that band with the lift at its bottom "
+                   "and rides up with the lift; the lift height centres the piece in the band (clamped to the "
+                   "lift's range). Without a lift (empty lift_range) command is empty (LOCEM judges the reach "
+                   "as before). FAILURE naming the heights when no lift height covers the piece.")
+    PORTS = (
+        input_port("z", FLOAT_LIST, None, "m", "z_min;z_max of the piece (e.g. {piece.z})"),
+        input_port("band", FLOAT_LIST, None, "m", "z_min;z_max reached from one lift height, at the lift's bottom"),
+        input_port("lift_range", FLOAT_LIST, "{@robot.lift.range}", "m", "bottom;top of the lift, empty: no lift"),
+        output_port("command", STRING, None, "", "'LIFT z=<m>', or empty when the robot has no lift"),
+        output_port("height", FLOAT, None, "m", "the lift height (0 without a lift)"),
+    )
+
+    def on_tick(self) -> Status:
+        z = list(self.get("z"))
+        if len(z) != 2:
+            raise PortError("%s: z must be two heights z_min;z_max, got %s" % (self.name, z))
+        lo, hi = sorted(z)
+        band, lift = list(self.get("band")), list(self.get("lift_range"))
+        if len(band) != 2 or band[0] >= band[1]:
+            raise PortError("%s: band must be two heights z_min < z_max, got %s" % (self.name, band))
+        if lift and (len(lift) != 2 or lift[0] > lift[1]):
+            raise PortError("%s: lift_range must be empty or bottom;top, got %s" % (self.name, lift))
+        if not lift:
+            self.set("command", "")
+            self.set("height", 0.0)
+            return Status.SUCCESS
+        want = lift[0] + (lo + hi) / 2.0 - (band[0] + band[1]) / 2.0
+        height = min(max(want, lift[0]), lift[1])
+        shift = height - lift[0]
+        if lo < band[0] + shift - 1e-6 or hi > band[1] + shift + 1e-6:
+            return self.fail("heights %.3f..%.3f m are out of reach from one lift height (band %.2f..%.2f m at the "
+                             "lift's bottom, lift %.2f..%.2f m)" % (lo, hi, band[0], band[1], lift[0], lift[1]))
+        self.set("command", "LIFT z=%.4f" % height)
+        self.set("height", height)
         return Status.SUCCESS
 
 
@@ -238,7 +286,12 @@ class GetAreaRaster(Leaf):
         input_port("yaw_offset", FLOAT, None, "rad", "added to the wall-facing heading"),
         input_port("edge_extension", FLOAT, "0.0", "m", "the first and last section reach this far beyond the "
                    "area's ends (spray run-in at the outer edges; sections meet exactly in between)"),
-        output_port("sections", JSON, None, "", "list of {approach, origin, u, width, height, normal}"),
+        input_port("band_height", FLOAT, "0.0", "m", "tallest section (e.g. {@robot.work.spray.band_height}: what "
+                   "the arm covers from one lift height); a taller area is cut into bands of equal height, bottom "
+                   "first in each column; 0: one band"),
+        input_port("band_gap", FLOAT, "0.0", "m", "a band starts this far above the band below it (the lane "
+                   "spacing: its bottom lane is one lane above the lower band's top lane, no lane twice)"),
+        output_port("sections", JSON, None, "", "list of {approach, origin, u, width, height, normal, index, z}"),
         output_port("count", INT, None, "", "number of sections"),
     )
 
@@ -256,6 +309,15 @@ class GetAreaRaster(Leaf):
         ext = self.get("edge_extension")
         if ext < 0:
             raise PortError("%s: edge_extension must be >= 0 m, got %g" % (self.name, ext))
+        band_h, gap = self.get("band_height"), self.get("band_gap")
+        if band_h < 0 or gap < 0:
+            raise PortError("%s: band_height and band_gap must be >= 0 m, got %g, %g" % (self.name, band_h, gap))
+        bands = 1
+        if band_h > 0 and a["height"] > band_h + 1e-9:
+            bands = int(math.ceil((a["height"] + gap) / (band_h + gap) - 1e-9))
+        bh = (a["height"] - gap * (bands - 1)) / bands
+        if bh <= 0:
+            raise PortError("%s: band_gap %g m leaves no band in the %g m high area" % (self.name, gap, a["height"]))
         sections = []
         for i in range(count):
             o = [a["origin"][k] + a["u"][k] * w * i for k in range(3)]
@@ -263,10 +325,14 @@ class GetAreaRaster(Leaf):
             s0 = -ext if i == 0 else 0.0                   # along u, relative to the section's own start
             s1 = w + ext if i == count - 1 else w
             o = [o[k] + a["u"][k] * s0 for k in range(3)]
-            sections.append({"approach": [mx + n[0] / nxy * bs, my + n[1] / nxy * bs, heading], "origin": o,
-                             "u": list(a["u"]), "width": s1 - s0, "height": a["height"], "normal": n, "index": i})
+            for b in range(bands):
+                ob = list(o)
+                ob[2] = o[2] + b * (bh + gap)
+                sections.append({"approach": [mx + n[0] / nxy * bs, my + n[1] / nxy * bs, heading], "origin": ob,
+                                 "u": list(a["u"]), "width": s1 - s0, "height": bh if bands > 1 else a["height"],
+                                 "normal": n, "index": len(sections), "z": [ob[2], ob[2] + bh]})
         self.set("sections", sections)
-        self.set("count", count)
+        self.set("count", len(sections))
         return Status.SUCCESS
 
 
@@ -305,4 +371,5 @@ class PlanTransit(Leaf):
         return Status.SUCCESS
 
 
-LIBRARY = (TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments, GetAreaRaster, PlanTransit)
+LIBRARY = (TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments, CheckLift, GetLiftHeight,
+           GetAreaRaster, PlanTransit)
