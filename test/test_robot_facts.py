@@ -1,5 +1,6 @@
 """Robot facts (locem_bridge.robot_facts): the formulas, and the numbers HICEM's trees read for a robot file."""
 import math
+import os
 
 import pytest
 import yaml
@@ -67,6 +68,23 @@ def test_another_robot_file_gives_hicem_its_own_numbers(tmp_path):
     assert bb["robot.work.taping.z_range"] == [0.3, 1.2] and bb["robot.work.taping.segment_length"] == 0.60
     assert bb["robot.reach"] == 0.85 and bb["robot.tcp_bound"] == 1.07
     assert bb["robot.work.spray.lane_spacing"] == 0.15        # same gun, same tuning
+
+
+def test_a_robot_with_a_lift_works_in_bands_that_ride_up_with_it():
+    """The second robot: its arm reaches z_band from one lift height (measured at the lift's bottom); over the
+    lift's travel the band spans z_range; areas are cut into bands of z_band's height. The shipped robot has no
+    lift: no band height (one band), z_range = z_band, no LIFT."""
+    bb = load_params(DEFAULT_PARAMS_FILE, robot_file=os.path.join(os.path.dirname(default_robot_path()),
+                                                                  "diffdrive_ur5e.yaml")).blackboard_entries()
+    assert bb["robot.lift.fitted"] is True and bb["robot.lift.range"] == [0.55, 1.45]
+    for work in ("taping", "spray", "sand"):
+        assert bb["robot.work.%s.z_band" % work] == [0.10, 1.45]
+        assert bb["robot.work.%s.z_range" % work] == [0.10, 2.35]            # 1.45 + the 0.90 m travel
+        assert bb["robot.work.%s.band_height" % work] == 1.35
+    shipped = load_params(DEFAULT_PARAMS_FILE).blackboard_entries()
+    assert shipped["robot.lift.fitted"] is False and shipped["robot.lift.range"] == []
+    assert shipped["robot.work.spray.z_band"] == shipped["robot.work.spray.z_range"] == [0.10, 2.15]
+    assert shipped["robot.work.spray.band_height"] == 0.0
 
 
 @pytest.mark.parametrize("change,key,problem", [
