@@ -20,11 +20,14 @@ def _lift(z, cfg):
     return rig, rig.tree.tick()
 
 
-def test_the_lift_height_centres_a_piece_in_the_band_within_the_lift_range():
-    rig, st = _lift("1.05;2.0", LIFT)          # the upper half of a 0.10..2.0 m joint
-    assert st == Status.SUCCESS
-    assert rig.bb.get("h") == pytest.approx(0.55 + 1.525 - 0.775) and rig.bb.get("c") == "LIFT z=1.3000"
-    rig, st = _lift("0.10;1.05", LIFT)         # the lower half: below the band's middle, the lift at its bottom
+def test_the_lift_puts_the_arm_mount_at_the_pieces_middle_within_the_lift_range():
+    rig, st = _lift("0.70;1.50", LIFT)         # band 0.65..2.00 at 1.10
+    assert st == Status.SUCCESS and rig.bb.get("h") == pytest.approx(1.10) and rig.bb.get("c") == "LIFT z=1.1000"
+    rig, st = _lift("0.20;1.50", LIFT)         # the mount at the middle (0.85) would leave 0.20 below its band:
+    assert st == Status.SUCCESS and rig.bb.get("c") == "LIFT z=0.6500"     # the highest that keeps it in
+    rig, st = _lift("1.05;2.0", LIFT)          # the upper half of a 0.10..2.0 m joint: the lift at its top
+    assert st == Status.SUCCESS and rig.bb.get("c") == "LIFT z=1.4500"
+    rig, st = _lift("0.10;1.05", LIFT)         # the lower half: the lift at its bottom
     assert st == Status.SUCCESS and rig.bb.get("c") == "LIFT z=0.5500"
     rig, st = _lift("0.10;2.0", LIFT)          # 1.9 m do not fit the 1.35 m band at any height
     assert st == Status.FAILURE

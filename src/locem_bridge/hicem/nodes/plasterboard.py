@@ -239,8 +239,8 @@ class CheckLift(ConditionLeaf):
 class GetLiftHeight(Leaf):
     DESCRIPTION = ("The LIFT command that puts a piece of wall work spanning heights z (map z_min;z_max) inside "
                    "the band the tool reaches from one lift height: band is that band with the lift at its bottom "
-                   "and rides up with the lift; the lift height centres the piece in the band (clamped to the "
-                   "lift's range). Without a lift (empty lift_range) command is empty (LOCEM judges the reach "
+                   "and rides up with the lift; of the lift heights that keep the piece in it (within the lift's range) the one nearest the "
+                   "piece's middle height (the arm reaches furthest sideways at its mount's height). Without a lift (empty lift_range) command is empty (LOCEM judges the reach "
                    "as before). FAILURE naming the heights when no lift height covers the piece.")
     PORTS = (
         input_port("z", FLOAT_LIST, None, "m", "z_min;z_max of the piece (e.g. {piece.z})"),
@@ -264,12 +264,13 @@ class GetLiftHeight(Leaf):
             self.set("command", "")
             self.set("height", 0.0)
             return Status.SUCCESS
-        want = lift[0] + (lo + hi) / 2.0 - (band[0] + band[1]) / 2.0
-        height = min(max(want, lift[0]), lift[1])
-        shift = height - lift[0]
-        if lo < band[0] + shift - 1e-6 or hi > band[1] + shift + 1e-6:
+        # lift heights that keep the piece in the band, within the lift's range; of these the one nearest the
+        # piece's middle (the arm reaches furthest sideways at its mount's height)
+        low, high = max(lift[0], lift[0] + hi - band[1]), min(lift[1], lift[0] + lo - band[0])
+        if low > high + 1e-6:
             return self.fail("heights %.3f..%.3f m are out of reach from one lift height (band %.2f..%.2f m at the "
                              "lift's bottom, lift %.2f..%.2f m)" % (lo, hi, band[0], band[1], lift[0], lift[1]))
+        height = min(max((lo + hi) / 2.0, low), max(low, high))
         self.set("command", "LIFT z=%.4f" % height)
         self.set("height", height)
         return Status.SUCCESS

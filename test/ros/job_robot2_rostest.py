@@ -1,0 +1,67 @@
+#!/usr/bin/env python3
+"""rostest: the whole plasterboard job on the second robot (diffdrive_ur5e: UR5e on a lift, differential base,
+tool changer) with the shipped processes and trees: report.json meets every outcome goal, the operator was never
+asked (zero interventions in the report), every GET_TOOL task was expanded by PEMKRE's tool-changer template into
+WALL_READY and CHANGE_TOOL (the task log), and the arm worked the walls in height bands (LIFT on LOCEM)."""
+import os
+import sys
+import unittest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path[:0] = [HERE]                          # job_support.py lives beside this file
+
+import rostest  # noqa: E402
+
+from job_support import (SANDING, TAPING, TERMINAL, HicemTimeline, LocemResults, SimCalls,  # noqa: E402
+                         init_test_node, kpi_count, outcome_goal_failures, pemkre_rows, setting, wait_for_report)
+
+PKG = "locem_bridge"
+
+
+class JobRobot2Test(unittest.TestCase):
+    maxDiff = None
+
+    @classmethod
+    def setUpClass(cls):
+        init_test_node("job_robot2_test")
+        cls.results_dir = setting("results_dir")
+        cls.timeline = HicemTimeline()
+        cls.locem = LocemResults()
+        cls.sim = SimCalls()
+        cls.sanding_end = cls.timeline.wait_for(lambda s: s["process"] == SANDING and s["phase"] in TERMINAL,
+                                                timeout=840.0)
+        cls.asked = cls.timeline.asked()
+        cls.report = wait_for_report(cls.results_dir, timeout=60.0)
+        cls.log = pemkre_rows("task_log")
+
+    def test_1_outcome_goals(self):
+        self.assertEqual([], outcome_goal_failures(self.report, self.asked))
+
+    def test_2_zero_operator_interventions(self):
+        self.assertEqual(self.asked, {})
+        self.assertEqual(self.report["outcome"]["operator_interventions"], 0)
+
+    def test_3_get_tool_realized_by_the_tool_changer_template(self):
+        parents = [r for r in self.log if r["actionType"] == "GET_TOOL"]
+        self.assertEqual(len(parents), 3, "one tool per process: %s" % parents)
+        for parent in parents:
+            self.assertEqual(parent["status"], "succeeded", parent)
+            steps = sorted((int(r["seq"]), r["actionType"], r["status"]) for r in self.log
+                           if r.get("expandedFrom") == parent["task"])
+            self.assertEqual([(a, s) for _n, a, s in steps], [("WALL_READY", "succeeded"),
+                                                              ("CHANGE_TOOL", "succeeded")], parent)
+        self.assertGreaterEqual(len(self.locem.of("CHANGE_TOOL")), 3)
+
+    def test_4_every_joint_taped_once_in_height_bands(self):
+        o = self.report["outcome"]
+        self.assertEqual(o["joints_taped"], o["joints_total"])
+        self.assertEqual(kpi_count(self.report, "TAPE_LINE", "succeeded"), o["joints_total"])
+        self.assertEqual(kpi_count(self.report, "TAPE_LINE", "failed"), 0)
+        self.assertEqual(len([a for a, _t in self.timeline.actions(TAPING) if a == "TAPE_LINE"]), o["joints_total"])
+        lifts = self.locem.of("LIFT")
+        self.assertGreaterEqual(len(lifts), 2 * o["joints_total"], "a LIFT per piece of every joint")
+        self.assertTrue(all(0.55 - 1e-3 <= r["height"] <= 1.45 + 1e-3 for r in lifts), lifts)
+
+
+if __name__ == "__main__":
+    rostest.rosrun(PKG, "job_robot2", JobRobot2Test)
