@@ -238,10 +238,11 @@ class CheckLift(ConditionLeaf):
 
 class GetLiftHeight(Leaf):
     DESCRIPTION = ("The LIFT command that puts a piece of wall work spanning heights z (map z_min;z_max) inside "
-                   "the band the tool reaches from one lift height: band is that band with the lift at its bottom "
-                   "and rides up with the lift; of the lift heights that keep the piece in it (within the lift's range) the one nearest the "
-                   "piece's middle height (the arm reaches furthest sideways at its mount's height). Without a lift (empty lift_range) command is empty (LOCEM judges the reach "
-                   "as before). FAILURE naming the heights when no lift height covers the piece.")
+                   "the band the tool reaches from one lift height (band: at the lift's bottom; it rides up with "
+                   "the lift): of the lift heights that keep the piece in the band (within the lift's range), the "
+                   "one nearest the piece's middle (the arm reaches furthest sideways at its mount's height). "
+                   "Without a lift (empty lift_range) command is empty (LOCEM judges the reach as before). "
+                   "FAILURE naming the heights when no lift height covers the piece.")
     PORTS = (
         input_port("z", FLOAT_LIST, None, "m", "z_min;z_max of the piece (e.g. {piece.z})"),
         input_port("band", FLOAT_LIST, None, "m", "z_min;z_max reached from one lift height, at the lift's bottom"),
