@@ -59,8 +59,9 @@ import threading
 import time
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
+from .can_link import open_device_bus
 from .config import need
-from .errors import BadRequest, BridgeConfigError, DeviceFault, LinkDown, MotionTimeout, NotConnected
+from .errors import BadRequest, DeviceFault, LinkDown, MotionTimeout, NotConnected
 from locem_bridge.common.geometry import wrap_angle
 from .interfaces import Base, Health, Waiter
 from ..common.base_kinematics import WHEEL_ORDER, kinematics_for
@@ -151,13 +152,7 @@ class Cia402Base(Base):
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def _open_bus(self) -> Any:
-        from locem_bridge.common.can_bus import CanInterfaceError, CanOpenError, open_bus   # as the sim's drives
-        try:
-            return open_bus(self.can_cfg)
-        except CanInterfaceError as error:
-            raise BridgeConfigError(error.problem, key=error.key, allowed=error.allowed, device="base")
-        except CanOpenError as error:
-            raise LinkDown(str(error), device="base")
+        return open_device_bus(self.can_cfg, "base")
 
     def start(self) -> None:
         import canopen

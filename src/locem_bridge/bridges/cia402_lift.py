@@ -27,8 +27,9 @@ import threading
 import time
 from typing import Any, Dict, Mapping, Optional, Tuple
 
+from .can_link import open_device_bus
 from .config import need
-from .errors import BadRequest, BridgeConfigError, DeviceFault, LinkDown, MotionTimeout, NotConnected
+from .errors import BadRequest, DeviceFault, MotionTimeout, NotConnected
 from .interfaces import Health, Lift, Waiter
 
 log = logging.getLogger(__name__)
@@ -77,13 +78,7 @@ class Cia402Lift(Lift):
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def _open_bus(self) -> Any:
-        from locem_bridge.common.can_bus import CanInterfaceError, CanOpenError, open_bus
-        try:
-            return open_bus(self.can_cfg)
-        except CanInterfaceError as error:
-            raise BridgeConfigError(error.problem, key=error.key, allowed=error.allowed, device="lift")
-        except CanOpenError as error:
-            raise LinkDown(str(error), device="lift")
+        return open_device_bus(self.can_cfg, "lift")
 
     def start(self) -> None:
         import canopen

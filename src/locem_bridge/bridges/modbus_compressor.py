@@ -34,7 +34,6 @@ itself. A command that needs pressure again switches the motor on itself (SPRAY_
 COMPRESSOR_ON first).
 """
 
-import inspect
 import logging
 import threading
 import time
@@ -43,6 +42,7 @@ from typing import Any, Callable, Dict, Mapping, Optional
 from ..common.rate import FixedRate
 from .config import need
 from .errors import DeviceFault, LinkDown, NotConnected
+from .modbus_link import ModbusLink
 from .interfaces import Compressor, Health
 
 log = logging.getLogger(__name__)
@@ -76,9 +76,8 @@ class ModbusCompressor(Compressor):
         self.poll_rate = poll_rate
         self.stale_after = stale_after
         self._health = Health("connecting")
-        self._lock = threading.Lock()           # one request at a time on the client
-        self._client: Any = None
-        self._id_kw = "device_id"
+        self._link = ModbusLink("compressor", self.host, self.port, self.device_id, self.timeout)
+        self._lock = self._link.lock            # one request at a time on the client
         self._state: Dict[str, Any] = {}
         self._last_ok = 0.0
         self._was_down = False
@@ -91,18 +90,7 @@ class ModbusCompressor(Compressor):
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def start(self) -> None:
-        from pymodbus.client import ModbusTcpClient
-
-        # pymodbus logs every failed attempt at ERROR level; this backend reports link state itself (health,
-        # one warning per loss), so keep the node's log readable while a device is unplugged
-        logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-        params = inspect.signature(ModbusTcpClient.read_input_registers).parameters
-        self._id_kw = "device_id" if "device_id" in params else "slave"
-        kwargs: Dict[str, Any] = {"port": self.port, "timeout": self.timeout, "retries": 0}
-        init = inspect.signature(ModbusTcpClient.__init__).parameters
-        if "reconnect_delay" in init:
-            kwargs.update(reconnect_delay=0.1, reconnect_delay_max=1.0)
-        self._client = ModbusTcpClient(self.host, **kwargs)
+        self._link.open()
         self._stop.clear()
         self._thread = threading.Thread(target=self._poll_loop, name="compressor-poll", daemon=True)
         self._thread.start()
@@ -112,44 +100,19 @@ class ModbusCompressor(Compressor):
         if self._thread is not None:
             self._thread.join(2.0)
             self._thread = None
-        if self._client is not None:
+        if self._link.is_open:
             for coil in (COIL_VALVE, COIL_MOTOR):
                 try:
                     self._request(lambda c, kw, coil=coil: c.write_coil(coil, False, **kw), attempts=1)
                 except (LinkDown, DeviceFault):
                     break
-            self._client.close()
-            self._client = None
+            self._link.close()
         self._health.set(link="down", device="closed")
 
     # -- requests ----------------------------------------------------------------------------------------
     def _request(self, call: Callable[[Any, Dict[str, Any]], Any], attempts: int = 2) -> Any:
         """One Modbus request with a bounded timeout, retried; raises LinkDown / DeviceFault."""
-        from pymodbus.exceptions import ModbusException
-
-        if self._client is None:
-            raise LinkDown("compressor backend is not started", device="compressor")
-        error = ""
-        for attempt in range(attempts):
-            with self._lock:
-                try:
-                    reply = call(self._client, {self._id_kw: self.device_id})
-                except (ModbusException, OSError) as exc:
-                    error = "%s: %s" % (type(exc).__name__, exc)
-                    try:
-                        self._client.close()       # the next attempt reconnects
-                    except Exception:
-                        pass
-                    continue
-            if reply.isError():
-                code = getattr(reply, "exception_code", None)
-                if code is None:
-                    error = "no valid answer (%s)" % (reply,)
-                    continue
-                raise DeviceFault("compressor refused the request (Modbus exception %s)" % code, device="compressor")
-            return reply
-        raise LinkDown("compressor %s:%d does not answer (%d attempts, %.0f ms timeout each): %s"
-                       % (self.host, self.port, attempts, self.timeout * 1000, error), device="compressor")
+        return self._link.request(call, attempts)
 
     def _read_state(self) -> Dict[str, Any]:
         regs = self._request(lambda c, kw: c.read_input_registers(IN_PRESSURE, count=5, **kw)).registers

@@ -17,7 +17,6 @@ link reported ``up``. Until the first safe state every command answers ``NOT_REA
 by itself; nothing else is needed to make it safe (no communication watchdog: holding the tool is safe).
 """
 
-import inspect
 import logging
 import threading
 import time
@@ -26,6 +25,7 @@ from typing import Any, Callable, Dict, Mapping, Optional
 from ..common.rate import FixedRate
 from .config import need
 from .errors import DeviceFault, LinkDown, NotConnected
+from .modbus_link import ModbusLink
 from .interfaces import Health, ToolChanger, Waiter
 
 log = logging.getLogger(__name__)
@@ -53,9 +53,8 @@ class ModbusToolChanger(ToolChanger):
         self.poll_rate = poll_rate
         self.stale_after = stale_after
         self._health = Health("connecting")
-        self._lock = threading.Lock()
-        self._client: Any = None
-        self._id_kw = "device_id"
+        self._link = ModbusLink("tool_changer", self.host, self.port, self.device_id, self.timeout)
+        self._lock = self._link.lock            # one request at a time on the client
         self._state: Dict[str, Any] = {}
         self._last_ok = 0.0
         self._was_down = False
@@ -67,15 +66,7 @@ class ModbusToolChanger(ToolChanger):
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def start(self) -> None:
-        from pymodbus.client import ModbusTcpClient
-
-        logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-        params = inspect.signature(ModbusTcpClient.read_input_registers).parameters
-        self._id_kw = "device_id" if "device_id" in params else "slave"
-        kwargs: Dict[str, Any] = {"port": self.port, "timeout": self.timeout, "retries": 0}
-        if "reconnect_delay" in inspect.signature(ModbusTcpClient.__init__).parameters:
-            kwargs.update(reconnect_delay=0.1, reconnect_delay_max=1.0)
-        self._client = ModbusTcpClient(self.host, **kwargs)
+        self._link.open()
         self._stop.clear()
         self._thread = threading.Thread(target=self._poll_loop, name="tool-changer-poll", daemon=True)
         self._thread.start()
@@ -85,9 +76,8 @@ class ModbusToolChanger(ToolChanger):
         if self._thread is not None:
             self._thread.join(2.0)
             self._thread = None
-        if self._client is not None:
-            self._client.close()
-            self._client = None
+        if self._link.is_open:
+            self._link.close()
         self._health.set(link="down", device="closed")
 
     def stop(self) -> None:
@@ -95,32 +85,8 @@ class ModbusToolChanger(ToolChanger):
 
     # -- requests ----------------------------------------------------------------------------------------
     def _request(self, call: Callable[[Any, Dict[str, Any]], Any], attempts: int = 2) -> Any:
-        from pymodbus.exceptions import ModbusException
-
-        if self._client is None:
-            raise LinkDown("tool changer backend is not started", device="tool_changer")
-        error = ""
-        for _ in range(attempts):
-            with self._lock:
-                try:
-                    reply = call(self._client, {self._id_kw: self.device_id})
-                except (ModbusException, OSError) as exc:
-                    error = "%s: %s" % (type(exc).__name__, exc)
-                    try:
-                        self._client.close()
-                    except Exception:
-                        pass
-                    continue
-            if reply.isError():
-                code = getattr(reply, "exception_code", None)
-                if code is None:
-                    error = "no valid answer (%s)" % (reply,)
-                    continue
-                raise DeviceFault("tool changer refused the request (Modbus exception %s)" % code,
-                                  device="tool_changer")
-            return reply
-        raise LinkDown("tool changer %s:%d does not answer (%d attempts, %.0f ms timeout each): %s"
-                       % (self.host, self.port, attempts, self.timeout * 1000, error), device="tool_changer")
+        """One Modbus request with a bounded timeout, retried; raises LinkDown / DeviceFault."""
+        return self._link.request(call, attempts)
 
     def _read_state(self) -> Dict[str, Any]:
         regs = self._request(lambda c, kw: c.read_input_registers(IN_COUPLED, count=IN_COUNT, **kw)).registers
