@@ -126,6 +126,34 @@ def test_a_resumed_basic_skill_runs_the_same_tree(tmp_path):
         s.close()
 
 
+@pytest.mark.parametrize("step", [("WALL_READY", {}, "WALL_READY"),
+                                  ("CHANGE_TOOL", {"tool": "sander"}, "CHANGE_TOOL tool=sander")])
+def test_a_template_step_a_crash_interrupted_is_run_again(tmp_path, step):
+    """A template step (PEMKRE's expansion of GET_TOOL on a tool-changer robot) arrives with its basic skill as
+    the action type; the shipped resume policy reruns WALL_READY and CHANGE_TOOL after a crash (both end in the
+    same state when repeated), instead of failing the tool change."""
+    skill, params, command = step
+    s = _system(tmp_path, {skill: (skill, "basic")})
+    try:
+        assert s.ex.params.resume_policy[skill] == "rerun"
+        pem = s.pemkre
+        pem.start_process(P)
+        s.ex.data_handler.ingest_scan(SITE)
+        pem.s["pending"] = [[skill, params]]
+        na = pem.next_action()
+        pem.set_task_status(na["task"], "in_progress")
+        pem.s["home_done"] = True
+        s.ex.store.put(HHLC, "process", {"iri": P, "specific": "x", "state": "running"})
+        s.ex.store.put(HHLC, "action", {"task": na["task"], "action_type": skill, "parameters": params,
+                                        "raw_parameters": na["parameters"], "skill": skill,
+                                        "skill_kind": "basic", "phase": "running"})
+        assert s.ctrl.resume() == "ended"
+        assert s.locem.sent[:2] == ["STOP", command]
+        assert pem.executed(skill)[0][2:4] == ["succeeded", command]
+    finally:
+        s.close()
+
+
 def test_the_hdict_records_the_skill_while_it_runs_and_with_its_outcome(tmp_path):
     s = System(tmp_path, durations={"MOUNT_TOOL": 0.5}, pemkre=PemkreDouble(skills=MOUNT, validate_lines=False))
     try:
