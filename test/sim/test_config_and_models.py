@@ -138,7 +138,7 @@ def test_a_misspelt_device_section_is_refused_instead_of_leaving_the_device_out(
     with pytest.raises(SimConfigError) as exc:
         load_robot(path)
     assert str(exc.value) == ("%s: robot.compresor: unknown key (allowed: arm, base, compressor, lift, name, namespace, "
-                              "pedestal, scanner, tools)" % path)
+                              "pedestal, scanner, tool_changer, tools)" % path)
 
 
 def test_relative_paths_resolve_against_the_robot_file_and_a_missing_one_is_named(tmp_path):
