@@ -218,30 +218,15 @@ def test_the_node_reads_the_task_parameters_and_leaves_out_the_omitted_ones():
 
 
 # ------------------------------------------------------------- against the real LOCEM and compressor --
+from test_recover_tree import real_locem  # noqa: E402,F401 - the real LOCEM core on the compressor stand-in
+
+
 @pytest.fixture
-def compressor_locem():
+def compressor_locem(real_locem):  # noqa: F811
     """The real LOCEM core with the real compressor bridge (pymodbus) on the compressor stand-in."""
-    bridges = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "bridges")
-    if bridges not in sys.path:
-        sys.path.insert(0, bridges)
-    from bridge_rigs import ROBOT_YAML, CompressorRig
     from test_recover_tree import CoreClient
-    from locem_bridge.bridges.commands_compressor import CompressorCommands
-    from locem_bridge.bridges.config import load_robot_config
-    from locem_bridge.bridges.modbus_compressor import ModbusCompressor
-    from locem_bridge.locem.core import LocemCore
-    rig = CompressorRig(load_robot_config(ROBOT_YAML))
-    core = LocemCore(grace=0.5, stop_timeout=2.0)
-    backend = ModbusCompressor(rig.cfg)
-    backend.start()
-    core.install(CompressorCommands(backend))
-    try:
-        assert backend.wait_ready(5.0), backend.health()
-        yield rig, CoreClient(core)
-    finally:
-        backend.close()
-        core.close()
-        rig.close()
+    rig, core, _backend, _wait = real_locem
+    yield rig, CoreClient(core)
 
 
 def _run_basic(tmp_path, locem, skill, params):
