@@ -5,7 +5,6 @@ the real LOCEM core driving the compressor stand-in over Modbus), the skill kept
 action runs the same tree, and values that cannot be one command word refused before anything is sent."""
 import os
 import re
-import sys
 import time
 
 import pytest
