@@ -185,6 +185,30 @@ def test_sander_in_contact_sands_and_off_the_wall_does_not(rig):
     assert w1 == pytest.approx(expected, rel=0.25)
 
 
+def test_a_pad_centred_past_the_walls_top_edge_still_presses_on_the_wall(rig):
+    """The force reading the UR stand-in gets (World.wall_contact): a sander whose pad centre sits on or up to the
+    pad's radius above the wall's top edge presses with its lower half (a raster's top lane is at the area's top);
+    a pad further up, or a tool without a pad there, touches nothing."""
+    world, arm, comp, wall = rig
+    w1 = next(w for w in world.site.walls if w.id == "wall_1")
+    world.set_base_pose(1.8, 2.5, np.pi / 2)
+    world.step()
+    r = world.tools_cfg["sander"]["pad_radius"]
+
+    def contact(t):
+        face = w1.from_wall_coords(1.8, t, -0.003)                # 3 mm into the wall, in front of the base
+        return world.wall_contact(world.tcp_target_in_arm_base(face, -w1.n))
+
+    world.mount_tool("taping_tool")
+    assert contact(1.0) is not None and contact(w1.height + 0.0005) is None      # no pad: the point alone
+    world.remove_tool()
+    world.mount_tool("sander")
+    for t in (1.0, w1.height, w1.height + 0.5 * r, w1.height + r - 1e-3):
+        depth, _normal = contact(t)
+        assert depth == pytest.approx(0.003, abs=1e-6), t
+    assert contact(w1.height + r + 1e-3) is None
+
+
 def test_collisions_of_base_and_arm_with_walls_are_counted_once_per_contact(rig, robot_cfg):
     world, arm, comp, wall = rig
     poses = robot_cfg["robot"]["arm"]["named_poses"]

@@ -324,17 +324,21 @@ class World:
     def wall_contact(self, tcp_pose: Sequence[float]) -> Optional[Tuple[float, List[float]]]:
         """Contact provider for the UR stand-in (``set_contact_provider``): how deep the TCP (a pose in the UR
         base frame, as the controller reports it) is inside a wall of the site, and that wall's normal out of
-        the wall (into the room) in the UR base frame; None when the TCP touches no wall. Called on the
+        the wall (into the room) in the UR base frame; None when the TCP touches no wall. A tool with a pad
+        (``pad_radius``) touches the wall while any of its pad does: its centre may be up to the pad's radius past
+        the wall's edge (a sander centred on the top edge presses with its lower half). Called on the
         controller's thread: it reads the robot placement cached by the last world step, no PyBullet call."""
         placed = self._ur_base_in_map
         if placed is None:
             return None
         rot, origin = placed
         p = rot.dot(np.asarray(tcp_pose[:3], dtype=float)) + origin
+        tool = self.mounted_tool
+        r = float(self.tools_cfg[tool].get("pad_radius", 0.0)) if tool is not None else 0.0
         best: Optional[Tuple[float, List[float]]] = None
         for wall in self.site.walls:
             s, t, d = wall.to_wall_coords(p)
-            if d >= 0.0 or d < -wall.thickness or not (0.0 <= s <= wall.length and 0.0 <= t <= wall.height):
+            if d >= 0.0 or d < -wall.thickness or not (-r <= s <= wall.length + r and -r <= t <= wall.height + r):
                 continue
             if best is None or -d > best[0]:
                 best = (-d, rot.T.dot(wall.n).tolist())
