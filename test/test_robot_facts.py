@@ -81,8 +81,10 @@ def test_a_robot_with_a_lift_works_in_bands_that_ride_up_with_it():
         assert bb["robot.work.%s.z_band" % work] == [0.10, 1.45]
         assert bb["robot.work.%s.z_range" % work] == [0.10, 2.35]            # 1.45 + the 0.90 m travel
         assert bb["robot.work.%s.band_height" % work] == 1.35
+    assert bb["robot.arm.transit_pose"] == "transit"         # the differential base turns in place: arm folded
     shipped = load_params(DEFAULT_PARAMS_FILE).blackboard_entries()
     assert shipped["robot.lift.fitted"] is False and shipped["robot.lift.range"] == []
+    assert shipped["robot.arm.transit_pose"] == ""             # mecanum: the arm stays at wall_ready
     assert shipped["robot.work.spray.z_band"] == shipped["robot.work.spray.z_range"] == [0.10, 2.15]
     assert shipped["robot.work.spray.band_height"] == 0.0
 
@@ -96,6 +98,8 @@ def test_a_robot_with_a_lift_works_in_bands_that_ride_up_with_it():
     (lambda r: r["tools"]["spray_gun"]["wall_work"].update(reach=1.0), "robot.tools.spray_gun.wall_work",
      "reach"),
     (lambda r: r["arm"].pop("reach"), "robot.arm.reach", "missing key"),
+    (lambda r: r["arm"].update(transit_pose="tucked"), "robot.arm.transit_pose",
+     "'tucked' is not a named pose of the arm"),
 ])
 def test_a_bad_robot_fact_is_refused_naming_the_robot_file_and_key(tmp_path, change, key, problem):
     path = _robot_file(tmp_path, change)

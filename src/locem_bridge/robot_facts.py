@@ -18,6 +18,10 @@ HICEM puts the result on the root blackboard (:meth:`RobotFacts.blackboard_entri
 ``robot.work.<work>.base_standoff`` m, base centre to wall: flange_distance + tool length + tool standoff
 ``robot.work.<work>.tool_standoff`` m, TCP to wall while working (the tool's ``standoff``; 0 for contact tools)
 ``robot.work.<work>.work_width``    m, width worked by one pass: spray fan on the wall, pad diameter, tape width
+``robot.arm.transit_pose``          the named arm pose the arm folds into while the base drives
+                                    (``robot.arm.transit_pose``: a non-holonomic base turns in place, and the arm
+                                    held out at 'wall_ready' would sweep into a wall beside it); '' when the arm
+                                    stays where it is (at 'wall_ready')
 ``robot.lift.fitted``               true when the arm rides on a lift (``robot.lift``), else false
 ``robot.lift.range``                m, [bottom, top] arm mount heights of the lift (``lift.range``); [] without one
 ``robot.work.<work>.z_band``        m, [z_min, z_max] reached from one base pose and one lift height: with a lift,
@@ -112,8 +116,10 @@ class RobotFacts:
     """Every derived robot fact: ``work`` (work name -> :class:`WorkFacts`), ``tools``, ``reach``, ``tcp_bound``."""
 
     def __init__(self, name: str, tools: List[str], reach: float, bound: float, work: Dict[str, WorkFacts],
-                 path: str = "", lift_range: Optional[List[float]] = None) -> None:
+                 path: str = "", lift_range: Optional[List[float]] = None, transit_pose: str = "") -> None:
         self.name = name
+        #: named arm pose for driving ('' = the arm stays where it is)
+        self.transit_pose = transit_pose
         #: [bottom, top] of the lift carrying the arm; None without a lift
         self.lift_range = lift_range
         self.tools = tools
@@ -126,6 +132,7 @@ class RobotFacts:
         """``robot.*`` entries (every leaf and every sub-mapping under its dotted path, as ``cfg.*``)."""
         out: Dict[str, Any] = {prefix + ".name": self.name, prefix + ".tools": list(self.tools),
                                prefix + ".reach": self.reach, prefix + ".tcp_bound": self.tcp_bound,
+                               prefix + ".arm.transit_pose": self.transit_pose,
                                prefix + ".lift.fitted": self.lift_range is not None,
                                prefix + ".lift.range": list(self.lift_range or [])}
         works: Dict[str, Any] = {}
@@ -189,7 +196,7 @@ def derive(robot: Mapping[str, Any], tuning: Optional[Mapping[str, Any]] = None,
                                   key="%s.lane_ratio" % work)
         works[work] = WorkFacts(work, name, entries)
     return RobotFacts(str(robot.get("name", "")), list(robot["tools"]), _r(robot["arm"]["reach"]), tcp_bound(robot),
-                      works, path, lift_range)
+                      works, path, lift_range, str(robot["arm"].get("transit_pose") or ""))
 
 
 def load_facts(robot_file: Optional[str] = None, tuning: Optional[Mapping[str, Any]] = None,

@@ -52,7 +52,7 @@ ROBOT_KEYS: Dict[str, Sequence[str]] = {
     "robot.lift": ("range", "max_velocity", "acceleration", "tolerance", "drive", "eds", "deadline"),
     "robot.lift.drive": ("node_id", "counts_per_m", "velocity_units_per_m_s", "heartbeat_ms", "tpdo_period_ms"),
     "robot.arm": ("backend", "model", "reach", "description", "mount", "joint_names", "controller", "named_poses",
-                  "home_via", "wall_ready_flange", "deadline"),
+                  "home_via", "transit_pose", "wall_ready_flange", "deadline"),
     "robot.arm.description": ("package", "urdf"),
     "robot.arm.mount": ("xyz", "rpy"),
     "robot.arm.controller": ("host", "dashboard_port", "script_port", "rtde_port", "rtde_frequency",
@@ -322,6 +322,9 @@ def _validate(data: Dict[str, Any], base_dir: Optional[str] = None) -> Dict[str,
                               allowed="z in robot.lift.range [%g, %g]" % (lo, hi))
     if arm.get("home_via") is not None and get(arm, "home_via", "robot.arm", str) not in poses:
         raise ConfigError("%r is not a named pose of the arm" % arm["home_via"], key="robot.arm.home_via",
+                          allowed=sorted(poses))
+    if arm.get("transit_pose") is not None and get(arm, "transit_pose", "robot.arm", str) not in poses:
+        raise ConfigError("%r is not a named pose of the arm" % arm["transit_pose"], key="robot.arm.transit_pose",
                           allowed=sorted(poses))
     if "wall_ready_flange" in arm:
         arm["wall_ready_flange"] = vec(arm, "wall_ready_flange", "robot.arm", 3)

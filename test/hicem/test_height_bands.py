@@ -48,7 +48,7 @@ def _raster(band_height, gap):
     return rig.bb.get("s"), rig.bb.get("n")
 
 
-def test_an_area_taller_than_one_band_is_cut_into_bands_bottom_first_no_lane_twice():
+def test_an_area_taller_than_one_band_is_cut_into_bands_serpentine_no_lane_twice():
     # wall_1_area_1: 4.8 m wide, 2.5 m high from z 0: 3 columns of 1.6 m
     one, n = _raster(0.0, 0.15)
     assert n == 3 and [s["height"] for s in one] == [2.5] * 3 and [s["z"] for s in one] == [[0.0, 2.5]] * 3
@@ -56,7 +56,11 @@ def test_an_area_taller_than_one_band_is_cut_into_bands_bottom_first_no_lane_twi
     assert n == 6 and [s["index"] for s in secs] == list(range(6))
     # two bands of (2.5 - 0.15) / 2 = 1.175 m: the upper one starts one lane spacing above the lower one's top
     assert [s["z"] for s in secs[:2]] == [pytest.approx([0.0, 1.175]), pytest.approx([1.325, 2.5])]
-    for low, high, col in zip(secs[::2], secs[1::2], one):
+    # bottom first in the first column, then each column starts in the band the one before ended in (the lift
+    # moves once between columns)
+    assert [s["origin"][2] for s in secs] == [pytest.approx(z) for z in (0.0, 1.325, 1.325, 0.0, 0.0, 1.325)]
+    pairs = [(secs[k], secs[k + 1]) if k % 4 == 0 else (secs[k + 1], secs[k]) for k in range(0, 6, 2)]
+    for (low, high), col in zip(pairs, one):
         assert low["approach"] == high["approach"] == col["approach"]
         assert low["origin"][:2] == high["origin"][:2] == col["origin"][:2]
         assert low["origin"][2] == pytest.approx(0.0) and high["origin"][2] == pytest.approx(1.325)

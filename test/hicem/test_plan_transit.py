@@ -38,3 +38,31 @@ def test_bad_poses_are_refused_with_what_was_given():
     status, _ = plan([1.0, 2.0], [1.0, 2.0, 0.0], rig)       # the port error is the action's failure reason
     assert status == Status.FAILURE and "here and goal must be [x, y, theta]" in rig.reason()
     assert "got [1.0, 2.0]" in rig.reason()
+
+
+ARM = '<CheckArmTransit pose="{@robot.arm.transit_pose}" here="{here}" waypoints="{w}"/>'
+
+
+def folds(transit_pose, here, waypoints):
+    rig = Rig(ARM, cfg={"robot.arm.transit_pose": transit_pose})
+    rig.bb.set("here", here)
+    rig.bb.set("w", waypoints)
+    return rig.tree.tick()
+
+
+def test_the_arm_folds_for_driving_only_on_a_robot_with_a_transit_pose_and_only_when_the_base_moves():
+    here = {"pose": [0.6, 1.78, math.pi / 2], "twist": [0, 0, 0]}
+    sideways = [[1.2, 1.78, math.pi / 2]]                 # a differential base turns in place for this
+    assert folds("transit", here, sideways) == Status.SUCCESS
+    assert folds("transit", here, [[0.6, 1.78, math.pi / 2 + 0.3]]) == Status.SUCCESS      # a turn alone
+    assert folds("transit", here, [[0.605, 1.78, math.pi / 2 + 0.01]]) == Status.FAILURE   # within tolerance
+    assert folds("", here, sideways) == Status.FAILURE    # the shipped mecanum robot: the arm stays out
+    # without waypoints (after DriveSafely: back to wall_ready) only the robot fact counts
+    assert Rig('<CheckArmTransit pose="transit"/>').tree.tick() == Status.SUCCESS
+
+
+def test_bad_waypoints_for_the_fold_are_refused_with_what_was_given():
+    rig = Rig(ARM, cfg={"robot.arm.transit_pose": "transit"})
+    rig.bb.set("here", [0.6, 1.78, 0.0])
+    rig.bb.set("w", [[1.2, 1.78]])
+    assert rig.tree.tick() == Status.FAILURE and "every waypoint must be [x, y, theta]" in rig.reason()

@@ -95,14 +95,18 @@ def test_every_action_tree_is_a_composite_skill_realizing_its_task_types_capabil
         assert composite[action].offered, action
 
 
+# every tree that drives (DriveSafely) may fold the arm into the robot's transit pose first (MOVE_HOME)
 @pytest.mark.parametrize("tree, params, invokes, operator, devices", [
-    ("GET_TOOL", [("tool", True)], {"WALL_READY", "HOME", "MOUNT_TOOL", "GET_POSE", "GOTO"}, True, ("arm", "base")),
-    ("TAPE_LINE", [("line", True)], {"APPLY_TAPE", "WALL_READY", "GET_POSE", "GOTO"}, False, ("arm", "base")),
-    ("VALIDATE_TAPE_LINE", [("line", True)], {"APPLY_TAPE_START", "WALL_READY", "GET_POSE", "GOTO"}, True,
+    ("GET_TOOL", [("tool", True)], {"WALL_READY", "HOME", "MOUNT_TOOL", "GET_POSE", "GOTO", "MOVE_HOME"}, True,
      ("arm", "base")),
-    ("SPRAY_AREA", [("area", True)], {"SPRAY_AREA", "WALL_READY", "GET_POSE", "GOTO"}, False,
+    ("TAPE_LINE", [("line", True)], {"APPLY_TAPE", "WALL_READY", "GET_POSE", "GOTO", "MOVE_HOME"}, False,
+     ("arm", "base")),
+    ("VALIDATE_TAPE_LINE", [("line", True)], {"APPLY_TAPE_START", "WALL_READY", "GET_POSE", "GOTO", "MOVE_HOME"},
+     True, ("arm", "base")),
+    ("SPRAY_AREA", [("area", True)], {"SPRAY_AREA", "WALL_READY", "GET_POSE", "GOTO", "MOVE_HOME"}, False,
      ("arm", "base", "compressor")),
-    ("GO_HOME", [("location", False)], {"WALL_READY", "HOME", "GET_POSE", "GOTO"}, False, ("arm", "base")),
+    ("GO_HOME", [("location", False)], {"WALL_READY", "HOME", "GET_POSE", "GOTO", "MOVE_HOME"}, False,
+     ("arm", "base")),
     ("SCAN", [], {"SCAN"}, False, ("scanner",)),
     ("RECOVER", [], {"RESET_ARM", "WALL_READY"}, True, ("arm",)),
 ])

@@ -3,7 +3,7 @@
 TagIdNameToObjectId (PEMKRE symbol → stored object id), GetTapingPosition (approach pose for a joint line),
 GetTapePath (line endpoints and wall normal), GetTapeSegments (a joint cut into pieces taped from one base pose
 each), GetAreaRaster (base stations and raster rectangles for an area), PlanTransit (base waypoints that turn
-away from the walls). They read the scanned walls, joints and areas through the HDH (the paper's data handler).
+away from the walls), CheckArmTransit (whether the arm folds into its transit pose while the base drives). They read the scanned walls, joints and areas through the HDH (the paper's data handler).
 
 Like every node they hold no number of their own: standoffs, offsets and tolerances arrive through ports, by
 default from the robot facts (``robot.work.taping.*``, ``robot.tools``: the robot file, derived by
@@ -290,7 +290,8 @@ class GetAreaRaster(Leaf):
                    "area's ends (spray run-in at the outer edges; sections meet exactly in between)"),
         input_port("band_height", FLOAT, "0.0", "m", "tallest section (e.g. {@robot.work.spray.band_height}: what "
                    "the arm covers from one lift height); a taller area is cut into bands of equal height, bottom "
-                   "first in each column; 0: one band"),
+                   "first in the first column, then alternating (the next column starts in the band the last one "
+                   "ended in: the lift moves once between two columns, not twice); 0: one band"),
         input_port("band_gap", FLOAT, "0.0", "m", "a band starts this far above the band below it (the lane "
                    "spacing: its bottom lane is one lane above the lower band's top lane, no lane twice)"),
         output_port("sections", JSON, None, "", "list of {approach, origin, u, width, height, normal, index, z}"),
@@ -327,7 +328,7 @@ class GetAreaRaster(Leaf):
             s0 = -ext if i == 0 else 0.0                   # along u, relative to the section's own start
             s1 = w + ext if i == count - 1 else w
             o = [o[k] + a["u"][k] * s0 for k in range(3)]
-            for b in range(bands):
+            for b in (range(bands) if i % 2 == 0 else reversed(range(bands))):
                 ob = list(o)
                 ob[2] = o[2] + b * (bh + gap)
                 sections.append({"approach": [mx + n[0] / nxy * bs, my + n[1] / nxy * bs, heading], "origin": ob,
@@ -373,5 +374,40 @@ class PlanTransit(Leaf):
         return Status.SUCCESS
 
 
+class CheckArmTransit(ConditionLeaf):
+    DESCRIPTION = ("SUCCESS when the arm folds into its transit pose (robot fact robot.arm.transit_pose, a named "
+                   "arm pose) while the base drives: the robot names one (a non-holonomic base turns in place, "
+                   "and an arm held out at 'wall_ready' would sweep into a wall beside it) and, when waypoints are "
+                   "given, they move the base from here (more than move_tolerance or turn_tolerance). FAILURE "
+                   "otherwise: the arm stays where it is.")
+    PORTS = (
+        input_port("pose", STRING, "{@robot.arm.transit_pose}", "", "the transit pose's name; empty: none"),
+        input_port("here", ANY, "", "m, m, rad", "current pose: [x, y, theta] or GET_POSE's result; empty: "
+                   "the base is taken to move"),
+        input_port("waypoints", ANY, "", "m, m, rad", "PlanTransit's waypoints; empty: the base is taken to move"),
+        input_port("move_tolerance", FLOAT, "0.01", "m", "a waypoint nearer than this (and turned less than "
+                   "turn_tolerance) does not move the base"),
+        input_port("turn_tolerance", FLOAT, "0.02", "rad", "see move_tolerance"),
+    )
+
+    def on_tick(self) -> Status:
+        if not str(self.get("pose") or "").strip():
+            return Status.FAILURE
+        here, waypoints = self.get("here"), self.get("waypoints")
+        if isinstance(here, dict):
+            here = here.get("pose")
+        if not isinstance(here, (list, tuple)) or not isinstance(waypoints, (list, tuple)):
+            return Status.SUCCESS
+        if len(here) != 3 or any(not isinstance(w, (list, tuple)) or len(w) != 3 for w in waypoints):
+            raise PortError("%s: here and every waypoint must be [x, y, theta], got %r, %r"
+                            % (self.name, here, waypoints))
+        x, y, th = (float(v) for v in here)
+        for w in waypoints:
+            if (math.hypot(float(w[0]) - x, float(w[1]) - y) > self.get("move_tolerance")
+                    or abs(wrap_angle(float(w[2]) - th)) > self.get("turn_tolerance")):
+                return Status.SUCCESS
+        return Status.FAILURE
+
+
 LIBRARY = (TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments, CheckLift, GetLiftHeight,
-           GetAreaRaster, PlanTransit)
+           GetAreaRaster, PlanTransit, CheckArmTransit)
