@@ -22,7 +22,7 @@ The same numbers go to ``<results_dir>/<run>/bench.json`` (the job's report fold
 job wrote none). Exit status: 0 when every process of the job succeeded, 1 when the job failed, timed out or
 never ran (the split is still printed for what ran), 2 when the benchmark could not start.
 
-Run:  tools/run.sh python bench/bench_job.py [--time-scale 5] [--site FILE]
+Run:  tools/run.sh python bench/bench_job.py [--time-scale 5] [--site FILE] [--robot NAME|FILE]
       [--validate-lines true|false] [--keep] [--timeout 600]
 Without --keep, the run's PEMKRE store, HDICT and ROS logs are deleted at the end; the results folder (report,
 pictures, bench.json), launch.log and the PEMKRE call log stay.
@@ -81,10 +81,19 @@ def device_ports(robot_path: str) -> List[Tuple[str, int]]:
     with open(robot_path, encoding="utf-8") as handle:
         robot = (yaml.safe_load(handle) or {}).get("robot", {})
     ctl = robot.get("arm", {}).get("controller", {})
-    out = [("127.0.0.1", int(ctl[k])) for k in ("dashboard_port", "script_port", "rtde_port") if k in ctl]
-    if "port" in robot.get("compressor", {}):
-        out.append(("127.0.0.1", int(robot["compressor"]["port"])))
+    out = [(str(ctl.get("host", "127.0.0.1")), int(ctl[k])) for k in ("dashboard_port", "script_port", "rtde_port")
+           if k in ctl]
+    for device in ("compressor", "tool_changer"):
+        if "port" in robot.get(device, {}):
+            out.append((str(robot[device].get("host", "127.0.0.1")), int(robot[device]["port"])))
     return out
+
+
+def robot_path(robot: str) -> str:
+    """``--robot``: a robot YAML's path, or the name of one in config/robots/."""
+    if os.sep in robot or robot.endswith((".yaml", ".yml")):
+        return os.path.abspath(robot)
+    return os.path.join(ROOT, "config", "robots", robot + ".yaml")
 
 
 def load_steps(path: str) -> List[Tuple[str, str]]:
@@ -332,6 +341,8 @@ def main() -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     ap.add_argument("--time-scale", type=float, default=5.0, help="sim seconds per wall second (default 5)")
     ap.add_argument("--site", default=os.path.join(ROOT, "config", "sites", "default.yaml"), help="site YAML")
+    ap.add_argument("--robot", default="rbkairos_ur10e",
+                    help="robot of config/robots/ by name, or a robot YAML's path (default rbkairos_ur10e)")
     ap.add_argument("--validate-lines", choices=("true", "false"), default="false",
                     help="the automatic operator validates each joint before taping")
     ap.add_argument("--keep", action="store_true", help="keep the PEMKRE store, HDICT and ROS logs too")
@@ -349,7 +360,10 @@ def main() -> int:
     if not os.path.isfile(site):
         print("bench_job: --site %s is not a file" % site, file=sys.stderr)
         return 2
-    robot = os.path.join(ROOT, "config", "robots", "rbkairos_ur10e.yaml")
+    robot = robot_path(args.robot)
+    if not os.path.isfile(robot):
+        print("bench_job: --robot %s: no such robot file (%s)" % (args.robot, robot), file=sys.stderr)
+        return 2
     steps = load_steps(os.path.join(ROOT, "config", "jobs", "plasterboard.yaml"))
 
     ports = device_ports(robot)
@@ -376,7 +390,7 @@ def main() -> int:
     os.environ.pop("ROS_HOSTNAME", None)
     os.environ.pop(ENV_VAR, None)
     argv = ["roslaunch", "-p", str(port), "locem_bridge", "plasterboard.launch", "operator:=auto",
-            "results_dir:=%s" % results_dir, "state_dir:=%s" % state_dir, "site:=%s" % site,
+            "results_dir:=%s" % results_dir, "state_dir:=%s" % state_dir, "site:=%s" % site, "robot:=%s" % robot,
             "time_scale:=%g" % args.time_scale, "validate_lines:=%s" % args.validate_lines,
             "hmi_port:=%d" % hmi_port, "output:=log", "process_timeout:=%d" % max(60, int(args.timeout - 120))]
     load_at_start = os.getloadavg()[0]

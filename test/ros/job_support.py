@@ -98,7 +98,8 @@ def wait_until(predicate: Callable[[], Any], timeout: float, period: float = 0.0
 
 # ---------------------------------------------------------------------------------------------------- HICEM
 class LocemResults:
-    """Results of the LOCEM commands that succeeded, from /locem/status (name -> list of result objects)."""
+    """Results of the LOCEM commands that succeeded, from /locem/status (name -> list of result objects, each
+    with the command string as received under ``_command``)."""
 
     def __init__(self, ns: str = "/locem") -> None:
         self._lock = threading.Lock()
@@ -112,6 +113,8 @@ class LocemResults:
             result = json.loads(m.result or "{}")
         except ValueError:
             result = {"unparsed": m.result}
+        if isinstance(result, dict):
+            result.setdefault("_command", m.command)
         with self._lock:
             self._results.setdefault(m.name, []).append(result)
 
