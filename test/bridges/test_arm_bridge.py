@@ -92,6 +92,12 @@ def test_move_l_reaches_the_pose_within_1mm_and_move_j_the_joints(rig, core):
     assert np.max(np.abs(np.subtract(standin.get_joint_positions(), q))) < 1e-3
     r = run(core, "MOVE_HOME")
     assert r.success and np.max(np.abs(np.subtract(standin.get_joint_positions(), HOME))) < 1e-3
+    assert r.result["duration_s"] > 0.0
+    # a move to where the arm stands is answered at once without a motion (duration 0), joint and linear alike
+    for again in ("MOVE_HOME", "MOVE_L %s" % " ".join("%.6f" % v for v in standin.get_tcp_pose())):
+        r = run(core, again)
+        assert r.success and r.result["duration_s"] == 0.0, (again, r.message, r.result)
+    assert np.max(np.abs(np.subtract(standin.get_joint_positions(), HOME))) < 1e-3
     assert run(core, "MOVE_HOME nowhere").code.value == "INVALID_ARGUMENT"
 
 

@@ -185,6 +185,8 @@ def test_lift_reaches_the_height_and_the_arm_mount_moves_with_it(diff, core):
     assert r.result["duration_s"] < nominal + 1.0, (r.result["duration_s"], nominal)
     assert run(core, "LIFT z=%g" % lo).success
     assert abs(diff.world.lift_height() - lo) < 1e-3
+    again = run(core, "LIFT z=%g" % lo)                   # already there: answered at once, no set-point
+    assert again.success and again.result["duration_s"] == 0.0 and again.result["error"] < 1e-3, again.result
 
 
 def test_lift_refuses_a_height_outside_its_range_naming_the_range_and_nothing_moves(diff, core):

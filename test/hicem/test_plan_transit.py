@@ -6,7 +6,8 @@ from py_trees.common import Status
 
 from test_nodes import Rig
 
-CFG = {"cfg.site.locations": {"home": [1.4, 1.4, 0.7854]}, "cfg.site.max_turn_near_walls": 0.5}
+CFG = {"cfg.site.locations": {"home": [1.4, 1.4, 0.7854]}, "cfg.site.max_turn_near_walls": 0.5,
+       "robot.arm.transit_pose": ""}
 BODY = '<PlanTransit here="{here}" goal="{goal}" transit="{@cfg.site.locations.home}" waypoints="{w}"/>'
 
 
@@ -31,6 +32,13 @@ def test_a_large_turn_is_made_at_the_transit_point_and_get_pose_results_are_read
     # going home (the goal is the transit point): out keeping the heading, then the turn there, nothing twice
     status, w = plan([2.4, 1.7, math.pi / 2], [1.4, 1.4, 0.7854])
     assert w == [[1.4, 1.4, math.pi / 2], [1.4, 1.4, 0.7854]]
+
+
+def test_a_robot_whose_arm_folds_for_driving_turns_on_the_way_without_the_detour():
+    # the differential robot turns in place on every move; folded, its chassis alone sweeps
+    rig = Rig(BODY, cfg=dict(CFG, **{"robot.arm.transit_pose": "transit"}))
+    status, w = plan({"pose": [2.4, 1.7, math.pi / 2], "twist": [0, 0, 0]}, [1.7, 2.4, 0.0], rig)
+    assert status == Status.SUCCESS and w == [[1.7, 2.4, 0.0]]
 
 
 def test_bad_poses_are_refused_with_what_was_given():

@@ -10,8 +10,9 @@ Heights ``z`` are the arm mount's (the arm's base_link origin) above base_footpr
 counts, 0x6064 / 0x607A) is ``(z - range[0]) x counts_per_m``. A move: target position 0x607A (SDO), controlword
 new set-point (bit 4, change immediately bit 5; SDO, so it is ordered after the target), the drive acknowledges
 (statusword bit 12), the bit is cleared; done when the drive reports target reached (bit 10) and the position is
-within ``tolerance`` of the goal. Halt (STOP, cancel): controlword bit 8 (the drive brakes at its deceleration
-and holds). Deadline (:class:`~.errors.MotionTimeout`, the lift halted first)::
+within ``tolerance`` of the goal (a LIFT to where the axis already stands so is answered at once, no set-point
+sent). Halt (STOP, cancel): controlword bit 8 (the drive brakes at its deceleration and holds). Deadline
+(:class:`~.errors.MotionTimeout`, the lift halted first)::
 
     deadline = scale x (trapezoid time of the move at max_velocity / acceleration) + margin
 
@@ -197,9 +198,12 @@ class Cia402Lift(Lift):
                              % (z, lo, hi), device="lift", argument="z")
         self._ready()
         start = self.height()
-        budget = self.deadline_scale * self._travel_time(abs(z - start)) + self.deadline_margin
         t0 = time.monotonic()
         node = self.node
+        if abs(z - start) <= self.tolerance and (node.tpdo_values.get(0x6041) or 0) & SW_TARGET_REACHED:
+            # at rest where it is asked to go (the next band of a section, a piece at the same height): no set-point
+            return {"height": round(start, 4), "error": round(abs(start - z), 4), "duration_s": 0.0}
+        budget = self.deadline_scale * self._travel_time(abs(z - start)) + self.deadline_margin
         move = {"z": z}
         with self._lock:
             self._moving = move

@@ -67,6 +67,7 @@ STOP_DECEL_L = 5.0                       # m/s^2 used by stopL
 MOTION_MARGIN_S = Arm.MOTION_MARGIN_S    # s, default deadline margin (the three from :class:`~.interfaces.Arm`)
 JOINT_TOL = 2e-3                         # rad, "at the target" for joint moves
 LINEAR_TOL = 1e-3                        # m, "at the target" for linear moves
+ALREADY_THERE = 0.25                     # of the tolerances: a move this close to its target is not sent
 REQUEST_TIMEOUT = 3.0
 PATH_UPLOAD_S = Arm.PATH_UPLOAD_S    # s, budget for ur_rtde's script re-upload before a path starts
 PATH_CALL_TIMEOUT = 10.0                 # s, the movePath request (stop script, upload, wait until it runs)
@@ -284,12 +285,26 @@ class UrRtdeArm(Arm):
     def move_joints(self, waiter: Waiter, q: Sequence[float], speed: float, accel: float) -> Dict[str, Any]:
         st = self._ready()
         travel = max(abs(a - b) for a, b in zip(q, st["q"]))
+        if travel <= ALREADY_THERE * JOINT_TOL and self._at_rest(st):
+            return self._already_there(st)
         return self._motion(waiter, "moveJ", list(q), speed, accel, travel, target_q=list(q))
 
     def move_linear(self, waiter: Waiter, pose: Sequence[float], speed: float, accel: float) -> Dict[str, Any]:
         st = self._ready()
         travel = distance(pose[:3], st["tcp"][:3]) + ROTATION_WEIGHT * angle_between(pose, st["tcp"])
+        if travel <= ALREADY_THERE * LINEAR_TOL and self._at_rest(st):
+            return self._already_there(st)
         return self._motion(waiter, "moveL", list(pose), speed, accel, travel, target_pose=list(pose))
+
+    def _at_rest(self, st: Dict[str, Any]) -> bool:
+        """The arm stands still outside force mode (a move to where it is then has nothing to do)."""
+        return self._force is None and max(abs(v) for v in st["qd"]) < 1e-4
+
+    @staticmethod
+    def _already_there(st: Dict[str, Any]) -> Dict[str, Any]:
+        """The result of a move whose target is where the arm stands: nothing is sent to the controller (a
+        motion of no length shows no movement, and telling it from one that has not started cost 0.2 s)."""
+        return {"q": st["q"], "tcp_pose": st["tcp"], "duration_s": 0.0}
 
     def move_path(self, waiter: Waiter, poses: Sequence[Sequence[float]], speed: float, accel: float,
                   blends: Sequence[float]) -> Dict[str, Any]:

@@ -343,13 +343,17 @@ class PlanTransit(Leaf):
     DESCRIPTION = ("Base waypoints from the current pose to goal [x, y, theta] (map). A turn larger than max_turn "
                    "is not made next to a wall, where the corners of the turning base would sweep into it: the "
                    "base first drives to the transit point keeping its heading, turns there, then drives to the "
-                   "goal. Otherwise the goal alone.")
+                   "goal. Otherwise the goal alone, and always on a robot whose arm folds for driving (a transit "
+                   "pose is named: a non-holonomic base, which turns in place on every move anyway; folded, only "
+                   "its chassis sweeps, and the work poses keep it clear of the walls).")
     PORTS = (
         input_port("here", ANY, None, "m, m, rad", "current pose: [x, y, theta] or GET_POSE's result"),
         input_port("goal", FLOAT_LIST, None, "m, m, rad", "x y theta to reach"),
         input_port("transit", FLOAT_LIST, "{@cfg.site.locations.home}", "m", "x y (theta ignored) with room "
                    "to turn"),
         input_port("max_turn", FLOAT, "{@cfg.site.max_turn_near_walls}", "rad", "largest turn made on the way"),
+        input_port("transit_pose", STRING, "{@robot.arm.transit_pose}", "", "the arm's pose for driving; "
+                   "named: any turn is made on the way (see above)"),
         output_port("waypoints", JSON, None, "", "list of [x, y, theta] poses for GOTO, in order"),
     )
 
@@ -362,7 +366,7 @@ class PlanTransit(Leaf):
             raise PortError("%s: here and goal must be [x, y, theta] and transit [x, y, ...], got %r, %r, %r"
                             % (self.name, here, goal, transit))
         turn = abs(wrap_angle(float(goal[2]) - float(here[2])))
-        if turn <= self.get("max_turn"):
+        if turn <= self.get("max_turn") or str(self.get("transit_pose") or "").strip():
             waypoints = [goal]
         else:
             waypoints = [[transit[0], transit[1], float(here[2])], [transit[0], transit[1], float(goal[2])], goal]
