@@ -35,7 +35,12 @@ the mecanum base. A purely lateral request (``MOVE_BASE_REL dy=0.5``) thus becom
 drive and a quarter turn back. The deadline::
 
     deadline = scale x (distance / speed + (turn_1 + turn_2) / (0.8 max_angular_velocity)
-                        + 2 speed / linear_acceleration + 3 max_angular_velocity / angular_acceleration) + margin
+                        + 2 speed / linear_acceleration + 3 max_angular_velocity / angular_acceleration
+                        + one correction) + margin
+
+(one correction, when the base has to move: :data:`REAIM_TURNS` / (0.8 max_angular_velocity) + 2
+max_angular_velocity / angular_acceleration + :data:`REAIM_CREEP_S`: a drive that ends out of the tolerance aims
+again.)
 
 Heartbeat consumer: a drive is silent when no heartbeat arrived for ``heartbeat_ms`` x ``consumer_timeout_factor``
 (the robot YAML: 100 ms x 2 = 200 ms); the cycle that notices it commands every wheel to zero, so the base stands
@@ -72,6 +77,11 @@ log = logging.getLogger(__name__)
 SW_FAULT = 0x08
 MASTER_TIMEOUT_MS = 500
 ALIGN_TOLERANCE = 0.02      # rad: a differential base aims at the goal this closely before it drives
+# A differential GOTO's deadline allows one correction: a drive that ends out of the position tolerance across its
+# heading (a few mm past the tolerance on a busy machine, whose control cycles come late) aims again, at most a
+# quarter turn, creeps the rest and makes the last turn from there, up to a half turn more than planned (rad, s).
+REAIM_TURNS = 1.5 * math.pi
+REAIM_CREEP_S = 1.0
 STEER_DISTANCE = 0.05       # m: it steers onto the bearing while farther than this from the goal
 
 
@@ -533,6 +543,9 @@ class Cia402Base(Base):
             last = abs(wrap_angle(theta - heading))
             budget = self.deadline_scale * (dist / speed + (aim + last) / (0.8 * self.max_ang)
                                             + 2.0 * speed / self.lin_accel + 3.0 * self.max_ang / self.ang_accel)
+            if dist > tolerance:                # one correction: ended out of the tolerance across its heading, it
+                budget += self.deadline_scale * (REAIM_TURNS / (0.8 * self.max_ang)       # aims again (at most
+                                                 + 2.0 * self.max_ang / self.ang_accel + REAIM_CREEP_S)   # pi/2)
         budget += self.deadline_margin
         goal = {"x": x, "y": y, "theta": wrap_angle(theta), "tolerance": tolerance,
                 "angle_tolerance": angle_tolerance, "speed": speed, "reached": threading.Event()}

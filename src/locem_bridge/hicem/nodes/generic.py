@@ -126,7 +126,8 @@ class WaitForDevices(Leaf):
                    "(check=links: its link is up; check=ready: link up, device 'ok', no fault), then writes the "
                    "STATUS result and succeeds. Waits between reads on HICEM's own clock, so a LOCEM that does "
                    "not answer yet (restarting, NOT_READY while it makes its devices safe) is waited for too; a "
-                   "STATUS without an answer within poll seconds is cancelled and read again. FAILURE after "
+                   "STATUS without an answer within poll seconds is cancelled and read again; an answered one is "
+                   "a heartbeat of the HEM's module 'locem' (as the ROS adapter's own STATUS poll). FAILURE after "
                    "timeout seconds, naming what was still not ready.")
     PORTS = (
         input_port("timeout", FLOAT, None, "s", "give up after this long"),
@@ -180,6 +181,8 @@ class WaitForDevices(Leaf):
                 self._why = ("LOCEM answers %s to STATUS: %s" % (reply.code, reply.message) if reply is not None
                              else "STATUS ended without a reply")
             else:
+                if self.ctx.health is not None:      # LOCEM answered: a sign of life, as the ROS adapter's own STATUS
+                    self.ctx.health.heartbeat("locem")     # poll counts it (the guarded commands after it see it)
                 down = devices_not_ready(reply.result, self.get("devices"), self.get("check") == "links")
                 if not down:
                     self.set("status", reply.result)
