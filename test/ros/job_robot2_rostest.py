@@ -70,9 +70,10 @@ class JobRobot2Test(unittest.TestCase):
         for process, action in ((SPRAYING, "SPRAY_AREA"), (SANDING, "SAND_AREA")):
             self.assertEqual(kpi_count(self.report, action, "failed"), 0, action)
             self.assertEqual(len([a for a, _t in self.timeline.actions(process) if a == action]), 2, action)
-        # two height bands per section: more raster commands than the first robot's 4 sections per area
-        for action in ("SPRAY_AREA", "SAND_AREA"):
-            self.assertGreaterEqual(len(self.locem.of(action)), 2 * 2 * 4, action)
+        # two height bands per section, 2 areas: 4 spray sections per area (0.60 m), 3 sand sections (0.80 m); the
+        # first robot sends 8 of each (4 sections per area, one band)
+        for action, sections in (("SPRAY_AREA", 4), ("SAND_AREA", 3)):
+            self.assertGreaterEqual(len(self.locem.of(action)), 2 * 2 * sections, action)
         folds = [r for r in self.locem.of("MOVE_HOME") if "pose=transit" in r["_command"].split()]
         gotos = self.locem.of("GOTO")
         self.assertGreater(len(folds), 0)
