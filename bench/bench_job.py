@@ -89,13 +89,6 @@ def device_ports(robot_path: str) -> List[Tuple[str, int]]:
     return out
 
 
-def robot_path(robot: str) -> str:
-    """``--robot``: a robot YAML's path, or the name of one in config/robots/."""
-    if os.sep in robot or robot.endswith((".yaml", ".yml")):
-        return os.path.abspath(robot)
-    return os.path.join(ROOT, "config", "robots", robot + ".yaml")
-
-
 def load_steps(path: str) -> List[Tuple[str, str]]:
     with open(path, encoding="utf-8") as handle:
         doc = yaml.safe_load(handle) or {}
@@ -360,9 +353,12 @@ def main() -> int:
     if not os.path.isfile(site):
         print("bench_job: --site %s is not a file" % site, file=sys.stderr)
         return 2
-    robot = robot_path(args.robot)
-    if not os.path.isfile(robot):
-        print("bench_job: --robot %s: no such robot file (%s)" % (args.robot, robot), file=sys.stderr)
+    from locem_bridge.common.config_errors import ConfigError
+    from locem_bridge.ros.main_job import resolve_robot     # tools/main.sh's --robot, the same names and paths
+    try:
+        robot = resolve_robot(args.robot)
+    except ConfigError as exc:
+        print("bench_job: %s" % exc, file=sys.stderr)
         return 2
     steps = load_steps(os.path.join(ROOT, "config", "jobs", "plasterboard.yaml"))
 

@@ -3,7 +3,8 @@
 TagIdNameToObjectId (PEMKRE symbol → stored object id), GetTapingPosition (approach pose for a joint line),
 GetTapePath (line endpoints and wall normal), GetTapeSegments (a joint cut into pieces taped from one base pose
 each), GetAreaRaster (base stations and raster rectangles for an area), PlanTransit (base waypoints that turn
-away from the walls), CheckArmTransit (whether the arm folds into its transit pose while the base drives). They read the scanned walls, joints and areas through the HDH (the paper's data handler).
+away from the walls), CheckArmTransit (whether the arm folds into its transit pose while the base drives). They
+read the scanned walls, joints and areas through the HDH (the paper's data handler).
 
 Like every node they hold no number of their own: standoffs, offsets and tolerances arrive through ports, by
 default from the robot facts (``robot.work.taping.*``, ``robot.tools``: the robot file, derived by
@@ -339,6 +340,16 @@ class GetAreaRaster(Leaf):
         return Status.SUCCESS
 
 
+def _pose_of(here: Any) -> Any:
+    """[x, y, theta] of a pose port: the value itself or GET_POSE's result (its 'pose')."""
+    return here.get("pose") if isinstance(here, dict) else here
+
+
+def _folds(transit_pose: Any) -> bool:
+    """Whether the robot names an arm pose for driving (robot fact robot.arm.transit_pose)."""
+    return bool(str(transit_pose or "").strip())
+
+
 class PlanTransit(Leaf):
     DESCRIPTION = ("Base waypoints from the current pose to goal [x, y, theta] (map). A turn larger than max_turn "
                    "is not made next to a wall, where the corners of the turning base would sweep into it: the "
@@ -358,15 +369,13 @@ class PlanTransit(Leaf):
     )
 
     def on_tick(self) -> Status:
-        here = self.get("here")
-        if isinstance(here, dict):
-            here = here.get("pose")
+        here = _pose_of(self.get("here"))
         goal, transit = list(self.get("goal")), list(self.get("transit"))
         if not isinstance(here, (list, tuple)) or len(here) != 3 or len(goal) != 3 or len(transit) < 2:
             raise PortError("%s: here and goal must be [x, y, theta] and transit [x, y, ...], got %r, %r, %r"
                             % (self.name, here, goal, transit))
         turn = abs(wrap_angle(float(goal[2]) - float(here[2])))
-        if turn <= self.get("max_turn") or str(self.get("transit_pose") or "").strip():
+        if turn <= self.get("max_turn") or _folds(self.get("transit_pose")):
             waypoints = [goal]
         else:
             waypoints = [[transit[0], transit[1], float(here[2])], [transit[0], transit[1], float(goal[2])], goal]
@@ -395,11 +404,9 @@ class CheckArmTransit(ConditionLeaf):
     )
 
     def on_tick(self) -> Status:
-        if not str(self.get("pose") or "").strip():
+        if not _folds(self.get("pose")):
             return Status.FAILURE
-        here, waypoints = self.get("here"), self.get("waypoints")
-        if isinstance(here, dict):
-            here = here.get("pose")
+        here, waypoints = _pose_of(self.get("here")), self.get("waypoints")
         if not isinstance(here, (list, tuple)) or not isinstance(waypoints, (list, tuple)):
             return Status.SUCCESS
         if len(here) != 3 or any(not isinstance(w, (list, tuple)) or len(w) != 3 for w in waypoints):
