@@ -47,6 +47,16 @@ class CommandHandle(abc.ABC):
     @abc.abstractmethod
     def cancel(self) -> None: ...
 
+    def suspend(self, cause: str = "") -> None:
+        """Suspend the command on its devices (LOCEM's ``SUSPEND id=N``: they come to rest where they are);
+        :class:`LocemCallError` when LOCEM refuses (the command cannot be suspended, it has ended). A client that
+        cannot suspend keeps this default."""
+        raise LocemCallError("%r cannot be suspended through this LOCEM client" % self.command)
+
+    def resume(self, cause: str = "") -> None:
+        """Resume a suspended command from where its devices stopped (``RESUME id=N``); LocemCallError if refused."""
+        raise LocemCallError("%r cannot be resumed through this LOCEM client" % self.command)
+
     def feedback(self) -> Optional[str]:
         """The text of the command's latest progress feedback (action feedback ``message``, e.g. SPRAY_AREA's
         ``raster 2.350 of 11.520 m``), None before the first; a client without feedback keeps this default."""

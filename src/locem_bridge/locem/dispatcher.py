@@ -24,6 +24,7 @@ which run in the caller's thread. A waiting handler sleeps on its execution's ev
 :meth:`CommandContext.sleep`), so it costs nothing until a cancel, ``STOP``, pause or its time wakes it.
 """
 
+import collections
 import functools
 import heapq
 import itertools
@@ -34,7 +35,8 @@ import traceback
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from ..common.locem_codes import Code
-from .errors import Aborted, Busy, CommandTimeout, LocemError
+from ..common.program_state import Method
+from .errors import Aborted, Busy, CommandTimeout, InvalidArgument, LocemError
 from .execution import CommandContext, CommandEvent, ExecState, Execution, Listener
 from .grammar import parse
 from .registry import BoundCommand, CommandRegistry, Interface
@@ -46,6 +48,8 @@ HealthSource = Callable[[], Dict[str, Any]]
 
 BIND_CACHE_SIZE = 256
 """Accepted command strings whose parse and binding are remembered (see :meth:`Dispatcher.bind`)."""
+KEEP_RECENT = 256
+"""Ended commands whose skill instance can still be reset (``RESET id=N``)."""
 DEFAULT_MAX_RUNNING = 64
 """Commands that may run at once in their own thread (the ROS node's ``~max_running`` parameter)."""
 
@@ -74,6 +78,7 @@ class Dispatcher:
         self._watch: List[Tuple[float, int, Execution]] = []
         self._watch_cv = threading.Condition()
         self._bind_cached = functools.lru_cache(maxsize=BIND_CACHE_SIZE)(self._bind_uncached)
+        self._recent: "collections.OrderedDict[int, Execution]" = collections.OrderedDict()
         self._closed = False
         self._watchdog = threading.Thread(target=self._watch_deadlines, name="locem-watchdog", daemon=True)
         self._watchdog.start()
@@ -122,7 +127,8 @@ class Dispatcher:
             execution.add_listener(listener)
         if not bound.spec.query:
             execution.add_listener(self._emit, feedback=False)
-            self._emit(execution._event())
+            self._remember(execution)
+            self._emit(execution.start_event())
         if bound.spec.inline:
             self._run(execution, handler)
             return execution
@@ -183,6 +189,30 @@ class Dispatcher:
                 self._released.wait(left)
         still = [e.id for e in victims if not e._handler_returned]
         return {"stopped": [e.id for e in victims], "still_running": still, "hook_errors": hook_errors}
+
+    def control(self, exec_id: int, method: Method, cause: str = "") -> Execution:
+        """Suspend, resume, halt or reset the skill instance of command ``exec_id`` (a running one, or one of the
+        last :data:`KEEP_RECENT` that changed state); :class:`InvalidArgument` names an unknown id or a method its
+        state does not allow, and nothing changes."""
+        with self._lock:
+            execution = self._running.get(int(exec_id)) or self._recent.get(int(exec_id))
+            known = sorted(set(self._running) | set(self._recent))
+        if execution is None or execution.bound.spec.query:
+            raise InvalidArgument("no command with id %s to %s (commands known now: %s)"
+                                  % (exec_id, method.value.lower(), _span(known)), argument="id")
+        if method is Method.SUSPEND:
+            execution.suspend(cause)
+        elif method is Method.RESUME:
+            execution.resume(cause)
+        elif method is Method.HALT:
+            execution.halt(cause)
+            execution.wait(self.stop_timeout + self.grace)       # answered once its devices are safe
+        elif method is Method.RESET:
+            execution.reset(cause)
+        else:
+            raise InvalidArgument("%s is not a method a caller may use on a running command; allowed: Suspend, "
+                                  "Resume, Halt, Reset" % method.value, argument="method")
+        return execution
 
     def running(self) -> List[Execution]:
         with self._lock:
@@ -294,6 +324,12 @@ class Dispatcher:
             return Response.from_error(LocemError("%s failed inside LOCEM: %s: %s"
                                                   % (execution.bound.name, type(error).__name__, error)))
 
+    def _remember(self, execution: Execution) -> None:
+        with self._lock:
+            self._recent[execution.id] = execution
+            while len(self._recent) > KEEP_RECENT:
+                self._recent.popitem(last=False)
+
     def _release(self, execution: Execution) -> None:
         with self._lock:
             for resource, owner in list(self._owners.items()):
@@ -359,3 +395,9 @@ class Dispatcher:
             except Exception:
                 _log.exception("dispatcher listener failed")
 
+
+
+def _span(ids: List[int]) -> str:
+    if not ids:
+        return "none"
+    return "%d to %d" % (ids[0], ids[-1]) if len(ids) > 1 else str(ids[0])

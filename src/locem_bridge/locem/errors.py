@@ -46,3 +46,10 @@ class Aborted(LocemError):
 
 class NotReady(LocemError):
     code = Code.NOT_READY
+
+
+class SuspendRequest(BaseException):
+    """Raised by a context's ``check()`` / ``sleep()`` when the command is suspended and its handler asked to be
+    unwound to its resume point (:meth:`~locem_bridge.locem.execution.CommandContext.unwinding`). Not a
+    :class:`LocemError` (the command has not ended) and not an ``Exception`` (no ``except Exception`` in a device
+    layer may swallow it): the device layers stop their motion on the way out, as for a cancel."""

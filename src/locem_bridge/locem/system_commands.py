@@ -1,13 +1,21 @@
-"""The system commands every LOCEM offers, whatever the robot: HELP, STATUS, STOP, WAIT.
+"""The system commands every LOCEM offers, whatever the robot: HELP, STATUS, STOP, WAIT, and the skill methods
+SUSPEND, RESUME, HALT, RESET.
+
+The skill methods act on the state machine of a running command (``id=``; without it, on every command whose
+state allows the method): OPC UA ``ProgramStateMachineType``, :mod:`locem_bridge.common.program_state`. What
+Suspend does on each device is in the API reference (``docs/api.md``, "Suspend and resume"). They are never BUSY.
 
 ``WAIT`` is a cancelable, pausable long-running command that touches no device: it is how the action and
 procedure semantics are exercised without hardware. ``hold=`` lets it occupy a resource, so the resource
 policy (``BUSY``, ``STOP``) can be shown on a machine without devices.
 """
 
+import functools
 from typing import Any, Dict, List
 
+from ..common.program_state import Method, ProgramState
 from .dispatcher import Dispatcher
+from .errors import InvalidArgument
 from .execution import CommandContext
 from .registry import Arg, CommandSpec
 
@@ -51,7 +59,28 @@ WAIT = CommandSpec(
     deadline=lambda values: float(values["seconds"]) + 5.0,
     result=(("waited_s", "seconds waited, pauses excluded"),), capability="sk:cap_Wait")
 
-SPECS = (HELP, STATUS, STOP, WAIT)
+MAX_ID = 2 ** 31 - 1
+
+
+def _method_spec(name: str, summary: str, result: str) -> CommandSpec:
+    return CommandSpec(
+        name, summary,
+        args=(Arg.integer("id", 0, MAX_ID, "the command id (STATUS lists them; /locem/status carries them); 0: every "
+                          "command whose state allows it", default=0),
+              Arg.word("cause", "who asks or why, recorded with the transition", default="", keyword_only=True)),
+        timeout=5.0, preemptive=True, inline=True,
+        result=(("ids", result), ("states", "command id -> its skill state after the call")),
+        capability="")
+
+
+SUSPEND = _method_spec("SUSPEND", "Suspend a running command: its devices come to rest where they are, the tool "
+                       "process pauses; RESUME goes on from there.", "the commands suspended")
+RESUME = _method_spec("RESUME", "Resume a suspended command from where its devices stopped.", "the commands resumed")
+HALT = _method_spec("HALT", "Halt a running or suspended command: it ends ABORTED 'halted', its devices safe.",
+                    "the commands halted")
+RESET = _method_spec("RESET", "Reset a halted (or failed) command's skill instance to Ready.", "the commands reset")
+
+SPECS = (HELP, STATUS, STOP, WAIT, SUSPEND, RESUME, HALT, RESET)
 
 
 class SystemCommands:
@@ -66,6 +95,8 @@ class SystemCommands:
         registry.bind("STATUS", self.status)
         registry.bind("STOP", self.stop)
         registry.bind("WAIT", self.wait)
+        for method in (Method.SUSPEND, Method.RESUME, Method.HALT, Method.RESET):
+            registry.bind(method.value.upper(), functools.partial(self.skill_method, method))
 
     def help(self, ctx: CommandContext, name: str) -> Dict[str, Any]:
         registry = self._dispatcher.registry
@@ -96,6 +127,26 @@ class SystemCommands:
             "; still finishing: %s" % outcome["still_running"] if outcome["still_running"] else "")
         return outcome
 
+    def skill_method(self, method: Method, ctx: CommandContext, id: int, cause: str) -> Dict[str, Any]:
+        dispatcher = self._dispatcher
+        cause = cause or "%s command" % method.value.upper()
+        if id:
+            execution = dispatcher.control(id, method, cause)
+            return {"message": "%s: %s" % (execution.bound.name, execution.program.value), "ids": [id],
+                    "states": {str(id): execution.program.value}}
+        wanted = _FROM[method]
+        targets = [e for e in dispatcher.running() if e.id != ctx.id and e.program in wanted
+                   and (method is not Method.SUSPEND or e.bound.spec.pausable) and not e.bound.spec.query]
+        if not targets:
+            raise InvalidArgument("%s: no running command is %s%s; name one with id=N (STATUS lists them)"
+                                  % (method.value.upper(), " or ".join(s.value for s in wanted),
+                                     " and suspendable" if method is Method.SUSPEND else ""), argument="id")
+        for execution in targets:
+            dispatcher.control(execution.id, method, cause)
+        return {"message": "%s: %s" % (method.value.lower(), ", ".join("%s %d" % (e.bound.name, e.id)
+                                                                       for e in targets)),
+                "ids": [e.id for e in targets], "states": {str(e.id): e.program.value for e in targets}}
+
     def wait(self, ctx: CommandContext, seconds: float, hold: str) -> Dict[str, Any]:
         # one sleep on the execution's event (woken at once by cancel, STOP, pause); only a caller that follows
         # progress (an action goal) gets it, in at most PROGRESS_STEPS steps of at least PROGRESS_MIN_STEP_S
@@ -110,6 +161,10 @@ class SystemCommands:
             waited += chunk
             ctx.report(waited / seconds, "waited %.2f of %.2f s" % (waited, seconds))
         return {"waited_s": round(waited, 6)}
+
+
+_FROM = {Method.SUSPEND: (ProgramState.RUNNING,), Method.RESUME: (ProgramState.SUSPENDED,),
+         Method.HALT: (ProgramState.RUNNING, ProgramState.SUSPENDED), Method.RESET: (ProgramState.HALTED,)}
 
 
 def describe(spec: CommandSpec, served: bool = True) -> str:
