@@ -21,6 +21,7 @@ from .errors import BadRequest
 from locem_bridge.common.geometry import angle_between
 from locem_bridge.robot_facts import shipped_tcp_bound, tcp_bound
 from .interfaces import Arm
+from .suspension import Resumable, arm_settle
 
 CATEGORY = "arm"
 _ARM = frozenset({"arm"})
@@ -63,12 +64,12 @@ _MOTION_RESULT = (("q", "joint positions at the end, rad"), ("tcp_pose", "TCP po
 
 MOVE_J = CommandSpec(
     "MOVE_J", "Move the arm to joint positions (synchronised joint motion).", args=_joints() + _speed_j(),
-    resources=_ARM, category=CATEGORY, pausable=False, result=_MOTION_RESULT,
+    resources=_ARM, category=CATEGORY, pausable=True, result=_MOTION_RESULT,
     deadline=lambda v: joint_travel_bound(v["speed"], v["accel"]), capability="sk:cap_MoveArm")
 MOVE_HOME = CommandSpec(
     "MOVE_HOME", "Move the arm to a named joint pose of the robot configuration (default home).",
     args=(Arg.word("pose", "named pose of robot.arm.named_poses", default="home"),) + _speed_j(),
-    resources=_ARM, category=CATEGORY, result=_MOTION_RESULT,
+    resources=_ARM, category=CATEGORY, result=_MOTION_RESULT, pausable=True,
     deadline=lambda v: joint_travel_bound(v["speed"], v["accel"]), capability="sk:cap_ArmToNamedPose")
 STOP_ARM = CommandSpec(
     "STOP_ARM", "Stop the arm now (the running arm command ends ABORTED); never BUSY.", category=CATEGORY,
@@ -117,6 +118,7 @@ def arm_specs(bound: float) -> Tuple[CommandSpec, ...]:
     move_l = CommandSpec(
         "MOVE_L", "Move the TCP in a straight line to a pose in the arm base frame.",
         args=_pose("target", bound) + _speed_l(), resources=_ARM, category=CATEGORY, result=_MOTION_RESULT,
+        pausable=True,
         deadline=lambda v: 2.0 * bound / v["speed"] + 2.0 * v["speed"] / v["accel"] + MOTION_MARGIN_S + 1.0,
         capability="sk:cap_MoveArmLinear")
     move_path = CommandSpec(
@@ -131,6 +133,7 @@ def arm_specs(bound: float) -> Tuple[CommandSpec, ...]:
         + _speed_l() + (Arg.number("blend", "m", 0.0, MAX_BLEND, "blend radius at the interior waypoints (0 = stop "
                                                                   "at each)", default=0.0, keyword_only=True),),
         resources=_ARM, category=CATEGORY, result=_MOTION_RESULT + (("waypoints", "waypoints in the path"),),
+        pausable=True,
         deadline=lambda v: _path_deadline(v, bound), capability="sk:cap_MoveArmPath")
     set_tcp = CommandSpec(
         "SET_TCP", "Set the TCP offset from the flange.", args=_pose("TCP offset", bound), resources=_ARM,
@@ -207,22 +210,50 @@ class ArmCommands:
     def health(self) -> Dict[str, Any]:
         return self.arm.health()
 
+    def resumable(self, ctx: Any) -> Resumable:
+        """Suspend: the arm decelerates along its path (``stopL`` / ``stopJ``, not a protective stop) and waits
+        at rest; Resume: the motion is issued again from there to the same target."""
+        return Resumable(ctx, lambda: self.arm.stop_motion("suspended"), settle=arm_settle(self.arm))
+
     def move_j(self, ctx: Any, q1: float, q2: float, q3: float, q4: float, q5: float, q6: float, speed: float,
                accel: float) -> Dict[str, Any]:
-        return self.arm.move_joints(ctx, [q1, q2, q3, q4, q5, q6], speed, accel)
+        q = [q1, q2, q3, q4, q5, q6]
+        return self.resumable(ctx).run(lambda: self.arm.move_joints(ctx, q, speed, accel))
 
     def move_l(self, ctx: Any, x: float, y: float, z: float, rx: float, ry: float, rz: float, speed: float,
                accel: float) -> Dict[str, Any]:
-        return self.arm.move_linear(ctx, [x, y, z, rx, ry, rz], speed, accel)
+        pose = [x, y, z, rx, ry, rz]
+        return self.resumable(ctx).run(lambda: self.arm.move_linear(ctx, pose, speed, accel))
 
     def move_path(self, ctx: Any, waypoints: str, speed: float, accel: float, blend: float) -> Dict[str, Any]:
+        """Resumed after a suspension with the waypoints not yet reached (the controller's path progress when it
+        was suspended); the first one's blend shrinks to half of its now shorter segment if need be."""
         self.arm.require(Arm.PATH)
         points, own = parse_path(waypoints, self.tcp_bound)
         radii = [blend if b is None else b for b in own]
-        return self.arm.move_path(ctx, points, speed, accel, radii)
+        left = {"from": 0}
+        arm = self.arm
+
+        def stop() -> None:
+            progress = arm.cached_state().get("progress")
+            if isinstance(progress, int) and progress >= 0:
+                left["from"] = max(left["from"], min(left["from"] + progress, len(points) - 1))
+            arm.stop_motion("suspended")
+
+        def attempt() -> Dict[str, Any]:
+            rest, blends = points[left["from"]:], list(radii[left["from"]:])
+            if left["from"] and len(rest) > 1:
+                here = arm.tcp_pose()
+                first = math.dist(here[:3], rest[0][:3])
+                blends[0] = min(blends[0], first / 2.0, math.dist(rest[0][:3], rest[1][:3]) / 2.0)
+            out = arm.move_path(ctx, rest, speed, accel, blends)
+            out["waypoints"] = len(points)
+            return out
+        return Resumable(ctx, stop, settle=arm_settle(arm)).run(attempt)
 
     def move_home(self, ctx: Any, pose: str, speed: float, accel: float) -> Dict[str, Any]:
-        return self.arm.move_joints(ctx, self.arm.named_pose(pose), speed, accel)
+        q = self.arm.named_pose(pose)
+        return self.resumable(ctx).run(lambda: self.arm.move_joints(ctx, q, speed, accel))
 
     def stop_arm(self, ctx: Any) -> Dict[str, Any]:
         self.arm.stop_motion("STOP_ARM")

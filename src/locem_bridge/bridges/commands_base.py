@@ -14,6 +14,7 @@ from locem_bridge.locem.registry import Arg, CommandSpec
 
 from locem_bridge.common.geometry import wrap_angle
 from .interfaces import Base, Lift
+from .suspension import Resumable, base_settle, lift_settle
 
 CATEGORY = "base"
 _BASE = frozenset({"base"})
@@ -39,18 +40,18 @@ GOTO = CommandSpec(
     args=(Arg.number("x", "m", -MAP_EXTENT, MAP_EXTENT, "goal x in map"),
           Arg.number("y", "m", -MAP_EXTENT, MAP_EXTENT, "goal y in map"),
           Arg.number("theta", "rad", -2 * PI, 2 * PI, "goal heading in map")) + _goal_args(),
-    resources=_BASE, category=CATEGORY, result=_POSE_RESULT, timeout=_goto_deadline({"speed": 0.01}),
+    resources=_BASE, category=CATEGORY, result=_POSE_RESULT, pausable=True, timeout=_goto_deadline({"speed": 0.01}),
     deadline=_goto_deadline, capability="sk:cap_DriveBase")
 GOTO_TAG = CommandSpec(
     "GOTO_TAG", "Drive the base to a named pose of the configuration (robot.base.named_poses / ~named_poses).",
     args=(Arg.word("name", "named base pose"),) + _goal_args(), resources=_BASE, category=CATEGORY,
-    result=_POSE_RESULT, timeout=_goto_deadline({"speed": 0.01}), deadline=_goto_deadline,
+    result=_POSE_RESULT, pausable=True, timeout=_goto_deadline({"speed": 0.01}), deadline=_goto_deadline,
     capability="sk:cap_DriveBaseToNamedPose")
 MOVE_BASE_REL = CommandSpec(
     "MOVE_BASE_REL", "Move the base relative to its current pose (dx, dy in the base frame, dtheta).",
     args=(Arg.number("dx", "m", -10.0, 10.0, "forward"), Arg.number("dy", "m", -10.0, 10.0, "to the left"),
           Arg.number("dtheta", "rad", -2 * PI, 2 * PI, "turn, counter-clockwise")) + _goal_args(),
-    resources=_BASE, category=CATEGORY, result=_POSE_RESULT,
+    resources=_BASE, category=CATEGORY, result=_POSE_RESULT, pausable=True,
     deadline=lambda v: (abs(v["dx"]) + abs(v["dy"])) / v["speed"] + abs(v["dtheta"]) / 0.5 + 15.0,
     capability="sk:cap_MoveBaseRelative")
 STOP_BASE = CommandSpec(
@@ -78,7 +79,7 @@ LIFT = CommandSpec(
     "moves with it) and wait until in position. Allowed: robot.lift.range (HELP LIFT on a robot with a lift: "
     "STATUS health.lift.range).",
     args=(Arg.number("z", "m", 0.0, LIFT_EXTENT, "arm mount height above the floor (base_footprint)"),),
-    resources=frozenset({"lift"}), category="lift", result=(("height", "m reached"), ("error", "m from the goal"),
+    resources=frozenset({"lift"}), category="lift", pausable=True, result=(("height", "m reached"), ("error", "m from the goal"),
                                                             ("duration_s", "seconds")),
     timeout=120.0, capability="sk:cap_Lift")
 
@@ -109,13 +110,21 @@ class BaseCommands:
     def health(self) -> Dict[str, Any]:
         return self.base.health()
 
+    def _goto(self, ctx: Any, x: float, y: float, theta: float, tolerance: float, angle_tolerance: float,
+              speed: float) -> Dict[str, Any]:
+        """Suspend: the base brakes to zero velocity (its drives' quick-stop deceleration) and stands; Resume:
+        it drives on to the same goal from where it stopped."""
+        base = self.base
+        return Resumable(ctx, base.halt, settle=base_settle(base)).run(
+            lambda: base.goto(ctx, x, y, theta, tolerance, angle_tolerance, speed))
+
     def goto(self, ctx: Any, x: float, y: float, theta: float, tolerance: float, angle_tolerance: float,
              speed: float) -> Dict[str, Any]:
-        return self.base.goto(ctx, x, y, theta, tolerance, angle_tolerance, speed)
+        return self._goto(ctx, x, y, theta, tolerance, angle_tolerance, speed)
 
     def goto_tag(self, ctx: Any, name: str, tolerance: float, angle_tolerance: float, speed: float) -> Dict[str, Any]:
         x, y, theta = self.base.named_pose(name)
-        out = self.base.goto(ctx, x, y, theta, tolerance, angle_tolerance, speed)
+        out = self._goto(ctx, x, y, theta, tolerance, angle_tolerance, speed)
         out["goal"] = [x, y, theta]
         return out
 
@@ -124,7 +133,7 @@ class BaseCommands:
         x, y, th = self.base.pose()
         gx = x + math.cos(th) * dx - math.sin(th) * dy
         gy = y + math.sin(th) * dx + math.cos(th) * dy
-        out = self.base.goto(ctx, gx, gy, wrap_angle(th + dtheta), tolerance, angle_tolerance, speed)
+        out = self._goto(ctx, gx, gy, wrap_angle(th + dtheta), tolerance, angle_tolerance, speed)
         out["goal"] = [gx, gy, wrap_angle(th + dtheta)]
         return out
 
@@ -166,4 +175,6 @@ class LiftCommands:
         return self.lift.health()
 
     def lift_to(self, ctx: Any, z: float) -> Dict[str, Any]:
-        return self.lift.move_to(ctx, z)
+        """Suspend: the lift halts (brakes at its deceleration and holds); Resume: on to the same height."""
+        lift = self.lift
+        return Resumable(ctx, lift.halt, settle=lift_settle(lift)).run(lambda: lift.move_to(ctx, z))

@@ -35,6 +35,7 @@ from .errors import BadRequest, BridgeError
 from locem_bridge.common.geometry import angle_between, invert, matrix_to_pose, pose_to_matrix
 from .geometry import arm_base_in_footprint, planar, tool_frame_facing
 from .interfaces import Arm, Base, Compressor, Lift, Scanner, Waiter
+from .suspension import Resumable, Steps, arm_settle
 
 CATEGORY = "wall"
 EXT = 100.0
@@ -45,6 +46,7 @@ LANE_ACCEL = 4.0               # m/s^2, raster lanes (short run-up: 3 cm at 0.5 
 RUNUP_MARGIN = 0.01            # m, constant-speed travel before the tool switches on
 PATH_BLEND = 0.03              # m, blend radius of the turns between raster lanes (one blended path)
 SKIP_RESOLUTION = 0.001        # m, a lane with less than this left after SPRAY_AREA skip= is not worked again
+LIFT_OFF = 0.03                # m, how far a suspended sander lifts off the wall
 
 
 def _point(prefix: str, doc: str, suffix: str = "") -> tuple:
@@ -89,6 +91,7 @@ APPLY_TAPE_START = CommandSpec(
     args=_LINE_ARGS + _normal() + (Arg.number("approach", "m", 0.0, 0.5, "distance in front of the wall", default=0.05,
                               keyword_only=True),),
     resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=60.0, result=(("tcp_pose", "arm base frame"),),
+    pausable=True,
     capability="plb:cap_ShowTapeLineStart")
 APPLY_TAPE = CommandSpec(
     "APPLY_TAPE", "Tape a joint line: approach its start, taping tool on, follow the line, tool off, retract.",
@@ -97,7 +100,7 @@ APPLY_TAPE = CommandSpec(
         Arg.number("offset", "m", -0.01, 0.05, "TCP distance from the wall surface while taping", default=0.0,
                    keyword_only=True),
         Arg.number("approach", "m", 0.01, 0.5, "approach / retract distance", default=0.05, keyword_only=True)),
-    resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=120.0, result=_WORK_RESULT,
+    resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=120.0, result=_WORK_RESULT, pausable=True,
     deadline=lambda v: _line_len(v) / v["speed"] + 60.0, capability="plb:cap_ApplyTapeStroke")
 _AREA_ARGS = _point("o", "area origin") + (
     Arg.number("ux", "", -1.0, 1.0, "along-wall unit vector x"), Arg.number("uy", "", -1.0, 1.0, "along-wall unit vector y"),
@@ -118,7 +121,8 @@ SPRAY_AREA = CommandSpec(
                    "their run-in end to end, turns not counted; at most lanes x (width + 2 run_in)): the command "
                    "goes on where an interrupted one stopped, the point its feedback reported as 'raster <m> of "
                    "<m> m'", default=0.0, keyword_only=True)),
-    resources=frozenset({"arm", "tool", "compressor"}), category=CATEGORY, timeout=600.0, result=_WORK_RESULT
+    resources=frozenset({"arm", "tool", "compressor"}), category=CATEGORY, timeout=600.0, pausable=True,
+    result=_WORK_RESULT
     + (("lanes", "lanes sprayed (a lane begun part way counts)"), ("skipped_m", "raster length left out (skip)")),
     deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0, capability="plb:cap_SprayRaster")
 SAND_AREA = CommandSpec(
@@ -131,17 +135,17 @@ SAND_AREA = CommandSpec(
         Arg.choice("contact", ("position", "force"), "position: lanes on the wall surface; force: force mode holds "
                    "the set-point along the tool axis while the lanes run (needs a controller with force control; "
                    "the UR stand-in needs contact surfaces)", default="position", keyword_only=True)),
-    resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=600.0, result=_WORK_RESULT
+    resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=600.0, pausable=True, result=_WORK_RESULT
     + (("lanes", "lanes sanded"),), deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0,
     capability="plb:cap_SandRaster")
 WALL_READY = CommandSpec(
     "WALL_READY", "Arm to the named pose 'wall_ready' (tool facing forward, links close to the base) to drive along "
     "walls: from a wall pose first a straight retract to the pose's TCP point, then the joint move.",
     resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=60.0, result=(("q", "joint positions"),),
-    capability="sk:cap_ArmToWallReady")
+    pausable=True, capability="sk:cap_ArmToWallReady")
 HOME = CommandSpec(
     "HOME", "Process outputs off, arm to its home pose.", resources=frozenset({"arm", "tool"}), category=CATEGORY,
-    timeout=60.0, result=(("q", "joint positions"),), capability="sk:cap_ArmHome")
+    timeout=60.0, result=(("q", "joint positions"),), pausable=True, capability="sk:cap_ArmHome")
 
 
 
@@ -230,6 +234,13 @@ class LaneSwitch(HookedWaiter):
         self._velocity = np.zeros(3)
         self.switch_s = 0.0                                        # running average of a switch request (s)
         self._before: List[Callable[[bool], None]] = []
+        self.held = False                                          # suspended: never switches on again
+
+    def hold_off(self) -> Optional[np.ndarray]:
+        """Suspension: the switch stays off from now on; returns the TCP predicted for the moment a switch
+        request made now takes effect (where the tool stops working), None without a TCP."""
+        self.held = True
+        return self._predicted_tcp()
 
     def before_switch(self, callback: Callable[[bool], None]) -> None:
         """Run ``callback(on)`` right before every switch request (e.g. a progress report as the valve opens)."""
@@ -266,7 +277,7 @@ class LaneSwitch(HookedWaiter):
         if p is None:
             return
         f = float((p - self._a).dot(self._ab)) / self._len2
-        want = self._f_on <= f <= self._f_off
+        want = self._f_on <= f <= self._f_off and not self.held
         if want != self.on:
             self._switch(want)
             self.on = want
@@ -297,7 +308,7 @@ class RasterSwitch(LaneSwitch):
         for a, ab in self._lines:
             f = float((p - a).dot(ab)) / max(float(ab.dot(ab)), 1e-12)
             if 0.0 <= f <= 1.0 and float(np.linalg.norm(p - a - ab * f)) <= self._reach:
-                want = True
+                want = not self.held
                 break
         if want != self.on:
             self._switch(want)
@@ -398,6 +409,15 @@ class RasterProgress(HookedWaiter):
             return
         self._at(*where)
         self._report(self._clock())
+
+    def resume_point(self, p: Optional[np.ndarray], tool_on: bool) -> float:
+        """Where a suspended raster goes on (m of the raster): the point ``p`` where the tool stopped working
+        while it was on a stretch, else the worked length done."""
+        where = self._on_stretch(p) if tool_on and p is not None else None
+        if where is None:
+            return self.done_m
+        lane, f = where
+        return max(self.done_m, self._starts[lane] + min(1.0, max(0.0, f)) * float(np.linalg.norm(self._lines[lane][1])))
 
     def _end_of(self, i: int) -> float:
         return self._starts[i] + float(np.linalg.norm(self._lines[i][1]))
@@ -581,6 +601,35 @@ class WallCommands:
         pose = matrix_to_pose(invert(mount).dot(tool_frame_facing(point, [-1.0, 0.0, 0.0])))
         self._need("arm").move_linear(ctx, pose, APPROACH_SPEED, 1.2)
 
+    # -- suspension (bridges/suspension.py) -----------------------------------------------------------------
+    def _resumable(self, ctx: Any, tool: Optional[str], live: Optional[Dict[str, Any]] = None,
+                   lift_off: bool = False) -> Resumable:
+        """Suspend: the tool's process output off first (spray valve, taping tool, sander), then the arm
+        decelerates along its path; a raster notes where its tool stopped working (``live['skip']``); with
+        ``lift_off`` the tool then backs off the wall by LIFT_OFF along its axis. The compressor keeps its
+        pressure. Resume: the interrupted step again from there (a raster from its skip point, run-up first)."""
+        arm = self._need("arm")
+
+        def stop() -> None:
+            sw = live.get("switch") if live is not None else None
+            p = sw.hold_off() if sw is not None else None
+            on = bool(sw.on) if sw is not None else False
+            if tool is not None:
+                self._switch_off_safely(tool)
+            if live is not None and live.get("progress") is not None:
+                live["skip"] = max(live["skip"], live["progress"].resume_point(p, on))
+            if live is not None and live.get("lane") is not None:
+                live["at"] = arm.tcp_pose()
+            arm.stop_motion("suspended")
+
+        def off_the_wall(waiter: Any) -> None:
+            pose = arm.tcp_pose()
+            z = pose_to_matrix(pose)[:3, 2]                     # the tool axis, pointing at the wall
+            lifted = [pose[0] - z[0] * LIFT_OFF, pose[1] - z[1] * LIFT_OFF, pose[2] - z[2] * LIFT_OFF] + list(pose[3:])
+            arm.move_linear(waiter, lifted, CONTACT_SPEED, 1.0)
+
+        return Resumable(ctx, stop, on_suspended=off_the_wall if lift_off else None, settle=arm_settle(arm))
+
     def _facing_forward(self) -> bool:
         """True when the tool axis points ahead of the base (the arm is working at or near a wall)."""
         arm = self._need("arm")
@@ -629,7 +678,7 @@ class WallCommands:
         n = self._unit([nx, ny, nz], "normal")
         p0 = np.array([x0, y0, z0])
         pose = self.to_arm(p0 + n * approach, n)
-        self._approach(ctx, pose)
+        self._resumable(ctx, None).run(lambda: self._approach(ctx, pose))
         return {"tcp_pose": pose}
 
     def apply_tape(self, ctx: Any, x0: float, y0: float, z0: float, x1: float, y1: float, z1: float, nx: float,
@@ -642,17 +691,25 @@ class WallCommands:
         if length < 1e-3:
             raise BadRequest("APPLY_TAPE: the line is shorter than 1 mm", argument="x1")
         start = time.monotonic()
-        self._approach(ctx, self.to_arm(p0 + n * approach, n))
-        try:
-            arm.move_linear(ctx, self.to_arm(p0 + n * offset, n), CONTACT_SPEED, 1.0)
+
+        def tape() -> None:          # resumed: on again where the roller stopped, on along the rest of the line
             self._switch("taping_tool", True)
             ctx.report(0.1, "taping")
             arm.move_linear(ctx, self.to_arm(p1 + n * offset, n), speed, 1.0)
+
+        steps = Steps([lambda: self._approach(ctx, self.to_arm(p0 + n * approach, n)),
+                       lambda: arm.move_linear(ctx, self.to_arm(p0 + n * offset, n), CONTACT_SPEED, 1.0),
+                       tape,
+                       lambda: self._switch("taping_tool", False),
+                       lambda: arm.move_linear(ctx, self.to_arm(p1 + n * approach, n), APPROACH_SPEED, 1.2),
+                       lambda: self._retract(ctx)])
+        resumable = self._resumable(ctx, "taping_tool")
+        try:
+            resumable.run(steps.run)
         finally:
             self._switch_off_safely("taping_tool")
-        arm.move_linear(ctx, self.to_arm(p1 + n * approach, n), APPROACH_SPEED, 1.2)
-        self._retract(ctx)
-        return {"length_m": length, "duration_s": round(time.monotonic() - start, 3)}
+        return {"length_m": length, "duration_s": round(time.monotonic() - start, 3),
+                "suspensions": resumable.suspensions}
 
     def _switch_off_safely(self, tool: str) -> None:
         try:
@@ -689,15 +746,18 @@ class WallCommands:
 
     def _raster(self, ctx: Any, tool: str, origin: Sequence[float], u: Sequence[float], width: float,
                 height: float, normal: Sequence[float], spacing: float, speed: float, offset: float,
-                run_in: float, skip: float = 0.0, hold_s: float = 0.0) -> Dict[str, Any]:
+                run_in: float, skip: float = 0.0, hold_s: float = 0.0,
+                live: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
         """Horizontal lanes from the area's bottom to its top, alternating direction. Each lane is one straight
         move that starts ``run-up`` before the worked stretch [-run_in, width + run_in] and ends as far after
         it (the distance the arm needs to reach ``speed`` at ``LANE_ACCEL``); the tool is on only over the
         worked stretch (:class:`LaneSwitch`). ``skip``: metres of the raster's worked length (the stretches end
         to end) left out from its start, so the first lane worked may start part way, with its own run-up.
         Progress (:class:`RasterProgress`): the worked length done, counted from the raster's start; ``hold_s``:
-        how long the tool stays on should LOCEM die (see there)."""
+        how long the tool stays on should LOCEM die (see there). ``live``: the running lane's switch and progress
+        are kept there for a suspension (:meth:`_resumable`)."""
         arm = self._need("arm")
+        live = live if live is not None else {}
         n = self._unit(normal, "normal")
         uu = self._unit(u, "u")
         up = np.array([0.0, 0.0, 1.0])
@@ -712,7 +772,7 @@ class WallCommands:
                     "duration_s": round(time.monotonic() - start, 3)}
         runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN
         if arm.supports(Arm.PATH) and len(lanes) > 1:
-            out = self._raster_path(ctx, tool, o, uu, up, n, heights, lanes, total_m, speed, offset, hold_s)
+            out = self._raster_path(ctx, tool, o, uu, up, n, heights, lanes, total_m, speed, offset, hold_s, live)
         else:
             s1 = 0.0
             for i, (k, t, w0, w1, start_m) in enumerate(lanes):
@@ -730,11 +790,14 @@ class WallCommands:
                 stretch = (self.to_arm(o + uu * w0 + up * t + n * offset, n),
                            self.to_arm(o + uu * w1 + up * t + n * offset, n))
                 progress = RasterProgress(lane, arm, [stretch], [start_m], total_m, reach=0.05, hold_s=hold_s)
+                live.update(switch=lane, progress=progress)
                 try:
                     arm.move_linear(progress, pb, speed, LANE_ACCEL)
                 finally:
+                    live.update(switch=None, progress=None)
                     self._switch_off_safely(tool)
                 progress.finish()
+                live["skip"] = max(live.get("skip", 0.0), progress.done_m)
             t_last = lanes[-1][1]
             last = o + uu * s1 + up * t_last + n * (offset + 0.05)
             arm.move_linear(ctx, self.to_arm(last, n), APPROACH_SPEED, 1.2)
@@ -746,7 +809,8 @@ class WallCommands:
 
     def _raster_path(self, ctx: Any, tool: str, o: np.ndarray, uu: np.ndarray, up: np.ndarray, n: np.ndarray,
                      heights: Sequence[float], lanes: Sequence[Tuple[int, float, float, float, float]],
-                     total_m: float, speed: float, offset: float, hold_s: float = 0.0) -> Dict[str, Any]:
+                     total_m: float, speed: float, offset: float, hold_s: float = 0.0,
+                     live: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
         """The serpentine as ONE blended controller path (MOVE_PATH semantics): each lane's ends, run-up
         included, are waypoints; the turns between lanes are rounded (blend within the run-up, so the worked
         stretches are straight and at speed); the tool is switched by position (:class:`RasterSwitch`)."""
@@ -769,11 +833,15 @@ class WallCommands:
         blends = [blend] * (len(poses) - 1) + [0.0]          # every turn blended, the path ends at rest
         switch = RasterSwitch(ctx, arm, lambda on: self._switch(tool, on), stretches, reach=0.25 * spacing)
         progress = RasterProgress(switch, arm, stretches, starts, total_m, reach=0.25 * spacing, hold_s=hold_s)
+        live = live if live is not None else {}
+        live.update(switch=switch, progress=progress)
         try:
             arm.move_path(progress, poses, speed, LANE_ACCEL, blends)
         finally:
+            live.update(switch=None, progress=None)
             self._switch_off_safely(tool)
         progress.finish()
+        live["skip"] = max(live.get("skip", 0.0), progress.done_m)
         last = points[-1] + n * 0.05
         arm.move_linear(ctx, self.to_arm(last, n), APPROACH_SPEED, 1.2)
         self._retract(ctx)
@@ -798,20 +866,36 @@ class WallCommands:
             ctx.report(1.0, progress_text(total_m, total_m))         # nothing left: no device is touched
             return {"length_m": 0.0, "lanes": 0, "skipped_m": round(min(skip, total_m), 4), "duration_s": 0.0}
         guarded = GuardedWaiter(ctx, comp.check_link)
-        try:
+        # should LOCEM die, the compressor's watchdog keeps the valve open for its timeout less one poll
+        # (none: open until the stretch's end, the most the report then claims)
+        hold_s = (max(0.0, comp.watchdog_timeout - 1.0 / comp.poll_rate) if comp.watchdog_timeout > 0
+                  else float("inf"))
+        live: Dict[str, Any] = {"skip": skip}
+
+        def pressure_up() -> None:
             comp.check_link()
             comp.set_valve(False)
             comp.set_motor(True)
             comp.set_setpoint(pressure)
             wait_for_pressure(comp, guarded, pressure, 0.2, timeout=30.0)
-            # should LOCEM die, the compressor's watchdog keeps the valve open for its timeout less one poll
-            # (none: open until the stretch's end, the most the report then claims)
-            hold_s = (max(0.0, comp.watchdog_timeout - 1.0 / comp.poll_rate) if comp.watchdog_timeout > 0
-                      else float("inf"))
-            out = self._raster(guarded, "spray_gun", [ox, oy, oz], [ux, uy, uz], width, height, [nx, ny, nz],
-                               spacing, speed, standoff, run_in=run_in, skip=skip, hold_s=hold_s)
+
+        steps = Steps([pressure_up, lambda: self._raster(
+            guarded, "spray_gun", [ox, oy, oz], [ux, uy, uz], width, height, [nx, ny, nz], spacing, speed, standoff,
+            run_in=run_in, skip=live["skip"], hold_s=hold_s, live=live)])
+        resumable = self._resumable(ctx, "spray_gun", live)
+        try:
+            out = resumable.run(steps.run)
         finally:
             self._switch_off_safely("spray_gun")
+        return self._worked(out, total_m, skip, resumable.suspensions)
+
+    @staticmethod
+    def _worked(out: Dict[str, Any], total_m: float, skip: float, suspensions: int) -> Dict[str, Any]:
+        """A raster's result over all its attempts: the length worked from ``skip`` on, and the suspensions."""
+        if suspensions:
+            out["length_m"] = round(max(0.0, total_m - skip), 4)
+            out["skipped_m"] = round(min(skip, total_m), 4)
+        out["suspensions"] = suspensions
         return out
 
     def sand_area(self, ctx: Any, ox: float, oy: float, oz: float, ux: float, uy: float, uz: float, width: float,
@@ -823,11 +907,15 @@ class WallCommands:
         self._need_tool("sander")
         arm = self._need("arm")
         if contact != "force" or not arm.supports(Arm.FORCE):
+            live: Dict[str, Any] = {"skip": 0.0}
+            resumable = self._resumable(ctx, "sander", live, lift_off=True)
             try:
-                out = self._raster(ctx, "sander", [ox, oy, oz], [ux, uy, uz], width, height, [nx, ny, nz], spacing,
-                                   speed, 0.0, run_in=0.0)
+                out = resumable.run(lambda: self._raster(ctx, "sander", [ox, oy, oz], [ux, uy, uz], width, height,
+                                                         [nx, ny, nz], spacing, speed, 0.0, run_in=0.0,
+                                                         skip=live["skip"], live=live))
             finally:
                 self._switch_off_safely("sander")
+            out = self._worked(out, len(self._lane_heights(height, spacing)) * width, 0.0, resumable.suspensions)
             out["force_n"] = force
             out["contact"] = "position"
             return out
@@ -844,29 +932,55 @@ class WallCommands:
         total = 0.0
         samples: List[float] = []
         end_pose: Optional[List[float]] = None
-        try:
-            for k, t in enumerate(heights):
+        # a suspension in a lane: the lane goes on from the point where the sander stopped (live['at'], the TCP
+        # then), approached again at the standoff with force mode, as a lane's start
+        live: Dict[str, Any] = {"k": 0, "f": 0.0, "lane": None, "at": None}
+        resumable = self._resumable(ctx, "sander", live, lift_off=True)
+
+        def lanes() -> None:
+            nonlocal total, end_pose
+            first = True
+            for k in range(live["k"], len(heights)):
+                t = heights[k]
                 s0, s1 = (0.0, width) if k % 2 == 0 else (width, 0.0)
+                s0 = s0 + (s1 - s0) * live["f"]
                 a = o + uu * s0 + up * t + n * standoff
                 b = o + uu * s1 + up * t + n * standoff
-                if k == 0:
+                if first:
                     self._approach(ctx, self.to_arm(a + n * 0.05, n))
+                    first = False
                 pa, pb = self.to_arm(a, n), self.to_arm(b, n)
                 arm.move_linear(ctx, pa, APPROACH_SPEED, 1.2)
                 arm.force_mode_start(pa, force, approach_speed)
                 arm.wait_for_contact(ctx, tolerance, standoff + 0.01, timeout=standoff / approach_speed * 4 + 5.0)
                 self._switch("sander", True)
                 arm.record_force(True)
-                arm.move_linear(ctx, pb, speed, 1.2)
+                live.update(lane=(pa, pb, s0, s1), at=None)
+                try:
+                    arm.move_linear(ctx, pb, speed, 1.2)
+                except BaseException:
+                    at, (qa, qb, _s0, _s1) = live["at"], live["lane"]
+                    if at is not None:          # suspended: where along this lane the sander stopped
+                        ab = np.asarray(qb[:3]) - np.asarray(qa[:3])
+                        f = float((np.asarray(at[:3]) - np.asarray(qa[:3])).dot(ab)) / max(float(ab.dot(ab)), 1e-12)
+                        live["f"] = live["f"] + (1.0 - live["f"]) * min(max(f, 0.0), 1.0)
+                        live["k"] = k
+                        total += abs(s1 - s0) * min(max(f, 0.0), 1.0)
+                    raise
+                finally:
+                    live["lane"] = None
                 arm.record_force(False)
                 self._switch_off_safely("sander")
                 stats = arm.force_mode_stop()
                 if stats.get("samples"):
-                    samples += [stats["min"], stats["max"]]
+                    samples.extend([stats["min"], stats["max"]])
                     total += abs(s1 - s0)
                 arm.move_linear(ctx, pb, APPROACH_SPEED, 1.2)      # lift back to the standoff
                 end_pose = pb
+                live.update(k=k + 1, f=0.0)
                 ctx.report((k + 1) / len(heights), "lane %d of %d" % (k + 1, len(heights)))
+        try:
+            resumable.run(lanes)
         finally:
             self._switch_off_safely("sander")
             arm.force_mode_stop()
@@ -874,20 +988,22 @@ class WallCommands:
             last = o + uu * (width if len(heights) % 2 else 0.0) + up * heights[-1] + n * 0.05
             arm.move_linear(ctx, self.to_arm(last, n), APPROACH_SPEED, 1.2)
         return {"length_m": round(total, 4), "lanes": len(heights), "duration_s": round(time.monotonic() - start, 3),
-                "force_n": force, "contact": "force",
+                "force_n": force, "contact": "force", "suspensions": resumable.suspensions,
                 "force_min_n": round(min(samples), 2) if samples else None,
                 "force_max_n": round(max(samples), 2) if samples else None}
 
     def wall_ready(self, ctx: Any) -> Dict[str, Any]:
         arm = self._need("arm")
         q = arm.named_pose("wall_ready")
-        self._retract(ctx)
-        return arm.move_joints(ctx, q, 1.0, 1.4)
+        steps = Steps([lambda: self._retract(ctx), lambda: arm.move_joints(ctx, q, 1.0, 1.4)])
+        return self._resumable(ctx, None).run(steps.run)
 
     def home(self, ctx: Any) -> Dict[str, Any]:
         self._outputs_off()
-        self.clear_of_wall(ctx)
-        return self._need("arm").move_joints(ctx, self._need("arm").named_pose("home"), 1.0, 1.4)
+        arm = self._need("arm")
+        q = arm.named_pose("home")
+        steps = Steps([lambda: self.clear_of_wall(ctx), lambda: arm.move_joints(ctx, q, 1.0, 1.4)])
+        return self._resumable(ctx, None).run(steps.run)
 
     def clear_of_wall(self, ctx: Any) -> None:
         """From a wall pose (tool pointing forward): the straight retract, then ``robot.arm.home_via``, so the

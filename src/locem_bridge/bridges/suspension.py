@@ -109,3 +109,35 @@ def wait_until(waiter: Any, condition: Callable[[], bool], timeout: float = SETT
             return False
         waiter.sleep(period)
     return True
+
+
+# -- per device: the immediate stop and "at rest" ------------------------------------------------------------
+REST_JOINT_SPEED = 1e-3      # rad/s: an arm is at rest below this on every joint
+REST_BASE_SPEED = 1e-3       # m/s and rad/s: a base is at rest below this
+REST_LIFT_STEP = 2e-4        # m: a lift is at rest when its height changes less than this in REST_LIFT_DT
+REST_LIFT_DT = 0.03          # s
+
+
+def arm_at_rest(arm: Any) -> bool:
+    qd = arm.cached_state().get("qd") or [0.0]
+    return max(abs(float(v)) for v in qd) < REST_JOINT_SPEED
+
+
+def arm_settle(arm: Any) -> Callable[[Any], None]:
+    return lambda waiter: wait_until(waiter, lambda: arm_at_rest(arm))
+
+
+def base_settle(base: Any) -> Callable[[Any], None]:
+    return lambda waiter: wait_until(waiter, lambda: max(abs(float(v)) for v in base.twist()) < REST_BASE_SPEED)
+
+
+def lift_settle(lift: Any) -> Callable[[Any], None]:
+    def settle(waiter: Any) -> None:
+        last = [lift.height()]
+
+        def still() -> bool:
+            h = lift.height()
+            moved, last[0] = abs(h - last[0]), h
+            return moved < REST_LIFT_STEP
+        wait_until(waiter, still, period=REST_LIFT_DT)
+    return settle

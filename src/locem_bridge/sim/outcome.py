@@ -26,6 +26,7 @@ from .site import Site, Wall
 
 TAPE_BIN = 0.01          # m, resolution of the tape record along a joint
 TAPED_FRACTION = 0.95    # a joint counts as taped from this covered fraction on
+PASS_GRID = 0.005        # m, resolution of the pass maps (how often the spray axis / the tape crossed a point)
 
 
 class _WallMaps:
@@ -39,6 +40,11 @@ class _WallMaps:
         # cell centres
         self.sc = (np.arange(self.ns) + 0.5) * grid
         self.tc = (np.arange(self.nt) + 0.5) * grid
+        # passes of the spray axis over each PASS_GRID cell (a pass: one opening of the valve), and the last pass
+        # that counted there: a stretch sprayed twice (a second coat) shows 2, one never crossed 0
+        ps, pt = int(math.ceil(wall.length / PASS_GRID)), int(math.ceil(wall.height / PASS_GRID))
+        self.passes = np.zeros((pt, ps), dtype=np.int16)
+        self._last_pass = np.zeros((pt, ps), dtype=np.int32)
         # the cells to be finished: centres inside one of the wall's areas (what SCAN reports as work)
         self.work = np.zeros((self.nt, self.ns), dtype=bool)
         for a in wall.areas:
@@ -64,12 +70,22 @@ class OutcomeRecorder:
         self.manual: set = set()
         self.tape_off_joint = 0.0        # m of tape laid on a wall but not on any joint
         self.spray_time = 0.0
+        #: per joint, how many taping passes (one switching on of the tool) laid tape in each TAPE_BIN
+        self.tape_passes: Dict[str, np.ndarray] = {j.id: np.zeros(len(b), dtype=np.int16) for j, b in
+                                                   ((j, self.tape[j.id]) for j in site.joints)}
+        self._tape_last: Dict[str, np.ndarray] = {j: np.zeros(len(b), dtype=np.int32) for j, b in self.tape.items()}
+        self._pass = 0                   # counts the switchings on of any tool process
+        self._active: Dict[str, bool] = {}
 
     # -- recording ---------------------------------------------------------------------------------------------
     def record(self, tool: str, active: bool, p0: np.ndarray, p1: np.ndarray, z_axis: np.ndarray, dt: float) -> None:
         """One TCP segment ``p0 -> p1`` (map) lasting ``dt`` sim seconds with the tool process ``active``."""
+        was = self._active.get(tool, False)
+        self._active[tool] = active
         if not active:
             return
+        if not was:
+            self._pass += 1
         if tool == "taping_tool":
             self._tape(p0, p1)
         elif tool == "spray_gun":
@@ -99,7 +115,11 @@ class OutcomeRecorder:
                         lateral, along = abs(t - float(j.start[2])), s - wall.to_wall_coords(j.start)[0]
                     if lateral <= self.lateral_tol and 0 <= along <= j.length:
                         bins = self.tape[j.id]
-                        bins[min(len(bins) - 1, int(along / TAPE_BIN))] = True
+                        k = min(len(bins) - 1, int(along / TAPE_BIN))
+                        bins[k] = True
+                        if self._tape_last[j.id][k] != self._pass:
+                            self._tape_last[j.id][k] = self._pass
+                            self.tape_passes[j.id][k] += 1
                         hit = True
                 if not hit:
                     self.tape_off_joint += seg
@@ -115,6 +135,7 @@ class OutcomeRecorder:
             if cos_in <= 0.05:
                 continue                                  # not pointing at this wall
             r_nom = standoff * math.tan(half)
+            self._mark_axis(m, p0, p1, z, cos_in)
             pts = self._samples(p0, p1, max(self.grid, r_nom / 4))
             h = dt / len(pts)
             for p in pts:
@@ -139,6 +160,26 @@ class OutcomeRecorder:
                 dep = rate * h * np.exp(-r2 / (2 * sigma * sigma))
                 dep[r2 > radius * radius] = 0.0
                 m.thickness[k0:k1, i0:i1] += dep
+
+    def _mark_axis(self, m: _WallMaps, p0: np.ndarray, p1: np.ndarray, z: np.ndarray, cos_in: float) -> None:
+        """The spray axis' hit points from ``p0`` to ``p1`` into the pass map (one count per pass and cell)."""
+        wall = m.wall
+        hits = []
+        for p in (p0, p1):
+            d = wall.to_wall_coords(p)[2]
+            if d <= 0.0:
+                return
+            hits.append(wall.to_wall_coords(p + (d / cos_in) * z)[:2])
+        (s0, t0), (s1, t1) = hits
+        n = max(1, int(math.ceil(math.hypot(s1 - s0, t1 - t0) / (PASS_GRID / 2))))
+        f = np.arange(0, n + 1) / n
+        ci = ((s0 + (s1 - s0) * f) / PASS_GRID).astype(int)
+        ck = ((t0 + (t1 - t0) * f) / PASS_GRID).astype(int)
+        ok = (ci >= 0) & (ci < m.passes.shape[1]) & (ck >= 0) & (ck < m.passes.shape[0])
+        for i, k in zip(ci[ok], ck[ok]):
+            if m._last_pass[k, i] != self._pass:
+                m._last_pass[k, i] = self._pass
+                m.passes[k, i] += 1
 
     def _sand(self, p0: np.ndarray, p1: np.ndarray) -> None:
         rad = float(self.tools["sander"]["pad_radius"])
