@@ -1,4 +1,6 @@
 """The procedure queue: order, states published on change only, pause/resume/cancel, STOP."""
+import time
+
 import pytest
 
 from locem_bridge.common.locem_codes import Code
@@ -87,3 +89,57 @@ def test_procedure_waits_for_a_resource_held_by_another_interface(core, wait_unt
     assert service_cmd.wait(2.0).code is Code.OK
     assert wait_until(lambda: core.procedures.query_state(pid).state is F)
     assert core.procedures.query_state(pid).code == "OK"
+
+
+def transitions_of(core):
+    seen = []
+    core.dispatcher.add_listener(lambda e: seen.append((e.id, e.transition)) if e.transition else None)
+    return seen
+
+
+def test_suspend_resume_halt_reset_drive_the_procedures_skill(core, published, wait_until):
+    seen = transitions_of(core)
+    pid = core.procedures.add("WAIT 5").id
+    queued = core.procedures.add("WAIT 0.05").id
+    assert wait_until(lambda: core.procedures.query_state(pid).state is R)
+    with pytest.raises(InvalidArgument, match=r"procedure %d is queued.*Suspend is not allowed.*cancel" % queued):
+        core.procedures.suspend(queued)
+    snapshot = core.procedures.suspend(pid, "operator")
+    assert (snapshot.state, snapshot.skill_state.value) == (P, "Suspended")
+    with pytest.raises(InvalidArgument, match=r"is Suspended \(allowed in Suspended: Resume, Halt\)"):
+        core.procedures.suspend(pid)
+    assert core.procedures.resume(pid, "go on").state is R
+    with pytest.raises(InvalidArgument, match=r"not paused.*Resume is not allowed.*Running \(allowed in Running: "
+                                              r"Suspend, Halt\)"):
+        core.procedures.resume(pid)
+    with pytest.raises(InvalidArgument, match=r"Reset is not allowed.*Running"):
+        core.procedures.reset(pid)
+    started = time.monotonic()
+    halted = core.procedures.halt(pid, "operator")  # answered once the command has ended
+    assert time.monotonic() - started < 1.0
+    assert (halted.state, halted.code, halted.skill_state.value) == (F, "ABORTED", "Halted")
+    assert "halted: operator" in halted.message
+    with pytest.raises(InvalidArgument, match="Halt is not allowed.*Halted"):
+        core.procedures.halt(pid)
+    reset = core.procedures.reset(pid, "operator")
+    assert (reset.state, reset.code, reset.skill_state.value) == (F, "ABORTED", "Ready")  # still finished
+    assert history(published, pid) == [Q, R, P, R, F]
+    command_id = reset.command_id
+    names = [(t.name, t.method, t.cause) for i, t in seen if i == command_id]
+    assert names == [("ReadyToRunning", "Start", "procedure interface"),
+                     ("RunningToSuspended", "Suspend", "operator"), ("SuspendedToRunning", "Resume", "go on"),
+                     ("RunningToHalted", "Halt", names[3][2]), ("HaltedToReady", "Reset", "operator")]
+    assert "halted: operator" in names[3][2]
+    assert wait_until(lambda: core.procedures.query_state(queued).state is F)  # the queue went on
+
+
+def test_halt_of_a_paused_procedure_and_reset_of_a_successful_one(core, wait_until):
+    pid = core.procedures.add("WAIT 5").id
+    assert wait_until(lambda: core.procedures.query_state(pid).state is R)
+    assert core.procedures.pause(pid).state is P
+    assert core.procedures.halt(pid).state is F
+    quick = core.procedures.add("WAIT 0.01").id
+    assert wait_until(lambda: core.procedures.query_state(quick).state is F)
+    assert core.procedures.query_state(quick).skill_state.value == "Ready"
+    with pytest.raises(InvalidArgument, match=r"procedure %d is finished: Reset is not allowed.*is Ready" % quick):
+        core.procedures.reset(quick)

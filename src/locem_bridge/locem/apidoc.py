@@ -24,6 +24,41 @@ DEFAULT_PATH = os.path.join(checkout_root(), "docs", "locem_api.md")
 _CODE_DOCS = {code: (code.__doc__ or "") for code in Code}
 
 
+SUSPEND_RESUME = [
+    "",
+    "## Suspend, resume, halt, reset",
+    "",
+    "Every running command is a skill instance with the OPC UA Part 10 program state machine (Ready, Running,",
+    "Suspended, Halted; `ontologies/skill.ttl`). `SUSPEND id=N`, `RESUME id=N`, `HALT id=N`, `RESET id=N` (or the",
+    "procedure interface's `suspend` / `resume` / `halt` / `reset` for a procedure) call its methods; a method its",
+    "state does not allow is answered `INVALID_ARGUMENT` naming the state and the methods it allows, and changes",
+    "nothing. Without `id` a method applies to every command whose state allows it. Every transition is published",
+    "with its cause (`/locem/skill_state`). Only commands marked *pausable* below can be suspended. `STOP` stays the",
+    "emergency path, always accepted, in any state.",
+    "",
+    "What Suspend does on each device (the devices are at rest within 0.3 s of sim time; measured on the stand-ins):",
+    "",
+    "| device | Suspend | Resume |",
+    "| --- | --- | --- |",
+    "| UR arm | decelerates on its path (`stopL` 5 m/s^2 / `stopJ` 10 rad/s^2; not a protective stop) and waits at "
+    "rest | the same motion from the stop point to the same target; `MOVE_PATH` with the waypoints not yet "
+    "reached |",
+    "| mobile base | brakes to zero wheel speed at the drives' quick-stop deceleration and stands | drives on to the "
+    "same goal |",
+    "| lift | halts (brakes at its deceleration and holds the load) | on to the same height |",
+    "| spray gun (compressor) | the valve closes first, then the arm stops; the compressor keeps its motor and "
+    "pressure | the raster goes on from the point where the valve closed (`skip=`), with its own run-up, so "
+    "there is no gap and no second coat |",
+    "| taping tool | its output switches off, the roller stays on the joint | the output on again and the line "
+    "on from the stop point |",
+    "| sander | its output switches off, force mode ends, the pad lifts 3 cm off the wall | the lane is approached "
+    "again and sanded on from the stop point |",
+    "",
+    "`HALT` ends the command `ABORTED` with `halted: <cause>`, its devices stopped as for a cancel (outputs off, "
+    "motions decelerated); `RESET` makes a halted or failed command's instance Ready again.",
+]
+
+
 def render(specs: Iterable[CommandSpec]) -> str:
     specs = sorted(specs, key=lambda s: (s.category != "system", s.category, s.name))
     out: List[str] = [
@@ -53,6 +88,7 @@ def render(specs: Iterable[CommandSpec]) -> str:
     ]
     for code in Code:
         out.append("| `%s` | %s |" % (code.value, _code_doc(code)))
+    out += SUSPEND_RESUME
     out += ["", "## Commands", "", "| command | summary | resources | interfaces |", "| --- | --- | --- | --- |"]
     for spec in specs:
         out.append("| `%s` | %s | %s | %s |" % (
