@@ -11,6 +11,12 @@ States of a procedure, published on change only::
   command from another interface, or that would exceed the dispatcher's ``max_running``, waits, still
   ``queued``, until they are free.
 * ``pause`` / ``resume`` apply to the running procedure, when its command is pausable.
+* The skill methods act on the skill instance of a procedure's command (OPC UA Part 10, see
+  :mod:`locem_bridge.locem.execution`): ``suspend`` (the same as ``pause``, with a cause), ``resume``, ``halt``
+  (the command ends ``ABORTED`` ``halted``, its devices safe; answered once it has ended) and ``reset`` (a halted or
+  failed one's skill instance back to Ready; the procedure stays finished). A method the skill state does not
+  allow is refused with :class:`InvalidArgument` naming the state and the methods it allows; a queued procedure
+  has no command yet (``cancel`` removes it).
 * ``cancel`` removes a queued procedure or cancels the running one; either way it ends ``finished`` with
   code ``ABORTED``.
 * ``STOP`` (a dispatcher stop hook) cancels the running procedure and every queued one: nothing queued before a
@@ -26,6 +32,7 @@ from enum import Enum
 from typing import Any, Callable, Deque, Dict, List, Optional
 
 from ..common.locem_codes import Code
+from ..common.program_state import Method, ProgramState
 from .dispatcher import Dispatcher
 from .errors import Aborted, Busy, InvalidArgument, LocemError
 from .execution import CommandEvent, ExecState, Execution
@@ -62,11 +69,14 @@ class Procedure:
 
     def snapshot(self) -> "ProcedureSnapshot":
         response = self.response
+        execution = self.execution
         return ProcedureSnapshot(self.id, self.command, self.state,
                                  response.code.value if response else "",
                                  response.message if response else "",
                                  dict(response.result) if response else {},
-                                 self.execution.progress if self.execution else 0.0)
+                                 execution.progress if execution else 0.0,
+                                 execution.id if execution else 0,
+                                 execution.program if execution else ProgramState.READY)
 
 
 @dataclass(frozen=True)
@@ -80,6 +90,8 @@ class ProcedureSnapshot:
     message: str = ""
     result: Dict[str, Any] = field(default_factory=dict)
     progress: float = 0.0
+    command_id: int = 0                                # the id of its LOCEM command once started, else 0
+    skill_state: ProgramState = ProgramState.READY     # its command's skill state (Ready while queued)
 
 
 StateListener = Callable[[ProcedureSnapshot], None]
@@ -146,23 +158,69 @@ class ProcedureManager:
             execution = procedure.execution
         if execution is not None:
             execution.cancel("procedure %d canceled" % procedure_id)
-            execution.wait(self._dispatcher.stop_timeout + self._dispatcher.grace)
+            self._wait_finished(procedure, execution)
         return self.query_state(procedure_id)
 
     def pause(self, procedure_id: int) -> ProcedureSnapshot:
         execution = self._running_execution(procedure_id, "paused")
-        execution.pause()
+        execution.suspend("pause requested")
         return self.query_state(procedure_id)
 
-    def resume(self, procedure_id: int) -> ProcedureSnapshot:
+    def resume(self, procedure_id: int, cause: str = "") -> ProcedureSnapshot:
+        """Resume the paused (suspended) procedure; refused (naming the skill state) when it is not paused."""
+        return self._skill_method(procedure_id, Method.RESUME, cause or "resume requested")
+
+    def suspend(self, procedure_id: int, cause: str = "") -> ProcedureSnapshot:
+        """Suspend the running procedure's command (``pause`` with a cause): it ends up ``paused``."""
+        return self._skill_method(procedure_id, Method.SUSPEND, cause or "suspend requested")
+
+    def halt(self, procedure_id: int, cause: str = "") -> ProcedureSnapshot:
+        """Halt a running or paused procedure's command; answered once it has ended (``finished``, ABORTED)."""
+        return self._skill_method(procedure_id, Method.HALT, cause or "halt requested")
+
+    def reset(self, procedure_id: int, cause: str = "") -> ProcedureSnapshot:
+        """Reset a finished procedure's halted (or failed) command to Ready; the procedure stays ``finished``."""
+        return self._skill_method(procedure_id, Method.RESET, cause or "reset requested")
+
+    def _skill_method(self, procedure_id: int, method: Method, cause: str) -> ProcedureSnapshot:
         with self._lock:
             procedure = self._get(procedure_id)
-            if procedure.state is not ProcedureState.PAUSED or procedure.execution is None:
-                raise InvalidArgument("procedure %d is %s, not paused; only a paused procedure can be resumed"
-                                      % (procedure_id, procedure.state.value))
             execution = procedure.execution
-        execution.resume()
+            state = procedure.state
+        if execution is None:  # queued (or finished before it could start): no skill instance yet
+            raise InvalidArgument("procedure %d is %s, its command has not started (skill Ready): %s is not allowed "
+                                  "on it%s" % (procedure_id, state.value, method.value,
+                                               "; cancel removes it from the queue"
+                                               if state is ProcedureState.QUEUED else ""), argument="id")
+        try:
+            if method is Method.SUSPEND:
+                execution.suspend(cause)
+            elif method is Method.RESUME:
+                execution.resume(cause)
+            elif method is Method.HALT:
+                execution.halt(cause)
+                self._wait_finished(procedure, execution)  # as cancel: answered once its devices are safe
+            else:
+                execution.reset(cause)
+        except InvalidArgument as error:
+            state = self.query_state(procedure_id).state
+            not_paused = ", not paused" if method is Method.RESUME else ""
+            raise InvalidArgument("procedure %d is %s%s: %s" % (procedure_id, state.value, not_paused, error.message),
+                                  argument="id") from None
         return self.query_state(procedure_id)
+
+    def _wait_finished(self, procedure: Procedure, execution: Execution) -> None:
+        """Wait (bounded) for the command's end and for the procedure to be marked finished (its listener runs
+        just after the command's answer)."""
+        timeout = self._dispatcher.stop_timeout + self._dispatcher.grace
+        deadline = time.monotonic() + timeout
+        execution.wait(timeout)
+        with self._lock:
+            while procedure.state is not ProcedureState.FINISHED and execution.done:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    break
+                self._lock.wait(min(left, 0.05))
 
     def cancel_all(self, reason: str) -> None:
         with self._lock:
@@ -256,6 +314,7 @@ class ProcedureManager:
         procedure.state = ProcedureState.FINISHED
         procedure.response = response
         self._publish(procedure.snapshot())
+        self._lock.notify_all()  # a cancel / halt waiting for this end (the worker re-checks its queue)
 
     def _trim(self) -> None:
         finished = [pid for pid, p in self._all.items() if p.state is ProcedureState.FINISHED]
