@@ -27,7 +27,8 @@ class LocemServiceTest(unittest.TestCase):
         for name in ("HELP", "STATUS", "STOP", "WAIT"):
             self.assertIn(name, reply["message"])
         names = [c["name"] for c in result_of(reply["result"])["commands"]]
-        self.assertEqual(names[:4], ["HELP", "STATUS", "STOP", "WAIT"])
+        system = ["HALT", "HELP", "RESET", "RESUME", "STATUS", "STOP", "SUSPEND", "WAIT"]
+        self.assertEqual(names[:len(system)], system)  # the system commands first, by name
 
     def test_help_name_gives_units_and_ranges(self):
         reply = rosservice_call("/locem/command", "command: 'HELP wait'")

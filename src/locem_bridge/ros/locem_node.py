@@ -10,10 +10,18 @@ service                ``~command``                                ``locem_bridg
 action                 ``~command_action``                         ``locem_bridge/CommandAction``
 subscriber             ``~command_in``                             ``locem_bridge/CommandString``
 publisher              ``~status``                                 ``locem_bridge/Status``
+skill state publisher  ``~skill_state`` (every transition)         ``locem_bridge/SkillTransition``
 procedure services     ``~procedure/{add,query_state,cancel,       ``locem_bridge/ProcedureAdd``,
-                       pause,resume}``                             ``locem_bridge/ProcedureControl``
+                       pause,resume,suspend,halt,reset}``          ``locem_bridge/ProcedureControl``
 procedure publisher    ``~procedure/state`` (on change, latched)   ``locem_bridge/ProcedureState``
 =====================  ==========================================  ====================================
+
+Skill methods (OPC UA Part 10 on each command, :mod:`locem_bridge.common.program_state`): the system commands
+``SUSPEND|RESUME|HALT|RESET id=N cause=WORD`` on any interface, and ``~procedure/{suspend,resume,halt,reset}`` on a
+procedure's command (``pause`` is ``suspend``; ``halt`` answers once the command has ended; ``reset`` acts on a
+finished one). Every transition of a command's skill state is published on ``~skill_state`` (stamped with the
+transition's time; not latched). An action goal's feedback carries its command's ``id`` (the goal's first feedback
+is sent as soon as the goal is accepted), which a client needs to call those methods on its goal.
 
 Accounting of ``~command_in``: the subscriber keeps no bounded queue of its own (rospy's ``queue_size``
 discards all but the newest N messages of a burst without a word), so every message read is handed to the
@@ -34,7 +42,7 @@ from locem_bridge.common.locem_codes import Code
 from locem_bridge.locem.core import LocemCore
 from locem_bridge.locem.dispatcher import DEFAULT_MAX_RUNNING
 from locem_bridge.locem.errors import LocemError
-from locem_bridge.locem.execution import CommandEvent, Execution
+from locem_bridge.locem.execution import CommandEvent, ExecState, Execution
 from locem_bridge.locem.procedures import ProcedureSnapshot
 from locem_bridge.locem.registry import Interface
 from locem_bridge.locem.response import Response, encode_result
@@ -44,6 +52,7 @@ from locem_bridge.msg import (
     CommandFeedback,
     CommandResult,
     ProcedureState,
+    SkillTransition,
     Status,
 )
 from locem_bridge.srv import (
@@ -77,16 +86,25 @@ class LocemNode:
         dispatcher = self.core.dispatcher
         self._status_pub = rospy.Publisher("~status", Status, queue_size=self._status_queue_size)
         self._procedure_pub = rospy.Publisher("~procedure/state", ProcedureState, queue_size=100, latch=True)
+        self._skill_pub = rospy.Publisher("~skill_state", SkillTransition, queue_size=self._status_queue_size)
         dispatcher.add_listener(self._publish_status)
+        dispatcher.add_listener(self._publish_skill_state)
         self.core.procedures.add_listener(self._publish_procedure)
+        procedures = self.core.procedures
         self._services = [
             rospy.Service("~command", Command, self._on_command),
             rospy.Service("~procedure/add", ProcedureAdd, self._on_procedure_add),
-            rospy.Service("~procedure/query_state", ProcedureControl,
-                          self._procedure_op(self.core.procedures.query_state)),
-            rospy.Service("~procedure/cancel", ProcedureControl, self._procedure_op(self.core.procedures.cancel)),
-            rospy.Service("~procedure/pause", ProcedureControl, self._procedure_op(self.core.procedures.pause)),
-            rospy.Service("~procedure/resume", ProcedureControl, self._procedure_op(self.core.procedures.resume)),
+            rospy.Service("~procedure/query_state", ProcedureControl, self._procedure_op(procedures.query_state)),
+            rospy.Service("~procedure/cancel", ProcedureControl, self._procedure_op(procedures.cancel)),
+            rospy.Service("~procedure/pause", ProcedureControl, self._procedure_op(procedures.pause)),
+            rospy.Service("~procedure/resume", ProcedureControl,
+                          self._procedure_op(lambda i: procedures.resume(i, "procedure/resume service"))),
+            rospy.Service("~procedure/suspend", ProcedureControl,
+                          self._procedure_op(lambda i: procedures.suspend(i, "procedure/suspend service"))),
+            rospy.Service("~procedure/halt", ProcedureControl,
+                          self._procedure_op(lambda i: procedures.halt(i, "procedure/halt service"))),
+            rospy.Service("~procedure/reset", ProcedureControl,
+                          self._procedure_op(lambda i: procedures.reset(i, "procedure/reset service"))),
         ]
         # queue_size=None: rospy discards nothing; the callback is quick, so TCP paces a sender (see module doc)
         self._subscriber = rospy.Subscriber("~command_in", CommandString, self._on_command_in, queue_size=None)
@@ -128,14 +146,35 @@ class LocemNode:
         message.progress = event.progress
         self._status_pub.publish(message)
 
+    def _publish_skill_state(self, event: CommandEvent) -> None:
+        transition = event.transition
+        if transition is None:
+            return
+        message = SkillTransition()
+        message.header.stamp = rospy.Time.from_sec(transition.stamp)
+        message.instance = transition.instance
+        message.skill = transition.skill
+        message.number = transition.number
+        message.transition = transition.name
+        message.from_state = transition.source.value
+        message.to_state = transition.target.value
+        message.method = transition.method
+        message.cause = transition.cause
+        self._skill_pub.publish(message)
+
     # -- action -------------------------------------------------------------------------------------------
     def _on_goal(self, goal_handle: Any) -> None:
         goal_id = goal_handle.get_goal_id().id
-        accepted = threading.Event()
+        lock = threading.Lock()        # the first feedback (the id) goes out before any progress feedback
+        accepted = [False]
 
         def feedback(event: CommandEvent) -> None:
-            if accepted.is_set() and not event.state.terminal:
-                goal_handle.publish_feedback(CommandFeedback(event.state.value, event.progress, event.message))
+            if event.state.terminal:
+                return
+            with lock:
+                if accepted[0]:
+                    goal_handle.publish_feedback(CommandFeedback(event.state.value, event.progress, event.message,
+                                                                 event.id))
 
         try:
             execution = self.core.dispatcher.submit(goal_handle.get_goal().command, Interface.ACTION,
@@ -146,7 +185,11 @@ class LocemNode:
         with self._goals_lock:
             self._goals[goal_id] = execution
         goal_handle.set_accepted("running as command %d" % execution.id)
-        accepted.set()
+        with lock:  # the goal's command id, at once: what a client needs for SUSPEND / RESUME id=N
+            state = execution.state
+            goal_handle.publish_feedback(CommandFeedback(ExecState.RUNNING.value if state.terminal else state.value,
+                                                         0.0, "", execution.id))
+            accepted[0] = True
         threading.Thread(target=self._finish_goal, args=(goal_handle, goal_id, execution),
                          name="locem-goal-%d" % execution.id, daemon=True).start()
 
