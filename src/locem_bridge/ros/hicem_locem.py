@@ -3,13 +3,16 @@
 - :class:`RosLocemClient`: one ``actionlib.ActionClient`` on ``<locem>/command_action``; every ``send`` is a goal
   of its own (several may run at once, e.g. under a Parallel node); ``cancel`` cancels that goal, which LOCEM
   turns into a device stop; the latest feedback's text is the handle's ``feedback()``. A command sent while LOCEM is away (restarting) waits for it, within a deadline; a
-  running command whose LOCEM went away ends ``ABORTED`` and is not sent again.
+  running command whose LOCEM went away ends ``ABORTED`` and is not sent again. The goal's LOCEM command id comes
+  with its feedback (the first right after LOCEM accepted it); ``suspend`` / ``resume`` send ``SUSPEND id=N
+  cause=WORD`` / ``RESUME ...`` through the ``<locem>/command`` service.
 - :class:`LocemHealthFeed`: polls ``STATUS`` through the ``<locem>/command`` service every ``period`` seconds —
   an answer is LOCEM's heartbeat, each backend's ``health`` entry becomes module ``locem/<backend>`` at the level
   :func:`locem_bridge.common.health.grade` gives it — and
   forwards ``diagnostics`` (``diagnostic_msgs/DiagnosticArray``) and ``<locem>/status`` (any message is a sign of life) to the HDH.
 """
 import json
+import re
 import threading
 import time
 from typing import Any, Optional
@@ -19,13 +22,25 @@ import rospy
 from diagnostic_msgs.msg import DiagnosticArray
 
 from locem_bridge.common.health import grade, problems
-from locem_bridge.hicem.errors import HicemError
+from locem_bridge.hicem.errors import HicemError, LocemCallError
 from locem_bridge.hicem.interfaces import LOCEM_LOST, CommandHandle, LocemClient, LocemReply
 from locem_bridge.msg import CommandAction, CommandGoal, Status
 from locem_bridge.srv import Command
 
 #: how long the action server of a running goal may be gone before the goal counts as lost (s)
 LOST_GRACE_S = 0.5
+#: how long ``suspend`` / ``resume`` wait for the goal's command id (its first feedback) before giving up (s)
+ID_WAIT_S = 1.0
+#: how long a ``SUSPEND`` / ``RESUME`` call waits for the ``<locem>/command`` service (s)
+METHOD_CALL_WAIT_S = 2.0
+
+_CAUSE_BAD = re.compile(r"[^A-Za-z0-9_.:/#\-]+")
+
+
+def cause_token(cause: str) -> str:
+    """``cause`` as one word of LOCEM's grammar (letters, digits, ``_ . : / # -``): every other run of characters
+    becomes ``_``, at most 120 characters; empty stays empty."""
+    return _CAUSE_BAD.sub("_", str(cause or "").strip())[:120].strip("_")
 
 
 class _Goal(CommandHandle):
@@ -40,6 +55,8 @@ class _Goal(CommandHandle):
         self._unsent: Optional[LocemReply] = None      # the reply of a command that never left HICEM / was lost
         self._lost_at: Optional[float] = None
         self._feedback: Optional[str] = None            # the latest action feedback's message
+        self._id = 0                                    # the goal's LOCEM command id, from its feedback
+        self._id_known = threading.Event()
         self._deadline = time.monotonic() + wait_s
         self._wait_s = wait_s
         self._try_send()
@@ -56,7 +73,47 @@ class _Goal(CommandHandle):
                                       "was not sent" % (self._client.name, self._wait_s, self.command))
 
     def _on_feedback(self, _gh: Any, feedback: Any) -> None:
-        self._feedback = feedback.message
+        command_id = getattr(feedback, "id", 0)
+        if command_id and not self._id_known.is_set():
+            self._id = int(command_id)
+            self._id_known.set()
+        if feedback.message or self._feedback is not None:  # the first (the id only) carries no text
+            self._feedback = feedback.message
+
+    @property
+    def command_id(self) -> int:
+        """The goal's LOCEM command id, 0 until its first feedback arrived."""
+        return self._id
+
+    def suspend(self, cause: str = "") -> None:
+        self._skill_method("SUSPEND", cause)
+
+    def resume(self, cause: str = "") -> None:
+        self._skill_method("RESUME", cause)
+
+    def _skill_method(self, name: str, cause: str) -> None:
+        """``NAME id=<id> [cause=<word>]`` through LOCEM's command service; LocemCallError when the goal has no
+        command id within ``ID_WAIT_S`` (not sent, not accepted yet) or LOCEM refuses (its code and message)."""
+        with self._lock:
+            self._try_send()
+            unsent = self._unsent
+        if unsent is not None:
+            raise LocemCallError("%s of %r: the command is not running in LOCEM (%s: %s)"
+                                 % (name, self.command, unsent.code, unsent.message), unsent.code)
+        if not self._id_known.wait(ID_WAIT_S):
+            reply = self.reply()
+            if reply is not None:
+                raise LocemCallError("%s of %r: the goal ended without a LOCEM command id (%s: %s)"
+                                     % (name, self.command, reply.code, reply.message), reply.code)
+            raise LocemCallError("%s of %r: LOCEM has not told its command id within %.1f s (no feedback of the goal "
+                                 "yet%s)" % (name, self.command, ID_WAIT_S,
+                                             "" if self._gh is not None else "; not sent yet, LOCEM away"),
+                                 "NOT_READY")
+        token = cause_token(cause)
+        text = "%s id=%d" % (name, self._id) + (" cause=%s" % token if token else "")
+        reply = self._client.call_command(text)
+        if not reply.success:
+            raise LocemCallError("%s refused by LOCEM (%s): %s" % (text, reply.code, reply.message), reply.code)
 
     def feedback(self) -> Optional[str]:
         return self._feedback
@@ -126,6 +183,8 @@ class RosLocemClient(LocemClient):
     def __init__(self, locem_ns: str, wait_s: float = 10.0) -> None:
         self.name = locem_ns.rstrip("/") + "/command_action"
         self.wait_s = wait_s
+        self._service_name = locem_ns.rstrip("/") + "/command"
+        self._service = rospy.ServiceProxy(self._service_name, Command, persistent=False)
         self._client = actionlib.ActionClient(self.name, CommandAction)
         if not self._client.wait_for_server(rospy.Duration(wait_s)):
             rospy.logwarn("hicem: LOCEM action server %s not up yet; commands wait up to %.0f s for it",
@@ -140,6 +199,17 @@ class RosLocemClient(LocemClient):
 
     def send(self, command: str) -> CommandHandle:
         return _Goal(self, command, self.wait_s)
+
+    def call_command(self, command: str) -> LocemReply:
+        """One command through ``<locem>/command`` (the service; for the skill methods on a goal's command);
+        LocemCallError when the service cannot be reached."""
+        try:
+            rospy.wait_for_service(self._service_name, timeout=METHOD_CALL_WAIT_S)
+            response = self._service(command)
+        except (rospy.ServiceException, rospy.ROSException) as error:
+            raise LocemCallError("%r: LOCEM service %s not reachable: %s" % (command, self._service_name, error),
+                                 "NOT_READY") from error
+        return LocemReply(response.success, response.code, response.message)
 
 
 class LocemHealthFeed:
