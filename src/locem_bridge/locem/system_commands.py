@@ -80,7 +80,9 @@ HALT = _method_spec("HALT", "Halt a running or suspended command: it ends ABORTE
                     "the commands halted")
 RESET = _method_spec("RESET", "Reset a halted (or failed) command's skill instance to Ready.", "the commands reset")
 
-SPECS = (HELP, STATUS, STOP, WAIT, SUSPEND, RESUME, HALT, RESET)
+SKILL_METHODS = (SUSPEND, RESUME, HALT, RESET)
+"""The methods of every skill's state machine, not skills themselves (the resource model leaves them out)."""
+SPECS = (HELP, STATUS, STOP, WAIT) + SKILL_METHODS
 
 
 class SystemCommands:

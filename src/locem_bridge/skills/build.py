@@ -266,6 +266,8 @@ def _registry(robot: Mapping[str, Any], devices: Sequence[str]) -> Tuple[list, S
     served: Set[str] = set()
     modules: Dict[str, str] = {}
     for spec in system_commands.SPECS:
+        if spec in system_commands.SKILL_METHODS:     # the state machine's methods, not skills
+            continue
         registry.declare(spec)
         served.add(spec.name)
         modules[spec.name] = inspect.getsourcefile(system_commands) or ""
