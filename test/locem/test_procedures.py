@@ -141,5 +141,6 @@ def test_halt_of_a_paused_procedure_and_reset_of_a_successful_one(core, wait_unt
     quick = core.procedures.add("WAIT 0.01").id
     assert wait_until(lambda: core.procedures.query_state(quick).state is F)
     assert core.procedures.query_state(quick).skill_state.value == "Ready"
-    with pytest.raises(InvalidArgument, match=r"procedure %d is finished: Reset is not allowed.*is Ready" % quick):
+    with pytest.raises(InvalidArgument, match=r"procedure %d is finished: Reset is not allowed.*has ended.*skill state "
+                                              r"Ready.*send it again" % quick):
         core.procedures.reset(quick)

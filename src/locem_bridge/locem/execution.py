@@ -319,6 +319,10 @@ class Execution:
         return "command %d (%s)" % (self.id, self.bound.name)
 
     def _refuse(self, method: Method) -> InvalidArgument:
+        if self.done and self.program is not ProgramState.HALTED:
+            return InvalidArgument("%s is not allowed: %s has ended (%s, skill state %s); a command runs once, send "
+                                   "it again for a new instance" % (method.value, self._what(), self.state.value,
+                                                                    self.program.value), argument="id")
         return InvalidArgument(str(TransitionRefused(self._what(), self.program, method)), argument="id")
 
     def suspend(self, cause: str = "") -> None:
