@@ -1,7 +1,9 @@
 """Child process for the kill -9 test (test code): runs HICEM over an HDICT file, the PEMKRE double persisted
-in a JSON file and the LOCEM double logging to a file. argv: start|resume workdir."""
+in a JSON file and the LOCEM double logging to a file. argv: start|resume|suspend workdir (suspend: start, and
+suspend the action once the second APPLY_TAPE runs, then log ``## suspended <state>`` and wait to be killed)."""
 import os
 import sys
+import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path[:0] = [os.path.join(HERE, "..", "..", "src"), HERE]
@@ -21,6 +23,16 @@ def main() -> int:
     ex.health.heartbeat("locem")
     beats = Heartbeats(ex.health)
     loc.log("## %s pid %d" % (mode, os.getpid()))
+    if mode == "suspend":
+        ex.controller.start_process(PemkreDouble.PROCESS)
+        while len([h for h in loc.running() if h.command.startswith("APPLY_TAPE ")]) < 1 or \
+                len([h for h in loc.handles if h.command.startswith("APPLY_TAPE ")]) < 2:
+            time.sleep(0.01)
+        time.sleep(0.2)
+        state = ex.controller.suspend_action("operator")
+        loc.log("## suspended %s" % state.value)
+        ex.controller.join()
+        return 4
     phase = ex.controller.run_process(PemkreDouble.PROCESS) if mode == "start" else ex.controller.resume()
     loc.log("## finished %s" % phase)
     beats.stop()

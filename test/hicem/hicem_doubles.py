@@ -2,9 +2,10 @@
 
 - :class:`LocemDouble`: an in-process stand-in for LOCEM's action interface. It checks command names and
   numeric arguments like the LOCEM grammar will (unknown name → INVALID_COMMAND, non-number → INVALID_ARGUMENT),
-  lets each command take a configurable time, answers SCAN with a site, supports cancel, injected failures,
-  odd codes and a progress feedback text per command name, and logs every command (optionally to a file,
-  fsync'ed, for the crash tests).
+  lets each command take a configurable time, answers SCAN with a site, supports cancel, suspend and resume
+  (a suspended command's time stands still; names in ``non_suspendable`` refuse, as LOCEM's commands that are not
+  pausable), injected failures, odd codes and a progress feedback text per command name, and logs every command
+  and SUSPEND/RESUME/CANCEL (optionally to a file, fsync'ed, for the crash tests).
 - :class:`PemkreDouble`: a tiny process engine following docs/contracts.md for the taping process (SCAN →
   GET_TOOL → per joint VALIDATE_TAPE_LINE → TAPE_LINE or MANUAL_TAPING → GO_HOME → ended). It refuses status
   updates for tasks that are not running, like the real PEMKRE must, and can persist its state to a JSON file
@@ -23,7 +24,7 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional
 
-from locem_bridge.hicem.errors import PemkreCallError
+from locem_bridge.hicem.errors import LocemCallError, PemkreCallError
 from locem_bridge.hicem.interfaces import CommandHandle, LocemClient, LocemReply, PemkreClient
 
 SITE = {
@@ -57,6 +58,7 @@ class _Handle(CommandHandle):
         self.t_done = time.monotonic() + duration
         self.cancelled = False
         self.cancel_time: Optional[float] = None
+        self.remaining: Optional[float] = None     # time left when suspended, None while not suspended
 
     def done(self) -> bool:
         return self.cancelled or time.monotonic() >= self.t_done
@@ -77,6 +79,25 @@ class _Handle(CommandHandle):
             self.cancel_time = time.monotonic()
             self.owner.log("CANCEL " + self.command)
 
+    # suspension, as LOCEM's SUSPEND/RESUME id=N: a pausable command stops its clock while suspended
+    def suspend(self, cause: str = "") -> None:
+        name = self.command.split()[0].upper() if self.command.split() else ""
+        if name in self.owner.non_suspendable:
+            raise LocemCallError("Suspend is not allowed: %s cannot be suspended (not pausable)" % name,
+                                 "INVALID_ARGUMENT")
+        if self.done() or self.remaining is not None:
+            raise LocemCallError("Suspend is not allowed: %s is not running" % name, "INVALID_ARGUMENT")
+        self.remaining = self.t_done - time.monotonic()
+        self.t_done = float("inf")
+        self.owner.log("SUSPEND %s cause=%s" % (self.command, cause))
+
+    def resume(self, cause: str = "") -> None:
+        if self.remaining is None or self.cancelled:
+            raise LocemCallError("Resume is not allowed: %r is not suspended" % self.command, "INVALID_ARGUMENT")
+        self.t_done = time.monotonic() + self.remaining
+        self.remaining = None
+        self.owner.log("RESUME %s cause=%s" % (self.command, cause))
+
 
 class LocemDouble(LocemClient):
     """TEST DOUBLE of LOCEM (see module doc)."""
@@ -96,6 +117,8 @@ class LocemDouble(LocemClient):
                                                   for n in ("arm", "base", "compressor", "wall")}
         self.health_script: List[Dict[str, Dict[str, Any]]] = []
         self.log_path = log_path
+        # commands that refuse SUSPEND (not pausable in LOCEM: tool changes, STATUS, ...)
+        self.non_suspendable = {"MOUNT_TOOL", "CHANGE_TOOL", "STATUS", "STOP", "SCAN", "GET_POSE"}
         self._lock = threading.Lock()
 
     def log(self, line: str) -> None:

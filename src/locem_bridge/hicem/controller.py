@@ -24,26 +24,60 @@ action type) → HDICT record ``phase=running`` → ``set_task_status(in_progres
   by ``hhlc.resume_policy``: ``rerun`` its tree, ``fail`` it ("interrupted ..."), or run a recovery tree (e.g.
   RESUME_TAPE_LINE: the operator finishes the joint by hand). Completed tasks are never run again (a task
   already reported is re-reported from the HDICT, not executed).
-- :meth:`state` / state listeners: process, action type, task, skill, tree, running node, phase.
+- :meth:`state` / state listeners: process, action type, task, skill, tree, running node, phase, and the
+  action's skill state (``skill_state``, ``allowed``: the skill methods accepted now, ``skill_detail``: the cause
+  of the last transition).
+
+Skill state (issue 18; OPC UA Part 10 ``ProgramStateMachineType``, :mod:`locem_bridge.common.program_state`): the
+running action is a composite skill instance with one state machine (instance = the task IRI, skill = the matched
+skill or else the action type). Start when its tree starts; the tree's SUCCESS takes Running -> Ready, its failure
+(and a stop, a health fault) Running -> Halted. Transitions go to :meth:`add_transition_listener` listeners (the
+ROS node's ``/hicem/skill_state``). The methods, from any thread (:meth:`suspend_action`, :meth:`resume_action`,
+:meth:`halt_action`, :meth:`reset_action`, or :meth:`skill_method`), return the new state or raise
+:class:`SkillMethodRefused` (nothing changed) with the state machine's text, or saying that no action runs:
+
+- Suspend: the worker stops ticking the tree (tree and blackboard stay as they are), every outstanding LOCEM
+  command is suspended on its devices (``CommandHandle.suspend``), the clock the tree's nodes see stands still
+  (:class:`PausableClock`: Timeout, Sleep, command and prompt deadlines do not run out) and the HDICT's
+  ``hhlc/action`` record gets ``phase: suspended``, ``suspended_at`` (wall-clock s) and ``suspend_cause``. A
+  command LOCEM cannot suspend (not pausable, e.g. a tool change under way) runs to its end: the action stays
+  Running with phase ``suspending`` (only Halt accepted; nothing new is sent, the tree is not ticked) and becomes
+  Suspended when that command ends, the transition's cause saying so. Nothing is lost: the command's reply is
+  read by its node after Resume.
+- Resume: the suspended commands continue (a command LOCEM will not resume is cancelled: its node fails the
+  action), the clock runs on, the HDICT record is ``running`` again and the tree is ticked from where it stood.
+- Halt: the tree is halted like for a stop (its commands cancelled), the task is reported failed
+  ``halted: <cause>`` and the process goes on with PEMKRE's next action as after any failure.
+- Reset: the last Halted action instance back to Ready (bookkeeping: the next action has an instance of its
+  own).
+- A HICEM crash while suspended: :meth:`resume` finds ``phase: suspended`` and comes back Suspended (one
+  RunningToSuspended transition whose cause says it was restored after a restart), with no device command sent.
+  Resume then settles the action as after any restart (safe commands, then ``hhlc.resume_policy``); Halt sends
+  the safe commands and reports the task failed ``halted: <cause>``; a stop reports it failed ``stopped: ...``.
+
 Threads: one worker runs the loop and ticks trees; stop/abort/operator replies come from other threads and
-only set flags or touch the thread-safe OperatorDesk.
+only set flags or touch the thread-safe OperatorDesk. The skill methods take the controller's skill lock, which
+the worker holds around each tick, so they never meet a tick half done.
 """
+import functools
 import logging
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 from py_trees.common import Status
 
 from ..common.next_action import ACTION, BASIC, COMPOSITE
+from ..common.program_state import Method, ProgramState, ProgramStateMachine, Transition, TransitionRefused
 from ..common.task_status import FAILED, IN_PROGRESS, SUCCEEDED
 from .blackboard import Blackboard
 from .config import HicemParams
 from .datastore import DataManager
-from .errors import ControllerError, HicemError, LocemCallError, PemkreCallError
+from .errors import ControllerError, HicemError, LocemCallError, PemkreCallError, SkillMethodRefused
 from .interfaces import CommandHandle, LocemReply, NextAction, PemkreUnavailableError, check_reply, parse_next_action
 from .node_base import NodeContext
 from .operator import OperatorDesk
+from .skill_control import PausableClock, operator_methods
 from .xml_loader import BuiltTree, TreeLibrary
 
 LOG = logging.getLogger("locem_bridge.hicem.controller")
@@ -134,6 +168,38 @@ class _TimedHandle(CommandHandle):
         """The inner handle's latest progress feedback (trees record it, e.g. SPRAY_AREA's section progress)."""
         return self.inner.feedback()
 
+    def suspend(self, cause: str = "") -> None:
+        self._timed(lambda: self.inner.suspend(cause))
+
+    def resume(self, cause: str = "") -> None:
+        self._timed(lambda: self.inner.resume(cause))
+
+
+def _command_name(h: Any) -> str:
+    words = str(getattr(h, "command", "") or "").split()
+    return words[0].upper() if words else "a command"
+
+
+def _cause(cause: Any, default: str) -> str:
+    text = " ".join(str(cause or "").split())
+    return text or default
+
+
+class _ActionSkill:
+    """The skill side of the running action: its state machine, its tree's context and clock (None for an action
+    restored Suspended after a restart: no tree yet), the commands suspended on the devices, a suspension waiting
+    for commands that cannot be suspended (``pending``: cause, their handles, their names) and a requested Halt."""
+
+    def __init__(self, machine: ProgramStateMachine, na: NextAction, ctx: Optional[NodeContext] = None,
+                 clock: Optional[PausableClock] = None) -> None:
+        self.machine = machine
+        self.na = na
+        self.ctx = ctx
+        self.clock = clock
+        self.suspended: List[Any] = []
+        self.pending: Optional[Tuple[str, List[Any], str]] = None
+        self.halt_cause: Optional[str] = None
+
 
 class HighLevelController:
     def __init__(self, pemkre: Any, locem: Any, library: TreeLibrary, store: DataManager, params: HicemParams,
@@ -158,7 +224,15 @@ class HighLevelController:
         self._thread: Optional[threading.Thread] = None
         self._listeners: List[Callable[[Dict[str, Any]], None]] = []
         self._state: Dict[str, Any] = {"process": "", "specific_process": "", "action_type": "", "task": "",
-                                       "skill": "", "tree": "", "node": "", "path": "", "phase": "idle", "detail": ""}
+                                       "skill": "", "tree": "", "node": "", "path": "", "phase": "idle", "detail": "",
+                                       "skill_state": "", "allowed": [], "skill_detail": ""}
+        # skill state of the running action (see the module doc); the worker holds the lock around each tick
+        self._skill_lock = threading.RLock()
+        self._action: Optional[_ActionSkill] = None
+        self._last_machine: Optional[ProgramStateMachine] = None
+        self._last_halted: Optional[ProgramStateMachine] = None
+        self._skill_detail = ""
+        self._transition_listeners: List[Callable[[Transition], None]] = []
         self._tree: Optional[BuiltTree] = None
         self._current_stats: Optional[ActionStats] = None
         self.stats: List[ActionStats] = []
@@ -189,6 +263,205 @@ class HighLevelController:
     @property
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
+
+    def add_transition_listener(self, cb: Callable[[Transition], None]) -> None:
+        """``cb(transition)`` on every transition of an action's skill state (called in the thread that caused it,
+        with the skill lock held: return quickly, do not call the skill methods from it)."""
+        self._transition_listeners.append(cb)
+
+    def skill_state(self) -> Tuple[str, List[str]]:
+        """The skill state of the running action (else of the last one; "" before any) and the methods accepted."""
+        with self._skill_lock:
+            return self._skill_state_name(), [m.value for m in self._allowed()]
+
+    def _skill_state_name(self) -> str:
+        m = self._action.machine if self._action is not None else self._last_machine
+        return m.state.value if m is not None else ""
+
+    def _allowed(self) -> List[Method]:
+        act = self._action
+        if act is not None:
+            if act.pending is not None:
+                return [Method.HALT]
+            return operator_methods(act.machine.state)
+        m = self._last_halted
+        return [Method.RESET] if m is not None and m.state == ProgramState.HALTED else []
+
+    def _publish_skill(self) -> None:
+        with self._skill_lock:
+            st, allowed, detail = self._skill_state_name(), [m.value for m in self._allowed()], self._skill_detail
+        self._set_state(skill_state=st, allowed=allowed, skill_detail=detail)
+
+    def _new_machine(self, na: NextAction, state: ProgramState = ProgramState.READY) -> ProgramStateMachine:
+        m = ProgramStateMachine(na.task, na.skill or na.action_type, state)
+        m.add_listener(functools.partial(self._on_transition, m))
+        return m
+
+    def _on_transition(self, machine: ProgramStateMachine, tr: Transition) -> None:
+        if tr.target == ProgramState.HALTED:
+            self._last_halted = machine
+        elif self._last_halted is machine:
+            self._last_halted = None
+        self._skill_detail = tr.cause
+        self.log.info("skill %s %s: %s -> %s (%s%s)", tr.skill, tr.instance, tr.source.value, tr.target.value,
+                      "%s: " % tr.method if tr.method else "", tr.cause)
+        for cb in list(self._transition_listeners):
+            try:
+                cb(tr)
+            except Exception:  # a broken observer must not change the action's course
+                self.log.exception("transition listener failed")
+        self._publish_skill()
+
+    # -- skill methods (any thread) -------------------------------------------------------------------------
+    def skill_method(self, method: Union[Method, str], cause: str = "") -> ProgramState:
+        """Suspend, Resume, Halt or Reset (a :class:`Method` or its name in any case); see the methods."""
+        try:
+            m = method if isinstance(method, Method) else Method.parse(method)
+        except ValueError as exc:
+            raise SkillMethodRefused(str(exc), str(method), *self.skill_state())
+        if m == Method.START:
+            st, allowed = self.skill_state()
+            raise SkillMethodRefused("Start is not a method of HICEM's action: HICEM starts each action PEMKRE names "
+                                     "(start a process with start_process); allowed now: %s"
+                                     % (", ".join(allowed) or "none"), m.value, st, allowed)
+        return {Method.SUSPEND: self.suspend_action, Method.RESUME: self.resume_action,
+                Method.HALT: self.halt_action, Method.RESET: self.reset_action}[m](cause)
+
+    def suspend_action(self, cause: str = "") -> ProgramState:
+        """Suspend the running action (see the module doc). Returns Suspended, or Running while a command that
+        cannot be suspended ends (the action becomes Suspended then, by itself); asked again meanwhile, the same."""
+        cause = _cause(cause, "suspend requested")
+        with self._skill_lock:
+            act = self._running_action(Method.SUSPEND)
+            if act.pending is not None:
+                return act.machine.state
+            self._check(act, Method.SUSPEND)
+            if act.ctx is None or act.clock is None:      # cannot happen: a restored action comes back Suspended
+                raise self._refused(Method.SUSPEND, "Suspend is not allowed: the action has no tree yet")
+            self._record_action(Method.SUSPEND, phase="suspended", suspended_at=time.time(), suspend_cause=cause)
+            act.clock.freeze()
+            waiting: List[Any] = []
+            for h in act.ctx.outstanding():
+                if h.done():
+                    continue
+                try:
+                    h.suspend(cause)
+                    act.suspended.append(h)
+                except Exception as exc:  # LocemCallError: LOCEM refused (not pausable, ended meanwhile)
+                    if not h.done():
+                        waiting.append(h)
+                        self.log.warning("suspend: %s cannot be suspended (%s); it runs to its end", h.command, exc)
+            if waiting:
+                names = ", ".join(sorted({_command_name(h) for h in waiting}))
+                act.pending = (cause, waiting, names)
+                self._skill_detail = ("%s: suspension pending, %s cannot be suspended; the action is Suspended when "
+                                      "it ends" % (cause, names))
+                self._set_state(phase="suspending")
+                self._publish_skill()
+                return act.machine.state
+            self._enter_suspended(act, cause)
+            return ProgramState.SUSPENDED
+
+    def resume_action(self, cause: str = "") -> ProgramState:
+        """Resume the suspended action: its commands continue on the devices, the tree is ticked from where it
+        stood (for an action restored Suspended after a restart: the resume policy runs, see the module doc)."""
+        cause = _cause(cause, "resume requested")
+        with self._skill_lock:
+            act = self._running_action(Method.RESUME)
+            if act.pending is not None:
+                raise self._refused(Method.RESUME, "Resume is not allowed: %s is still Running, its suspension waits "
+                                    "for %s, which cannot be suspended, to end (allowed: Halt)"
+                                    % (act.machine.describe(), act.pending[2]))
+            self._check(act, Method.RESUME)
+            self._record_action(Method.RESUME, phase="running", drop=("suspended_at", "suspend_cause"))
+            problems: List[str] = []
+            for h in act.suspended:
+                if h.done():
+                    continue
+                try:
+                    h.resume(cause)
+                except Exception as exc:  # LOCEM lost it or refuses: cancel, its node fails the action with it
+                    problems.append("%s could not be resumed (%s) and was cancelled" % (_command_name(h), exc))
+                    self.log.warning("resume: %s could not be resumed (%s); cancelling it", h.command, exc)
+                    try:
+                        h.cancel()
+                    except Exception:
+                        self.log.exception("cancel failed")
+            act.suspended = []
+            if act.clock is not None:
+                act.clock.unfreeze()
+            act.machine.call(Method.RESUME, "; ".join([cause] + problems))
+            self._set_state(phase="running" if act.ctx is not None else "resuming")
+        self._wake.set()
+        return ProgramState.RUNNING
+
+    def halt_action(self, cause: str = "") -> ProgramState:
+        """Halt the running or suspended action: the worker halts its tree (commands cancelled) and reports the task
+        failed ``halted: <cause>``; the process goes on with PEMKRE's next action."""
+        cause = _cause(cause, "halt requested")
+        with self._skill_lock:
+            act = self._running_action(Method.HALT)
+            self._check(act, Method.HALT)
+            act.halt_cause = cause
+            act.machine.call(Method.HALT, cause)
+        self._wake.set()
+        return ProgramState.HALTED
+
+    def reset_action(self, cause: str = "") -> ProgramState:
+        """Reset the last Halted action instance to Ready (refused while an action runs)."""
+        cause = _cause(cause, "reset requested")
+        with self._skill_lock:
+            act = self._action
+            if act is not None:
+                if act.machine.state == ProgramState.HALTED:
+                    raise self._refused(Method.RESET, "Reset is not allowed: %s is still being halted; try again"
+                                        % act.machine.describe())
+                self._check(act, Method.RESET)
+            m = self._last_halted
+            if m is None or m.state != ProgramState.HALTED:
+                raise self._refused(Method.RESET, "Reset is not allowed: no HICEM action is Halted%s"
+                                    % self._last_text())
+            m.call(Method.RESET, cause)
+        return ProgramState.READY
+
+    def _running_action(self, method: Method) -> _ActionSkill:
+        act = self._action
+        if act is None:
+            raise self._refused(method, "%s is not allowed: no HICEM action is running%s" % (method.value,
+                                                                                           self._last_text()))
+        return act
+
+    def _last_text(self) -> str:
+        m = self._last_machine
+        allowed = ", ".join(x.value for x in self._allowed()) or "none"
+        if m is None:
+            return " (allowed now: %s)" % allowed
+        return " (the last, %s, is %s; allowed now: %s)" % (m.describe(), m.state.value, allowed)
+
+    def _refused(self, method: Method, text: str) -> SkillMethodRefused:
+        return SkillMethodRefused(text, method.value, self._skill_state_name(), [m.value for m in self._allowed()])
+
+    def _check(self, act: _ActionSkill, method: Method) -> None:
+        try:
+            act.machine.check(method)
+        except TransitionRefused as exc:
+            raise self._refused(method, str(exc)) from None
+
+    def _record_action(self, method: Method, drop: Tuple[str, ...] = (), **fields: Any) -> None:
+        """Update the HDICT's action record; a store failure refuses the method (nothing changed yet)."""
+        try:
+            rec = self.store.value(HHLC, "action") or {}
+            for k in drop:
+                rec.pop(k, None)
+            rec.update(fields)
+            self.store.put(HHLC, "action", rec, source="HHLC")
+        except HicemError as exc:
+            raise ControllerError("%s failed: the HDICT did not take it: %s" % (method.value, exc)) from exc
+
+    def _enter_suspended(self, act: _ActionSkill, cause: str) -> None:
+        act.pending = None
+        self._set_state(phase="suspended")
+        act.machine.call(Method.SUSPEND, cause)
 
     # -- commands from outside ------------------------------------------------------------------------------
     def start_process(self, process_iri: str, options: Optional[Dict[str, Any]] = None) -> None:
@@ -269,31 +542,91 @@ class HighLevelController:
         self._stop_reason = None
         self._set_state(process=rec["iri"], specific_process=rec.get("specific") or "", phase="resuming")
         try:
-            phase = self._resume_action()
+            phase = self._settle_interrupted()
         except Exception as exc:
             self.log.exception("resume failed")
             return self._finish_process("failed", "resume failed: %s: %s" % (type(exc).__name__, exc))
         return phase if phase is not None else self._loop()
 
-    def _resume_action(self) -> Optional[str]:
-        """Bring devices safe and settle the interrupted action; a final phase if the process must end."""
+    def _settle_interrupted(self) -> Optional[str]:
+        """Bring devices safe and settle the interrupted action; a final phase if the process must end. An action
+        suspended when HICEM died comes back Suspended instead, with no device command (:meth:`_restore_suspended`)."""
         act = self.store.value(HHLC, "action")
+        if act is not None and act.get("phase") == "suspended":
+            return self._restore_suspended(act)
         self._send_safe_commands()
         if act is not None and act.get("phase") != "reported":
-            na = NextAction(ACTION, task=act["task"], action_type=act["action_type"],
-                            parameters=act.get("raw_parameters", ""), skill=act.get("skill", ""),
-                            skill_kind=act.get("skill_kind", ""), values=act.get("parameters", {}))
-            policy = self.params.resume_policy.get(act["action_type"], "fail")
-            if act.get("phase") == "finished":
-                self._report_on_resume(na, act["outcome"], act["detail"])
-            elif policy == "fail" or (policy != "rerun" and not self.library.has_tree(policy)):
-                self._report_on_resume(na, FAILED, "interrupted: HICEM restarted during %s; not repeated "
-                                                     "(resume policy %s)" % (act["action_type"], policy))
-            else:
-                tree = tree_for(na) if policy == "rerun" else policy
-                self.log.info("resume: running %s for the interrupted %s %s", tree, act["action_type"], act["task"])
-                return self._execute(na, resumed=True, tree_id=tree)
+            return self._apply_resume_policy(act, self._na_of_record(act))
         return None
+
+    @staticmethod
+    def _na_of_record(act: Dict[str, Any]) -> NextAction:
+        return NextAction(ACTION, task=act["task"], action_type=act["action_type"],
+                          parameters=act.get("raw_parameters", ""), skill=act.get("skill", ""),
+                          skill_kind=act.get("skill_kind", ""), values=act.get("parameters", {}))
+
+    def _apply_resume_policy(self, act: Dict[str, Any], na: NextAction,
+                             machine: Optional[ProgramStateMachine] = None) -> Optional[str]:
+        """``hhlc.resume_policy`` for an action a restart interrupted; ``machine``: its skill state machine when it
+        was restored Suspended and resumed (Running), ended with the outcome."""
+        policy = self.params.resume_policy.get(act["action_type"], "fail")
+        if act.get("phase") == "finished":
+            self._report_on_resume(na, act["outcome"], act["detail"])
+        elif policy == "fail" or (policy != "rerun" and not self.library.has_tree(policy)):
+            detail = "interrupted: HICEM restarted during %s; not repeated (resume policy %s)" % (
+                act["action_type"], policy)
+            if machine is not None:
+                with self._skill_lock:
+                    machine.fail(detail)
+            self._report_on_resume(na, FAILED, detail)
+        else:
+            tree = tree_for(na) if policy == "rerun" else policy
+            self.log.info("resume: running %s for the interrupted %s %s", tree, act["action_type"], act["task"])
+            return self._execute(na, resumed=True, tree_id=tree, machine=machine)
+        return None
+
+    def _restore_suspended(self, rec: Dict[str, Any]) -> Optional[str]:
+        """The action was Suspended when HICEM died: come back Suspended (no device command sent) and wait for
+        Resume (safe commands, then the resume policy), Halt (safe commands, reported failed ``halted: ...``) or
+        a stop (reported failed ``stopped: ...``, the process ends)."""
+        na = self._na_of_record(rec)
+        machine = self._new_machine(na, ProgramState.RUNNING)
+        act = _ActionSkill(machine, na)
+        since = rec.get("suspended_at")
+        when = (" at %s" % time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(since))
+                if isinstance(since, (int, float)) else "")
+        by = rec.get("suspend_cause") or ""
+        self._set_state(action_type=na.action_type, task=na.task, skill=na.skill, tree="", node="", path="",
+                        phase="suspended")
+        with self._skill_lock:
+            self._action = act
+            self._last_machine = machine
+            machine.call(Method.SUSPEND, "restored after a HICEM restart: the action was suspended%s%s; no device "
+                                         "command sent" % (when, " (%s)" % by if by else ""))
+        self.log.warning("resume: %s %s was suspended when HICEM stopped; it stays Suspended until Resume or Halt",
+                         na.action_type, na.task)
+        stop: Optional[str] = None
+        while True:
+            with self._skill_lock:
+                if act.halt_cause is not None or self._stop_reason is not None or \
+                        machine.state == ProgramState.RUNNING:
+                    self._action = None
+                    if act.halt_cause is None and self._stop_reason is not None:
+                        stop = self._stop_reason
+                        machine.fail("stopped: %s" % stop)
+                    break
+            self._wake.wait(self.params.idle_poll_s)
+            self._wake.clear()
+        self._publish_skill()
+        if act.halt_cause is not None:
+            self._send_safe_commands()
+            self._report_on_resume(na, FAILED, "halted: %s" % act.halt_cause)
+            return None
+        if stop is not None:
+            self._report_on_resume(na, FAILED, "stopped: %s" % stop)
+            return self._finish_process("stopped", stop)
+        self._send_safe_commands()
+        return self._apply_resume_policy(rec, na, machine)
 
     def _report_on_resume(self, na: NextAction, outcome: str, detail: str) -> None:
         """Report an outcome found in the HDICT. PEMKRE may already have it (the crash came after its answer
@@ -346,8 +679,10 @@ class HighLevelController:
             if phase is not None:
                 return phase
 
-    def _execute(self, na: NextAction, resumed: bool = False, tree_id: Optional[str] = None) -> Optional[str]:
-        """Run one action; returns a final process phase if the process must end, else None."""
+    def _execute(self, na: NextAction, resumed: bool = False, tree_id: Optional[str] = None,
+                 machine: Optional[ProgramStateMachine] = None) -> Optional[str]:
+        """Run one action; returns a final process phase if the process must end, else None. ``machine``: the
+        action's skill state machine when it exists already (an action restored Suspended, then resumed)."""
         stats = ActionStats(na.action_type)
         self._current_stats = stats
         t0 = time.perf_counter()
@@ -371,7 +706,7 @@ class HighLevelController:
                 reason = "no behavior tree for %s; trees: %s" % (_what(na), ", ".join(self.library.tree_ids()))
                 self._report(na, FAILED, reason)
                 return self._finish_process("failed", reason)
-            outcome, detail = self._run_tree(na, stats, tree_id)
+            outcome, detail = self._run_tree(na, stats, tree_id, machine)
             rec.update(phase="finished", outcome=outcome, detail=detail)
             self.store.put(HHLC, "action", rec, source="HHLC")
             self._report(na, outcome, detail)
@@ -385,10 +720,15 @@ class HighLevelController:
             stats.wall_s = time.perf_counter() - t0
             self.stats.append(stats)
             self._current_stats = None
+            if machine is not None and machine.state in (ProgramState.RUNNING, ProgramState.SUSPENDED):
+                with self._skill_lock:       # ended before its tree ran (no tree, PEMKRE refused)
+                    machine.fail("the action ended before its tree ran")
 
-    def _run_tree(self, na: NextAction, stats: ActionStats, tree_id: str) -> "tuple":
+    def _run_tree(self, na: NextAction, stats: ActionStats, tree_id: str,
+                  machine: Optional[ProgramStateMachine] = None) -> "tuple":
+        clock = PausableClock(self.clock)       # stands still while the action is suspended
         ctx = NodeContext(locem=self._timed_locem, store=self.store, health=self.health, operator=self.operator,
-                          data_handler=self.data_handler, clock=self.clock, log=self.log)
+                          data_handler=self.data_handler, clock=clock, log=self.log)
         bb = Blackboard()
         bb.update(self.params.blackboard_entries())
         bb.update(na.blackboard_entries())
@@ -399,35 +739,78 @@ class HighLevelController:
         tree = self.library.build(tree_id, ctx, bb)
         self._abort_reason = None
         self._tree = tree
+        act = _ActionSkill(machine or self._new_machine(na), na, ctx, clock)
         self._set_state(tree=tree_id, phase="running")
+        with self._skill_lock:
+            self._action = act
+            self._last_machine = act.machine
+            if act.machine.state == ProgramState.READY:
+                act.machine.call(Method.START, "HICEM runs the tree %s" % tree_id)
+            else:
+                self._publish_skill()
         period = self.params.tick_period_s
+        end: Optional[Tuple[str, str]] = None
         try:
             while True:
-                halt_reason = self._stop_reason and ("stopped: %s" % self._stop_reason) or self._abort_reason
-                if halt_reason:
-                    self._halt(tree, ctx)
-                    return FAILED, halt_reason
-                try:
-                    status = tree.tick()
-                except Exception as exc:
-                    self.log.exception("tick of %s raised", na.action_type)
-                    self._halt(tree, ctx)
-                    return FAILED, "internal error while ticking %s: %s" % (na.action_type, exc)
-                stats.ticks += 1
-                self._set_state(node=tree.tip_name() or tree.root.name, path="/".join(tree.running_path()))
-                if status == Status.SUCCESS:
-                    detail = bb.get_default("task_detail", "")
-                    return SUCCEEDED, str(detail)
-                if status == Status.FAILURE:
-                    last = ctx.last_failure()
-                    self._cancel_outstanding(ctx)
-                    return FAILED, ("%s: %s" % last) if last else "tree %s failed" % tree_id
+                with self._skill_lock:
+                    end = self._step(na, stats, tree_id, tree, ctx, bb, act)
+                    if end is not None:
+                        self._end_action(act, end[0], end[1])
+                        return end
+                    ticking = act.machine.state == ProgramState.RUNNING and act.pending is None
                 tw = time.perf_counter()
-                self._wake.wait(period)
+                self._wake.wait(period if ticking else self.params.idle_poll_s)
                 self._wake.clear()
                 stats.wait_s += time.perf_counter() - tw
         finally:
             self._tree = None
+            if end is None:                      # an exception: the action cannot go on
+                with self._skill_lock:
+                    self._end_action(act, FAILED, "internal error in HICEM's controller")
+
+    def _step(self, na: NextAction, stats: ActionStats, tree_id: str, tree: BuiltTree, ctx: NodeContext,
+              bb: Blackboard, act: _ActionSkill) -> Optional[Tuple[str, str]]:
+        """One turn of the tick loop (skill lock held): halt, wait while suspended, or tick; the outcome or None."""
+        halt_reason = ((act.halt_cause is not None and "halted: %s" % act.halt_cause)
+                       or (self._stop_reason and "stopped: %s" % self._stop_reason) or self._abort_reason)
+        if halt_reason:
+            self._halt(tree, ctx)
+            return FAILED, halt_reason
+        if act.pending is not None:
+            cause, handles, names = act.pending
+            if any(not h.done() for h in handles):
+                return None
+            self._enter_suspended(act, "%s; suspended when %s ended (it cannot be suspended)" % (cause, names))
+        if act.machine.state != ProgramState.RUNNING:
+            return None                          # suspended: tree and blackboard stay as they are
+        try:
+            status = tree.tick()
+        except Exception as exc:
+            self.log.exception("tick of %s raised", na.action_type)
+            self._halt(tree, ctx)
+            return FAILED, "internal error while ticking %s: %s" % (na.action_type, exc)
+        stats.ticks += 1
+        self._set_state(node=tree.tip_name() or tree.root.name, path="/".join(tree.running_path()))
+        if status == Status.SUCCESS:
+            detail = bb.get_default("task_detail", "")
+            return SUCCEEDED, str(detail)
+        if status == Status.FAILURE:
+            last = ctx.last_failure()
+            self._cancel_outstanding(ctx)
+            return FAILED, ("%s: %s" % last) if last else "tree %s failed" % tree_id
+        return None
+
+    def _end_action(self, act: _ActionSkill, outcome: str, detail: str) -> None:
+        """The action's tree is over (skill lock held): Running/Suspended -> Ready on success, -> Halted else."""
+        self._action = None
+        if act.clock is not None:
+            act.clock.unfreeze()
+        if outcome == SUCCEEDED:
+            tr = act.machine.complete("succeeded: %s" % detail if detail else "succeeded")
+        else:
+            tr = act.machine.fail(detail or "failed")
+        if tr is None:                          # already Halted by the Halt method
+            self._publish_skill()
 
     def _halt(self, tree: BuiltTree, ctx: NodeContext) -> None:
         tree.halt()

@@ -4,7 +4,7 @@ Every error raised by :mod:`locem_bridge.hicem` derives from :class:`HicemError`
 whole family in one place. Each subclass names one kind of failure; messages always say what was wrong and,
 where there is a closed set, what is allowed.
 """
-from typing import Optional
+from typing import List, Optional
 
 from ..common.config_errors import ConfigError as _ConfigFileError
 
@@ -69,6 +69,19 @@ class PemkreCallError(HicemError):
 
 class ControllerError(HicemError):
     """The high-level controller was asked to do something its state does not allow."""
+
+
+class SkillMethodRefused(ControllerError):
+    """A skill method (Suspend, Resume, Halt, Reset) on HICEM's action that its state does not allow; nothing
+    changed. The text is the state machine's refusal (the state and the methods it allows) or says that no action
+    runs; ``method``, ``state`` (the skill state, "" when no action ran yet) and ``allowed`` (the methods HICEM
+    accepts now) carry the same in fields."""
+
+    def __init__(self, message: str, method: str = "", state: str = "", allowed: Optional[List[str]] = None) -> None:
+        super().__init__(message)
+        self.method = method
+        self.state = state
+        self.allowed = list(allowed or [])
 
 
 class ConfigError(HicemError, _ConfigFileError):
