@@ -4,7 +4,14 @@ Interfaces (relative to the node, ``/hicem/...`` when the node is named ``hicem`
 
 - services ``~start_process`` (``HicemStartProcess``: process IRI + JSON options), ``~stop`` (``HicemStop``),
   ``~operator_reply`` (``HicemOperatorReply``);
-- topics ``~state`` (``HicemState``, latched, on every change) and ``~prompts`` (``HicemPrompt`` events);
+- the running action's skill methods (OPC UA Part 10 program state machine, issue 18): services ``~suspend``,
+  ``~resume``, ``~halt``, ``~reset`` (``SkillControl``: request ``cause``; reply ``success``, ``code`` ``OK`` or
+  ``INVALID_ARGUMENT`` when the skill state does not allow the method -- nothing changed then --, ``message``,
+  ``state`` and ``allowed``, the methods accepted now, comma-separated) and topic ``~skill_state``
+  (``SkillTransition``, latched: the last transition, then every one with its cause); see
+  :mod:`locem_bridge.hicem.controller` for what each method does;
+- topics ``~state`` (``HicemState``, latched, on every change; ``phase`` ``suspending`` / ``suspended`` while
+  the action is) and ``~prompts`` (``HicemPrompt`` events);
 - it uses LOCEM's action ``<locem>/command_action`` for every command and its ``<locem>/command`` service for a
   periodic ``STATUS`` (LOCEM's heartbeat), listens to ``diagnostics`` and ``<locem>/status``, and talks to
   PEMKRE through ``<pemkre>/*`` services (``~pemkre: ros``) or an engine embedded in this process
@@ -25,20 +32,22 @@ Lifecycle: start → (resume) → serve until shutdown → the running tree is h
 """
 import json
 import os
-from typing import Any, Dict
+from typing import Any, Dict, Optional
 
 import rospkg
 import rospy
 
 from locem_bridge.common.folders import split_folders
+from locem_bridge.common.program_state import Method, Transition
 from locem_bridge.hicem.config import load_params
-from locem_bridge.hicem.errors import ControllerError, HicemError, OperatorError
+from locem_bridge.hicem.errors import ControllerError, HicemError, OperatorError, SkillMethodRefused
 from locem_bridge.hicem.executive import create_executive
 from locem_bridge.hicem.xml_loader import TreeLibrary
 from locem_bridge.job.call_log import instrument_from_env
-from locem_bridge.msg import HicemPrompt, HicemState
+from locem_bridge.msg import HicemPrompt, HicemState, SkillTransition
 from locem_bridge.srv import (HicemOperatorReply, HicemOperatorReplyResponse, HicemStartProcess,
-                              HicemStartProcessResponse, HicemStop, HicemStopResponse)
+                              HicemStartProcessResponse, HicemStop, HicemStopResponse, SkillControl,
+                              SkillControlResponse)
 
 from .hicem_locem import LocemHealthFeed, RosLocemClient
 from .hicem_pemkre import RosPemkreClient
@@ -94,13 +103,18 @@ class HicemNode:
         self.ctrl.pemkre_wait_s = param("pemkre_wait", 600.0)
         self.state_pub = rospy.Publisher("~state", HicemState, queue_size=20, latch=True)
         self.prompt_pub = rospy.Publisher("~prompts", HicemPrompt, queue_size=50)
+        self.skill_pub = rospy.Publisher("~skill_state", SkillTransition, queue_size=50, latch=True)
+        self._last_transition: Optional[Transition] = None
         self.ctrl.add_state_listener(self._publish_state)
+        self.ctrl.add_transition_listener(self._publish_transition)
         self.ex.operator.add_listener(self._on_prompt)
         self.feed = LocemHealthFeed(self.ex.data_handler, locem_ns, param("status_period", 0.25),
                                     rospy.resolve_name(param("diagnostics_topic", "diagnostics")))
         self.services = [rospy.Service("~start_process", HicemStartProcess, self._start),
                          rospy.Service("~stop", HicemStop, self._stop),
                          rospy.Service("~operator_reply", HicemOperatorReply, self._reply)]
+        self.services += [rospy.Service("~%s" % m.value.lower(), SkillControl, self._skill_handler(m))
+                          for m in (Method.SUSPEND, Method.RESUME, Method.HALT, Method.RESET)]
         self._publish_state(self.ctrl.state())
         if param("resume", "auto") == "auto" and self.ctrl.resume_in_background():
             rospy.logwarn("hicem: resuming the process interrupted in the previous run (HDICT %s)", hdict)
@@ -118,6 +132,14 @@ class HicemNode:
         msg.prompts = json.dumps([{"id": p.id, "kind": p.kind, "text": p.text, "choices": list(p.choices)}
                                   for p in self.ex.operator.open_prompts()])
         self.state_pub.publish(msg)
+
+    def _publish_transition(self, tr: Transition) -> None:
+        self._last_transition = tr
+        msg = SkillTransition()
+        msg.header.stamp = rospy.Time.from_sec(tr.stamp)
+        msg.instance, msg.skill, msg.number, msg.transition = tr.instance, tr.skill, tr.number, tr.name
+        msg.from_state, msg.to_state, msg.method, msg.cause = tr.source.value, tr.target.value, tr.method, tr.cause
+        self.skill_pub.publish(msg)
 
     def _on_prompt(self, event: str, prompt: Any) -> None:
         self.prompt_pub.publish(HicemPrompt(id=prompt.id, event=event, kind=prompt.kind, text=prompt.text,
@@ -151,6 +173,29 @@ class HicemNode:
         except OperatorError as exc:
             return HicemOperatorReplyResponse(False, str(exc))
         return HicemOperatorReplyResponse(True, "answer '%s' given to prompt %s" % (req.answer, req.prompt_id))
+
+    def _skill_handler(self, method: Method) -> Any:
+        service = rospy.resolve_name("~%s" % method.value.lower())
+
+        def handle(req: Any) -> Any:
+            try:
+                state = self.ctrl.skill_method(method, req.cause or "requested over ROS (%s)" % service)
+            except SkillMethodRefused as exc:
+                return SkillControlResponse(False, "INVALID_ARGUMENT", str(exc), exc.state, ",".join(exc.allowed))
+            except HicemError as exc:
+                state_now, allowed = self.ctrl.skill_state()
+                return SkillControlResponse(False, "ABORTED", str(exc), state_now, ",".join(allowed))
+            state_now, allowed = self.ctrl.skill_state()
+            tr = self._last_transition
+            if method == Method.SUSPEND and state.value != "Suspended":
+                message = "Suspend pending: %s" % self.ctrl.state().get("skill_detail", "")
+            elif tr is not None:
+                message = "%s taken: %s %s is %s (%s)" % (method.value, tr.skill, tr.instance, tr.target.value,
+                                                         tr.cause)
+            else:
+                message = "%s taken" % method.value
+            return SkillControlResponse(True, "OK", message, state.value, ",".join(allowed))
+        return handle
 
     def shutdown(self) -> None:
         self.feed.shutdown()
