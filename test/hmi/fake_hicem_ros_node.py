@@ -3,7 +3,9 @@
 
 The real HICEM message and service types on the real names (/hicem/state latched, /hicem/start_process,
 /hicem/stop, /hicem/operator_reply) playing a fixed script: mount_tool prompt, then one validate_line prompt per
-joint (invalid -> a manual_taping prompt for it), then ended. The simulator side: /sim/remove_tool,
+joint (invalid -> a manual_taping prompt for it), then ended. The running action's skill state: one program state
+machine per process run (Start at start_process, Halted at stop), /hicem/{suspend,resume,halt,reset}
+(SkillControl) and /hicem/skill_state (SkillTransition, latched). The simulator side: /sim/remove_tool,
 /sim/mount_tool, /sim/manual_taping, /sim/outcome, /sim/save_outcome (locem_bridge/JsonCall; save_outcome writes
 one PNG per wall with Pillow). Every call is appended to a JSON-lines log (``~log``) so the test can check what
 the operator_hmi node did, in order. Not the executive, not the simulator."""
@@ -18,10 +20,12 @@ from PIL import Image
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-from locem_bridge.msg import HicemState
+from locem_bridge.common.program_state import Method, ProgramStateMachine, TransitionRefused
+from locem_bridge.hicem.skill_control import operator_methods
+from locem_bridge.msg import HicemState, SkillTransition
 from locem_bridge.srv import (HicemOperatorReply, HicemOperatorReplyResponse, HicemStartProcess,
                               HicemStartProcessResponse, HicemStop, HicemStopResponse, JsonCall, JsonCallResponse,
-                              PemkreStartProcess)
+                              PemkreStartProcess, SkillControl, SkillControlResponse)
 
 JOINTS = ["wall_1_joint_1", "wall_1_joint_2"]
 
@@ -39,6 +43,10 @@ class FakeHicem:
         self.services = [rospy.Service("~start_process", HicemStartProcess, self.start),
                          rospy.Service("~stop", HicemStop, self.stop),
                          rospy.Service("~operator_reply", HicemOperatorReply, self.reply)]
+        self.skill_pub = rospy.Publisher("~skill_state", SkillTransition, queue_size=20, latch=True)
+        self.machine = None
+        self.skill_services = [rospy.Service("~%s" % m.value.lower(), SkillControl, self.skill_handler(m))
+                               for m in (Method.SUSPEND, Method.RESUME, Method.HALT, Method.RESET)]
         self.mounted = None
         self.sim_services = [rospy.Service("/sim/%s" % op, JsonCall, self.sim_handler(op))
                              for op in ("remove_tool", "mount_tool", "manual_taping", "outcome", "save_outcome")]
@@ -64,6 +72,28 @@ class FakeHicem:
                         with open(os.path.join(args["folder"], wall + ".png"), "wb") as fh:
                             fh.write(buf.getvalue())
             return JsonCallResponse(True, "%s done" % op, "{}")
+        return handle
+
+    def transition(self, tr) -> None:
+        self.skill_pub.publish(SkillTransition(instance=tr.instance, skill=tr.skill, number=tr.number,
+                                               transition=tr.name, from_state=tr.source.value,
+                                               to_state=tr.target.value, method=tr.method, cause=tr.cause))
+
+    def skill_handler(self, method):
+        def handle(req):
+            with self.lock:
+                self.record("skill", method.value, req.cause)
+                m = self.machine
+                if m is None:
+                    return SkillControlResponse(False, "INVALID_ARGUMENT", "%s is not allowed: no HICEM action is "
+                                                "running" % method.value, "", "")
+                try:
+                    m.call(method, req.cause)
+                except TransitionRefused as exc:
+                    return SkillControlResponse(False, "INVALID_ARGUMENT", str(exc), m.state.value,
+                                                ",".join(x.value for x in operator_methods(m.state)))
+                return SkillControlResponse(True, "OK", "%s taken" % method.value, m.state.value,
+                                            ",".join(x.value for x in operator_methods(m.state)))
         return handle
 
     def record(self, *call) -> None:
@@ -96,6 +126,8 @@ class FakeHicem:
                               action_type="GET_TOOL", task="urn:fake:task_1", tree="GET_TOOL", node="ask_mount",
                               detail="")
             self.step = -1
+            self.machine = ProgramStateMachine("urn:fake:task_1", "GET_TOOL", listener=self.transition)
+            self.machine.call(Method.START, "HICEM runs the tree GET_TOOL")
             self.open("mount_tool", "Mount the taping_tool on the arm, then answer done.", ["done"])
             self.publish()
             return HicemStartProcessResponse(True, "process %s started" % req.process)
@@ -106,6 +138,8 @@ class FakeHicem:
             self.prompts = []
             if self.state["phase"] == "running":
                 self.state.update(phase="stopped", detail="stopped: %s" % req.reason, tree="", node="")
+                if self.machine is not None:
+                    self.machine.fail("stopped: %s" % req.reason)
             self.publish()
             return HicemStopResponse(True, "stopped")
 

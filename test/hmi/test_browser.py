@@ -215,3 +215,76 @@ def test_the_skill_matching_of_a_process_is_shown_per_task(browser, server, doub
     assert "no resource model" in browser.find_element(By.ID, "error-text").text
     assert [c[1] for c in double.calls if c[0] == "match_process"] == [TAPING, PROCESSES[2]["iri"],
                                                                         PROCESSES[1]["iri"]]
+
+
+def test_pause_and_resume_buttons_follow_the_skill_state(browser, tmp_path):
+    """Pause and Resume on the page against the REAL HICEM executive (its PEMKRE and LOCEM test doubles): the
+    skill state shown and which of Pause, Resume, Abort, Reset are enabled follow the action's state machine."""
+    import sys
+    import time
+
+    from selenium.common.exceptions import StaleElementReferenceException
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    hicem_tests = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "hicem")
+    if hicem_tests not in sys.path:
+        sys.path.insert(0, hicem_tests)
+    from hicem_doubles import AutoOperator, Heartbeats, LocemDouble, PemkreDouble
+    from locem_bridge.hicem.executive import create_executive
+    from locem_bridge.hmi import ExecutiveBackend, HmiServer
+
+    def wait(cond, what):
+        return WebDriverWait(browser, WAIT_S, poll_frequency=0.05,
+                             ignored_exceptions=(StaleElementReferenceException,)).until(lambda d: cond(),
+                                                                                         message=what)
+
+    def text(elem_id):
+        return browser.find_element(By.ID, elem_id).text
+
+    def enabled():
+        return [b.text for b in browser.find_elements(By.CSS_SELECTOR, "#skill-controls button") if b.is_enabled()]
+
+    pemkre = PemkreDouble(validate_lines=False)
+    locem = LocemDouble(durations={"APPLY_TAPE": 1.0})
+    ex = create_executive(pemkre, locem, str(tmp_path / "hdict.sqlite"))
+    ex.operator.add_listener(AutoOperator(ex.controller, {"mount_tool": "done"}))
+    ex.health.heartbeat("locem")
+    beats = Heartbeats(ex.health)
+    backend = ExecutiveBackend.for_executive(ex, processes=[{"iri": PemkreDouble.PROCESS, "name": "Taping"}])
+    srv = HmiServer(backend, "127.0.0.1", 0, poll_period_s=0.05, shutdown_poll_s=0.05).start()
+    try:
+        browser.get(srv.url)
+        wait(lambda: text("connection") == "live", "the event stream to connect")
+        assert text("status-skill-state") == "–" and enabled() == []
+        browser.find_element(By.CSS_SELECTOR, '.start-button[data-iri="%s"]' % PemkreDouble.PROCESS).click()
+        wait(lambda: text("status-tree") == "TAPE_LINE" and text("status-skill-state") == "Running",
+             "the first joint's TAPE_LINE to run")
+        wait(lambda: enabled() == ["Pause", "Abort"], "Pause and Abort enabled while Running")
+        wait(lambda: any(h.command.startswith("APPLY_TAPE ") for h in locem.running()), "the tape command")
+
+        browser.find_element(By.ID, "skill-suspend").click()
+        wait(lambda: text("status-skill-state") == "Suspended", "the skill state to show Suspended")
+        wait(lambda: enabled() == ["Resume", "Abort"], "Resume and Abort enabled while Suspended")
+        assert text("status-phase") == "suspended" and "Pause pressed on the operator HMI" in text("status-skill-detail")
+        assert ex.controller.state()["skill_state"] == "Suspended"
+        (suspended,) = [h for h in locem.handles if h.remaining is not None]
+        assert browser.save_screenshot(str(tmp_path / "operator_hmi_paused.png"))
+        time.sleep(1.2)                                   # longer than the command: it stays suspended
+        assert not suspended.done() and text("status-skill-state") == "Suspended"
+
+        browser.find_element(By.ID, "skill-resume").click()
+        wait(lambda: text("status-skill-state") == "Running" and enabled() == ["Pause", "Abort"],
+             "Running again with Pause and Abort enabled")
+        wait(lambda: text("status-phase") == "ended", "the process to end")
+        assert enabled() == [] and text("status-skill-state") == "Ready"
+        assert suspended.done() and suspended.reply().success
+        assert [s[2] for s in pemkre.executed("TAPE_LINE")] == ["succeeded"] * 3
+        log = text("event-log")
+        assert "Pause pressed" in log and "Resume pressed" in log
+        severe = [e["message"] for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+        assert severe == [], severe
+    finally:
+        srv.close()
+        beats.stop()
+        ex.close()

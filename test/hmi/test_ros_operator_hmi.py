@@ -119,6 +119,40 @@ def test_operator_hmi_node_over_ros(ros, tmp_path):
     wait_state(url, lambda d: d["snapshot"]["phase"] == "stopped" and not d["prompts"], timeout=10)
 
 
+def test_pause_resume_abort_reset_over_ros(ros, tmp_path):
+    """The page's skill buttons call /hicem/{suspend,resume,halt,reset}; the skill state shown and the methods
+    allowed follow /hicem/skill_state; HICEM's refusal is shown as such."""
+    log = str(tmp_path / "hicem_calls.jsonl")
+    ros.spawn([sys.executable, os.path.join(HERE, "fake_hicem_ros_node.py"), "_log:=%s" % log], "fake_hicem")
+    ros.wait_for_service("/hicem/reset", 30)
+    port = free_port()
+    ros.spawn(["rosrun", "locem_bridge", "operator_hmi", "_mode:=web", "_port:=%d" % port], "operator_hmi")
+    url = "http://127.0.0.1:%d/" % port
+    wait_for(lambda: serving(url), 60, "the operator_hmi page")
+    r = post(url, "/api/skill/suspend", {})
+    assert r.status == 409 and "no HICEM action is running" in r.error["message"]
+    assert post(url, "/api/processes/start", {"iri": TAPING}).status == 200
+    snap = wait_state(url, lambda d: d["snapshot"]["skill_state"] == "Running", timeout=10)["snapshot"]
+    assert snap["allowed"] == ["Suspend", "Halt"] and snap["skill_detail"] == "HICEM runs the tree GET_TOOL"
+    r = post(url, "/api/skill/suspend", {})
+    assert r.status == 200 and (r.json["state"], r.json["allowed"]) == ("Suspended", ["Resume", "Halt"])
+    snap = wait_state(url, lambda d: d["snapshot"]["skill_detail"] == "Pause pressed on the operator HMI",
+                      timeout=10)["snapshot"]
+    assert (snap["skill_state"], snap["allowed"]) == ("Suspended", ["Resume", "Halt"])
+    r = post(url, "/api/skill/suspend", {"cause": "twice"})
+    assert r.status == 409 and "is Suspended (allowed in Suspended: Resume, Halt)" in r.error["message"]
+    assert post(url, "/api/skill/resume", {"cause": "bay clear"}).json["state"] == "Running"
+    assert post(url, "/api/skill/halt", {}).json["state"] == "Halted"
+    wait_state(url, lambda d: d["snapshot"]["allowed"] == ["Reset"] and d["snapshot"]["skill_state"] == "Halted",
+               timeout=10)
+    assert post(url, "/api/skill/reset", {}).json["state"] == "Ready"
+    wait_state(url, lambda d: d["snapshot"]["skill_state"] == "Ready" and d["snapshot"]["allowed"] == [], timeout=10)
+    assert [c[1:] for c in calls(log) if c[0] == "skill"] == [
+        ["Suspend", "Pause pressed on the operator HMI"],                      # refused: no action yet
+        ["Suspend", "Pause pressed on the operator HMI"], ["Suspend", "twice"], ["Resume", "bay clear"],
+        ["Halt", "Abort pressed on the operator HMI"], ["Reset", "Reset pressed on the operator HMI"]]
+
+
 def test_kpis_and_skill_matching_from_the_real_pemkre_node(ros, tmp_path):
     robot = os.path.join(HERE, "..", "..", "config", "robots", "rbkairos_ur10e.yaml")
     ros.spawn(["rosrun", "locem_bridge", "pemkre_node", "_store_path:=%s" % (tmp_path / "pemkre_store"),

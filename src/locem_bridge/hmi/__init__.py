@@ -45,9 +45,15 @@ All JSON bodies are UTF-8 objects. POSTs need ``Content-Type: application/json``
 ``GET  /api/walls/<wall_id>.png``           ``image/png``, the wall's current picture
 ``GET  /api/match?process=<iri>``           ``{"match": M}``: PEMKRE's skill matching of an offered process
                                             (the backend's optional ``match_process``)
+``POST /api/skill/<method>``                ``{"cause": str}`` (optional, or no body) -> ``{"ok": true,
+                                            "method": str, "state": str, "allowed": [str], "message": str}``:
+                                            ``suspend``, ``resume``, ``halt`` or ``reset`` HICEM's running action
+                                            (the page's Pause, Resume, Abort, Reset; the backend's optional
+                                            ``skill_method``); refused (409) when its skill state does not allow it
 ==========================================  ===================================================================
 
-Shapes: S = ``{"process", "phase", "action", "skill", "tree", "node", "detail": str, "health": {"status": "ok" |
+Shapes: S = ``{"process", "phase", "action", "skill", "tree", "node", "detail", "skill_state", "skill_detail": str,
+"allowed": [str] (the skill methods accepted now: Suspend, Resume, Halt, Reset), "health": {"status": "ok" |
 "degraded" | "fault" | "unknown", "detail": str}, "progress": {"done": int, "total": int, "text": str} | null}``;
 P = ``{"id", "kind", "text": str, "choices": [str], "context": {...}}``; R = ``{"iri", "name", "description"}``;
 W = ``{"id": wall_id, "version": token, "url": "/api/walls/<id>.png?v=<token>" | ""}`` (empty url: the picture
@@ -62,7 +68,8 @@ Errors are ``{"error": {"status": int, "code": str, "message": str}}`` with: 400
 ``forbidden_host`` (loopback server asked for another Host), ``forbidden_origin`` (a request from a page served
 elsewhere: another ``Origin``, or ``Sec-Fetch-Site`` cross-site/same-site on ``/api``); 404 ``not_found``
 (unknown endpoint; the message lists the endpoints), ``unknown_process``, ``unknown_wall``,
-``picture_not_ready``, ``no_matching`` (the backend offers no skill matching); 405 ``method_not_allowed``; 409
+``picture_not_ready``, ``no_matching`` (the backend offers no skill matching), ``unknown_skill_method``,
+``no_skill_control`` (the backend offers no skill methods); 405 ``method_not_allowed``; 409
 ``prompt_not_open`` (answered, withdrawn or never asked; the message lists the open prompts), ``refused`` (the
 backend declined, with its reason); 411/413/415 for body framing, size and type; 502 ``backend_error`` /
 ``bad_picture`` / ``bad_match``; 503 ``backend_unavailable``, ``too_many_streams`` (in all, or per client address). The server

@@ -13,8 +13,11 @@ should return quickly, reading cached state where they can):
   when the executive declines (unknown IRI, a process already running).
 - ``stop()`` -> ``None``; must always be accepted (STOP is never refused), raise only when unreachable.
 - ``snapshot()`` -> ``{"process": str, "action": str, "tree": str, "node": str, "health": HEALTH,
-  "progress": PROGRESS}`` plus optional ``"phase"`` (idle, running, stopping, stopped, ended, failed),
-  ``"skill"`` (the skill PEMKRE matched the running task to) and ``"detail"`` (free text); HEALTH is ``{"status": "ok" | "degraded" | "fault" | "unknown", "detail": str}`` (a
+  "progress": PROGRESS}`` plus optional ``"phase"`` (idle, running, suspending, suspended, stopping, stopped,
+  ended, failed), ``"skill"`` (the skill PEMKRE matched the running task to), ``"detail"`` (free text) and the
+  running action's skill state: ``"skill_state"`` (Ready, Running, Suspended, Halted; "" before any action),
+  ``"allowed"`` (the skill methods accepted now, of Suspend, Resume, Halt, Reset) and ``"skill_detail"`` (the
+  cause of its last transition); HEALTH is ``{"status": "ok" | "degraded" | "fault" | "unknown", "detail": str}`` (a
   plain string is accepted as the status); PROGRESS is ``{"done": int, "total": int, "text": str}`` or ``None``.
 - ``prompts()`` -> the OPEN prompts: ``[{"id": str, "kind": str, "text": str, "choices": [str, ...],
   "context": {...}}]`` (``context`` optional: e.g. ``{"line": "wall_1_joint_2"}``).
@@ -24,6 +27,10 @@ should return quickly, reading cached state where they can):
   ``{"processes": [...], "task_types": [...]}``), or ``{}`` while there is nothing to show.
 - ``wall_pictures()`` -> ``{wall_id: png_bytes_or_path}``: the current picture of each wall as PNG bytes or the
   path of a PNG file (read when served; a missing file means "not yet available").
+- optional ``skill_method(method, cause)`` -> ``{"state": str, "allowed": [str], "message": str}``: Suspend,
+  Resume, Halt or Reset (``method`` one of :data:`SKILL_METHODS`) on HICEM's running action (the page's Pause,
+  Resume, Abort and Reset buttons); raise :class:`BackendRefused` naming the state and the methods it allows when
+  the skill state does not allow it. A backend without it: the page says so (404) and shows no skill buttons.
 - optional ``match_process(iri)`` -> PEMKRE's skill matching of an abstract process (``ProcessMatch.to_dict()``,
   JSON text or decoded; :func:`locem_bridge.hmi.pemkre_view.match_view` reads it); raise :class:`BackendRefused`
   when PEMKRE refuses (no resource model, unknown process). A backend without it: the page says so (404).
@@ -57,6 +64,8 @@ class HmiBackend(Protocol):
 
 
 SNAPSHOT_KEYS = ("process", "action", "tree", "node", "health", "progress")
+SKILL_METHODS = ("Suspend", "Resume", "Halt", "Reset")
+"""The skill methods the page offers for HICEM's action (OPC UA Part 10; Start is HICEM's own)."""
 HEALTH_STATUSES = ("ok", "degraded", "fault", "unknown")
 
 
@@ -70,9 +79,11 @@ def normalize_snapshot(raw: Optional[Dict[str, Any]]) -> Dict[str, Any]:
     if not isinstance(raw, dict):
         raise TypeError("snapshot() must return a dict, got %s" % type(raw).__name__)
     snap = dict(raw)
-    for key in ("process", "action", "skill", "tree", "node", "phase", "detail"):
+    for key in ("process", "action", "skill", "tree", "node", "phase", "detail", "skill_state", "skill_detail"):
         value = snap.get(key)
         snap[key] = "" if value is None else str(value)
+    allowed = snap.get("allowed")
+    snap["allowed"] = [m for m in SKILL_METHODS if isinstance(allowed, (list, tuple)) and m in allowed]
     health = snap.get("health")
     if isinstance(health, dict):
         status = str(health.get("status", "unknown"))

@@ -1,7 +1,8 @@
 """An :class:`~locem_bridge.hmi.backend.HmiBackend` over a HICEM executive in the same process (no ROS).
 
 For ROS-free runs (a main job without a ROS master, tests of the HMI with the real executive) this adapter
-hands the HMI HICEM's own objects: the high-level controller (start, stop, state, operator replies), its
+hands the HMI HICEM's own objects: the high-level controller (start, stop, state, operator replies, the running
+action's skill methods), its
 operator desk (prompts) and its health monitor. What HICEM does not know -- the processes to offer, KPIs, wall
 pictures, progress -- comes from injected callables. Lifecycle: construct with the executive's parts; nothing
 to close (it owns nothing).
@@ -61,6 +62,16 @@ class ExecutiveBackend:
         modules = self.health.snapshot() if self.health is not None else None
         progress = self._progress() if self._progress is not None else None
         return snapshot_from_hicem(self.controller.state(), modules, progress)
+
+    def skill_method(self, method: str, cause: str = "") -> Dict[str, Any]:
+        """Suspend / Resume / Halt / Reset on the controller's running action; BackendRefused with its refusal."""
+        try:
+            state = self.controller.skill_method(method, cause or "%s pressed on the operator HMI" % method)
+        except HicemError as err:
+            raise BackendRefused(str(err))
+        st = self.controller.state()
+        return {"state": state.value, "allowed": list(st.get("allowed") or []),
+                "message": str(st.get("skill_detail", "") or "")}
 
     def prompts(self) -> List[Dict[str, Any]]:
         return [p.as_dict() for p in self.operator.open_prompts()]

@@ -1,7 +1,9 @@
 """How HICEM's own state reads on the operator's screen: pure functions shared by every HICEM backend.
 
 HICEM's controller publishes a state dict (``process``, ``specific_process``, ``action_type``, ``task``, ``skill``,
-``tree``, ``node``, ``path``, ``phase``, ``detail``; the ROS adapter carries the same fields on ``/hicem/state``)
+``tree``, ``node``, ``path``, ``phase``, ``detail``; the ROS adapter carries the same fields on ``/hicem/state``;
+plus the action's skill state ``skill_state``, ``allowed`` and ``skill_detail``, which the ROS adapter follows on
+``/hicem/skill_state`` instead)
 and its health monitor a per-module snapshot (``{module: {"level", "message", "crucial", "fault"}}``). These
 functions turn them into the HMI snapshot of :mod:`locem_bridge.hmi.backend`. No I/O, no ROS.
 """
@@ -61,6 +63,9 @@ def snapshot_from_hicem(state: Optional[Dict[str, Any]], modules: Optional[Dict[
             "skill": str(st.get("skill", "") or ""),
             "tree": str(st.get("tree", "") or ""), "node": str(st.get("node", "") or ""),
             "detail": str(st.get("detail", "") or ""),
+            "skill_state": str(st.get("skill_state", "") or ""),
+            "allowed": [str(m) for m in (st.get("allowed") or [])],
+            "skill_detail": str(st.get("skill_detail", "") or ""),
             "health": health if health is not None else health_summary(modules),
             "progress": progress}
 

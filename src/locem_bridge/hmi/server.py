@@ -31,7 +31,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Dict, List, Optional, Tuple
 from urllib.parse import parse_qs, unquote, urlsplit
 
-from .backend import HmiBackend
+from .backend import SKILL_METHODS, HmiBackend
 from .errors import BackendRefused, BackendUnavailable, RequestError, ServerStartError
 from .hub import StateHub
 from .pemkre_view import match_view
@@ -47,6 +47,9 @@ SAME_SITE_FETCH = ("same-origin", "none")      # Sec-Fetch-Site values of the pa
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 PROMPT_REPLY = re.compile(r"/api/prompts/([^/]+)/reply\Z")
 WALL_PNG = re.compile(r"/api/walls/([^/]+)\.png\Z")
+SKILL_METHOD = re.compile(r"/api/skill/([^/]+)\Z")
+#: the page's names of the skill methods (OPC UA Part 10) it offers for HICEM's running action
+SKILL_BUTTONS = {"Suspend": "Pause", "Resume": "Resume", "Halt": "Abort", "Reset": "Reset"}
 
 ENDPOINTS = [
     ("GET", "/", "the operator page"),
@@ -63,6 +66,8 @@ ENDPOINTS = [
     ("GET", "/api/walls/<wall_id>.png", "the current picture of one wall"),
     ("GET", "/api/match?process=<iri>", "how each task of a process is matched to this robot's skills: the chosen "
      "skill and the rejected candidates with reasons"),
+    ("POST", "/api/skill/<method>", "suspend, resume, halt or reset HICEM's running action (Pause, Resume, Abort, "
+     "Reset): {\"cause\": str} (optional)"),
 ]
 
 
@@ -389,9 +394,14 @@ class HmiServer:
             m = PROMPT_REPLY.match(path)
             if m:
                 return self._reply(h, unquote(m.group(1)))
-        if any(p.split("?")[0] == path for _m, p, _w in ENDPOINTS) or PROMPT_REPLY.match(path) or WALL_PNG.match(path):
+            m = SKILL_METHOD.match(path)
+            if m:
+                return self._skill(h, unquote(m.group(1)))
+        if any(p.split("?")[0] == path for _m, p, _w in ENDPOINTS) or PROMPT_REPLY.match(path) or \
+                WALL_PNG.match(path) or SKILL_METHOD.match(path):
             allow = ", ".join(sorted({m for m, p, _ in ENDPOINTS if p.split("?")[0] == path} or
-                                     ({"POST"} if PROMPT_REPLY.match(path) else {"GET"})))
+                                     ({"POST"} if PROMPT_REPLY.match(path) or SKILL_METHOD.match(path)
+                                      else {"GET"})))
             raise RequestError(405, "method_not_allowed", "%s %s is not supported; allowed: %s" % (
                 method, path, allow), allow=allow)
         raise RequestError(404, "not_found", "no endpoint %s %s; endpoints: %s" % (method, path, _known_paths()))
@@ -490,6 +500,33 @@ class HmiServer:
         self.hub.note("answered %s: %s" % (prompt.get("kind") or prompt_id, answer))
         self.hub.refresh_now()
         h._json(200, {"ok": True, "prompt": prompt_id, "answer": answer})
+
+    def _skill(self, h: _Handler, name: str) -> None:
+        method = next((m for m in SKILL_METHODS if m.lower() == name.lower()), None)
+        if method is None:
+            raise RequestError(404, "unknown_skill_method", "no skill method %r; methods: %s" % (
+                name, ", ".join(m.lower() for m in SKILL_METHODS)))
+        body = h.read_json(("cause",), ())
+        cause = body.get("cause", "")
+        if not isinstance(cause, str):
+            raise RequestError(400, "bad_body", "field 'cause' must be a string, got %r" % (cause,))
+        fn = getattr(self.backend, "skill_method", None)
+        if fn is None:
+            raise RequestError(404, "no_skill_control", "this HMI's backend offers no skill methods (it has no "
+                               "skill_method); the ROS HMI calls HICEM's <hicem>/%s service" % method.lower())
+        button = SKILL_BUTTONS[method]
+        default = "%s pressed on the operator HMI" % button
+        try:
+            result = fn(method, cause or default) or {}
+        except BackendRefused as err:
+            raise BackendRefused("%s: %s" % (button, err))
+        message = str(result.get("message", "") or "")
+        self.hub.note("%s pressed: %s%s" % (button, result.get("state") or "taken",
+                                            " (%s)" % message if message and message != default else ""))
+        self.hub.refresh_now()
+        h._json(200, {"ok": True, "method": method, "state": str(result.get("state", "")),
+                      "allowed": [m for m in SKILL_METHODS if m in (result.get("allowed") or [])],
+                      "message": str(result.get("message", ""))})
 
     def _events(self, h: _Handler) -> None:
         if h.command == "HEAD":

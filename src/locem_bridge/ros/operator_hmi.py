@@ -5,8 +5,12 @@ interfaces (names relative to the node's namespace unless absolute):
 
 - ``<hicem>/state`` (``HicemState``, latched) -> snapshot, and the open prompts (its ``prompts`` JSON field);
 - ``<hicem>/start_process`` (``HicemStartProcess``, with ``~process_options`` as JSON), ``<hicem>/stop``
-  (``HicemStop``), ``<hicem>/operator_reply`` (``HicemOperatorReply``); a ``success: false`` answer becomes a
-  refusal shown to the operator (HTTP 409), an unreachable service a 503;
+  (``HicemStop``), ``<hicem>/operator_reply`` (``HicemOperatorReply``), and the page's Pause, Resume, Abort and
+  Reset buttons: ``<hicem>/suspend``, ``<hicem>/resume``, ``<hicem>/halt``, ``<hicem>/reset`` (``SkillControl``);
+  a ``success: false`` answer becomes a refusal shown to the operator (HTTP 409), an unreachable service a 503;
+- ``<hicem>/skill_state`` (``SkillTransition``, latched) -> the running action's skill state, the cause of its
+  last transition and the methods it allows (:func:`locem_bridge.hicem.skill_control.operator_methods`; Reset
+  while an action it halted is not reset);
 - ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) -> health, with HICEM's own liveness and its
   ``waiting_for_health`` phase (read by :class:`locem_bridge.hmi.health.DiagnosticsHealth`);
 - ``<pemkre>/query`` (``locem_bridge/PemkreQuery``, SPARQL results JSON) -> KPIs (``kpi_by_process``,
@@ -51,12 +55,15 @@ from diagnostic_msgs.msg import DiagnosticArray
 from locem_bridge.hmi import (DEFAULT_CONFIG, AutoOperator, AutoOperatorConfig, BackendRefused, BackendUnavailable,
                               DiagnosticsHealth, HmiError, HmiServer, SimPictures, snapshot_from_hicem,
                               wall_pictures_in)
+from locem_bridge.common.program_state import ProgramState
+from locem_bridge.hicem.skill_control import operator_methods
+from locem_bridge.hmi.backend import SKILL_METHODS
 from locem_bridge.hmi.hicem_view import WorkFollower
 from locem_bridge.hmi.pemkre_view import KPI_QUERIES, processes_from_ontologies, rows_from_result, work_progress
 from locem_bridge.hmi.sim_hands import HandsError, hand_actions
-from locem_bridge.msg import HicemState
+from locem_bridge.msg import HicemState, SkillTransition
 from locem_bridge.srv import (HicemOperatorReply, HicemStartProcess, HicemStop, JsonCall, PemkreMatchProcess,
-                              PemkreQuery)
+                              PemkreQuery, SkillControl)
 from locem_bridge.ros.calls import timed
 from locem_bridge.ros.params import as_list, package_share, param
 from locem_bridge.ros.startup import config_guard
@@ -110,7 +117,12 @@ class RosHmiBackend:
         self._start = rospy.ServiceProxy(self.hicem + "/start_process", HicemStartProcess)
         self._stop = rospy.ServiceProxy(self.hicem + "/stop", HicemStop)
         self._reply = rospy.ServiceProxy(self.hicem + "/operator_reply", HicemOperatorReply)
+        self._skill_calls = {m: rospy.ServiceProxy("%s/%s" % (self.hicem, m.lower()), SkillControl)
+                             for m in SKILL_METHODS}
+        self._skill: Dict[str, Any] = {"skill_state": "", "allowed": [], "skill_detail": ""}
+        self._halted = ""                           # the instance HICEM halted last, until it is reset
         self._subs = [rospy.Subscriber(self.hicem + "/state", HicemState, self._on_state, queue_size=20),
+                      rospy.Subscriber(self.hicem + "/skill_state", SkillTransition, self._on_skill, queue_size=50),
                       rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diagnostics, queue_size=20)]
 
     def close(self) -> None:
@@ -134,6 +146,22 @@ class RosHmiBackend:
             self._state = state
             self._prompts = [p for p in prompts if isinstance(p, dict)]
             self._follower.update(state)
+
+    def _on_skill(self, msg: Any) -> None:
+        try:
+            state = ProgramState(msg.to_state)
+        except ValueError:
+            rospy.logwarn_throttle(10, "operator_hmi: %s/skill_state names the state %r" % (self.hicem, msg.to_state))
+            return
+        with self._lock:
+            if state == ProgramState.HALTED:
+                self._halted = msg.instance
+            elif msg.instance == self._halted:
+                self._halted = ""
+            allowed = operator_methods(state) if state in (ProgramState.RUNNING, ProgramState.SUSPENDED) else (
+                operator_methods(ProgramState.HALTED) if self._halted else [])
+            self._skill = {"skill_state": state.value, "allowed": [m.value for m in allowed],
+                           "skill_detail": msg.cause}
 
     def _on_diagnostics(self, msg: Any) -> None:
         for st in msg.status:
@@ -242,7 +270,23 @@ class RosHmiBackend:
                 self._progress = dict(progress, work=work) if progress else None
             except HmiError:
                 pass                                # progress is optional; KPIs report PEMKRE's absence
-        return snapshot_from_hicem(state, progress=self._progress, health=self._health(state))
+        with self._lock:
+            skill = dict(self._skill)
+        return snapshot_from_hicem(dict(state or {}, **skill), progress=self._progress, health=self._health(state))
+
+    def skill_method(self, method: str, cause: str = "") -> Dict[str, Any]:
+        """Suspend / Resume / Halt / Reset through ``<hicem>/<method>``; BackendRefused with HICEM's refusal."""
+        proxy = self._skill_calls.get(method)
+        if proxy is None:
+            raise BackendRefused("unknown skill method %r; methods: %s" % (method, ", ".join(SKILL_METHODS)))
+        service = "%s/%s" % (self.hicem, method.lower())
+        resp = _timed_call(lambda: proxy(cause=cause), self.call_timeout, service)
+        allowed = [m for m in resp.allowed.split(",") if m]
+        if not resp.success:
+            raise BackendRefused(resp.message or "HICEM refused %s" % method)
+        with self._lock:
+            self._skill = dict(self._skill, skill_state=resp.state, allowed=allowed)
+        return {"state": resp.state, "allowed": allowed, "message": resp.message}
 
     def prompts(self) -> List[Dict[str, Any]]:
         with self._lock:

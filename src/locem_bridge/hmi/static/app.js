@@ -56,6 +56,30 @@
     post("/api/stop", {}).then(refreshNow, function () {});
   });
 
+  // Pause / Resume / Abort / Reset: the skill methods of HICEM's running action (Suspend, Resume, Halt, Reset),
+  // each enabled only while the action's skill state allows it (snapshot.allowed)
+  var SKILL_BUTTONS = ["skill-suspend", "skill-resume", "skill-halt", "skill-reset"];
+  var skillBusy = false;        // a method sent and not answered yet: every button waits
+  var lastSnapshot = null;
+  function renderSkillButtons(s) {
+    var allowed = (s && s.allowed) || [];
+    SKILL_BUTTONS.forEach(function (id) {
+      var b = $(id);
+      var on = !skillBusy && allowed.indexOf(b.getAttribute("data-method")) >= 0;
+      if (b.disabled === on) b.disabled = !on;
+    });
+  }
+  SKILL_BUTTONS.forEach(function (id) {
+    var b = $(id);
+    b.addEventListener("click", function () {
+      skillBusy = true;
+      renderSkillButtons(lastSnapshot);
+      post("/api/skill/" + b.getAttribute("data-method").toLowerCase(), {})
+        .then(function () { skillBusy = false; renderSkillButtons(lastSnapshot); return refreshNow(); },
+              function () { skillBusy = false; renderSkillButtons(lastSnapshot); });
+    });
+  });
+
   // ---------------------------------------------------------------- rendering
   function changed(part, value) {
     var t = JSON.stringify(value);
@@ -65,6 +89,8 @@
   }
 
   function renderStatus(s) {
+    lastSnapshot = s;
+    renderSkillButtons(s);
     if (!changed("status", s)) return;
     setText("status-process", localName(s.process));
     var phase = $("status-phase");
@@ -74,6 +100,10 @@
     setText("status-skill", s.skill);
     setText("status-tree", s.tree);
     setText("status-node", s.node);
+    var ss = $("status-skill-state");
+    ss.textContent = s.skill_state || "–";
+    ss.className = "skill-state" + (s.skill_state ? " skill-" + s.skill_state.toLowerCase() : "");
+    $("status-skill-detail").textContent = s.skill_detail || "";
     setText("status-detail", s.detail);
     var h = s.health || {status: "unknown", detail: ""};
     [$("status-health"), $("header-health")].forEach(function (b, i) {
