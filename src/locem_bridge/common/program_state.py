@@ -86,6 +86,11 @@ _BY_METHOD: Dict[Tuple[ProgramState, Method], TransitionType] = {
 _BY_STATES: Dict[Tuple[ProgramState, ProgramState], TransitionType] = {(t.source, t.target): t for t in TRANSITIONS}
 
 
+def transition_between(source: ProgramState, target: ProgramState) -> TransitionType:
+    """The transition from ``source`` to ``target`` (KeyError when the machine has none)."""
+    return _BY_STATES[(source, target)]
+
+
 def allowed_methods(state: ProgramState) -> List[Method]:
     """The methods a caller may use in ``state``, in the order of :class:`Method`."""
     return [m for m in Method if (state, m) in _BY_METHOD]
@@ -118,10 +123,6 @@ class Transition:
     cause: str                      # who asked or what happened
     stamp: float = field(default_factory=time.time)
 
-    def as_dict(self) -> Dict[str, object]:
-        return {"instance": self.instance, "skill": self.skill, "number": self.number, "name": self.name,
-                "from": self.source.value, "to": self.target.value, "method": self.method, "cause": self.cause,
-                "stamp": self.stamp}
 
 
 TransitionListener = Callable[[Transition], None]
@@ -179,7 +180,7 @@ class ProgramStateMachine:
         with self._lock:
             if self._state not in (ProgramState.RUNNING, ProgramState.SUSPENDED):
                 return None
-            t = _BY_STATES[(self._state, target)]
+            t = transition_between(self._state, target)
             self._state = target
         return self._tell(t, "", cause)
 

@@ -35,7 +35,7 @@ from enum import Enum
 from typing import Any, Callable, Dict, List, Optional
 
 from ..common.locem_codes import Code
-from ..common.program_state import Method, ProgramState, Transition, TransitionRefused, TRANSITIONS
+from ..common.program_state import Method, ProgramState, Transition, TransitionRefused, transition_between
 from .errors import Aborted, CommandTimeout, InvalidArgument, LocemError, SuspendRequest
 from .registry import BoundCommand, Interface
 from .response import Response
@@ -76,8 +76,6 @@ class CommandEvent:
     stamp: float = field(default_factory=time.time)
     transition: Optional[Transition] = None    # the skill state transition this event is, if any
 
-
-_TRANSITION = {(t.source, t.target): t for t in TRANSITIONS}
 
 
 Listener = Callable[[CommandEvent], None]
@@ -383,7 +381,7 @@ class Execution:
 
     def _transition(self, source: ProgramState, target: ProgramState, method: Optional[Method],
                     cause: str) -> Transition:
-        t = _TRANSITION[(source, target)]
+        t = transition_between(source, target)
         return Transition(str(self.id), self.bound.name, t.number, t.name, source, target,
                           method.value if method is not None else "", cause)
 
