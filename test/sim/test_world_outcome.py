@@ -284,3 +284,52 @@ def test_spray_thickness_depends_on_speed_and_distance(site_cfg, robot_cfg, chan
     else:
         assert t_new < 0.7 * t_ref                                     # farther: thinner ...
         assert w_new > 1.3 * w_ref                                     # ... and wider
+
+
+def _line(x0, x1, y, z, step=0.01):
+    n = int(round(abs(x1 - x0) / step))
+    return [[x0 + (x1 - x0) * i / n, y, z] for i in range(n + 1)]
+
+
+@pytest.mark.parametrize("resume_at, gap, double", [(1.80, 0.0, 0.0), (1.75, 0.0, 0.05), (1.85, 0.05, 0.0)])
+def test_a_spray_lane_interrupted_and_resumed_shows_its_seam(rig, resume_at, gap, double):
+    """The valve closes mid-lane at x 1.8 and opens again at ``resume_at``: the seam there shows the stretch
+    never sprayed (resumed ahead) or sprayed twice (resumed behind), within a pass-map cell."""
+    world, arm, comp, wall = rig
+    world.set_base_pose(1.8, 2.3, np.pi / 2)
+    world.mount_tool("spray_gun")
+    comp.set_setpoint(4.5)
+    comp.set_motor(True)
+    wall.t += 20.0
+    _pass(world, arm, wall, [[1.4, 3.3, 1.4]], [0, 1, 0])
+    comp.set_valve(True)
+    _pass(world, arm, wall, _line(1.4, 1.8, 3.3, 1.4), [0, 1, 0], speed=0.3)
+    comp.set_valve(False)
+    closed_at = wall.t
+    _pass(world, arm, wall, [[1.8, 3.3, 1.4], [resume_at, 3.29, 1.4], [resume_at, 3.3, 1.4]], [0, 1, 0])
+    comp.set_valve(True)
+    _pass(world, arm, wall, _line(resume_at, 2.2, 3.3, 1.4), [0, 1, 0], speed=0.3)
+    comp.set_valve(False)
+    _pass(world, arm, wall, [[2.2, 3.3, 1.4], [2.2, 3.2, 1.4]], [0, 1, 0])
+    seams = world.outcome.summary()["spray_seams"]
+    assert len(seams) == 2, seams                       # the interruption and the lane's end, both in area_1
+    seam = min(seams, key=lambda x: abs(x["s"] - 1.8))
+    assert seam["wall"] == "wall_1" and seam["area"] == "wall_1_area_1" and seam["s"] == pytest.approx(1.8, abs=0.01)
+    assert seam["t"] == pytest.approx(1.4, abs=0.01) and seam["sim_time"] == pytest.approx(closed_at, abs=0.001)
+    assert seam["gap_m"] == pytest.approx(gap, abs=0.011) and seam["double_m"] == pytest.approx(double, abs=0.011)
+
+
+@pytest.mark.parametrize("resume_at, gap, double", [(1.40, 0.0, 0.0), (1.34, 0.0, 0.06), (1.46, 0.06, 0.0)])
+def test_a_joint_taped_in_two_passes_shows_its_seam(rig, resume_at, gap, double):
+    world, arm, comp, wall = rig
+    world.set_base_pose(1.2, 2.5, np.pi / 2)
+    world.mount_tool("taping_tool")
+    _pass(world, arm, wall, [[1.2, 3.5, 0.9]], [0, 1, 0])
+    arm.set_digital_output(0, True)
+    _pass(world, arm, wall, _vertical(1.2, 3.6, 0.9, 1.4), [0, 1, 0])
+    arm.set_digital_output(0, False)
+    _pass(world, arm, wall, [[1.2, 3.55, 1.4], [1.2, 3.55, resume_at], [1.2, 3.6, resume_at]], [0, 1, 0])
+    arm.set_digital_output(0, True)
+    _pass(world, arm, wall, _vertical(1.2, 3.6, resume_at, 1.9), [0, 1, 0])
+    j = world.outcome.summary()["joints"]["wall_1_joint_1"]
+    assert j["gap_m"] == pytest.approx(gap, abs=0.015) and j["double_m"] == pytest.approx(double, abs=0.015), j

@@ -119,6 +119,7 @@ def build_report(record: RunRecord, run: str) -> Dict[str, Any]:
         "areas_manual": [dict(m) for m in record.manual_areas],
         "joints": joints,
         "walls": walls,
+        "spray_seams": [dict(x) for x in record.outcome.get("spray_seams", [])] if measured else [],
         "measured": measured,
     }
     for key in ("tape_coverage", "spray_coverage", "sand_coverage"):

@@ -11,6 +11,13 @@ name, process on/off, segment start/end in map, tool z axis, sim duration) and k
 - a sanded map (bool): sander on and its pad on the surface (``|d| <= contact_tolerance``).
 Spray and sand coverage, thickness mean and coefficient of variation count the cells of the wall's work areas
 (the areas SCAN reports); deposits outside them are overspray and show only in the pictures.
+Seams (where a tool process was interrupted inside the work, e.g. by a suspension, and went on later): the pass
+maps count how often the spray axis and the tape crossed each point (one count per switching on of the tool); per
+joint the longest stretch taped twice (``double_m``) and the longest untaped stretch between taped ones (``gap_m``);
+per spray pass that ended inside a work area (``spray_seams``) the longest stretch never crossed (``gap_m``) and
+crossed twice (``double_m``) along the pass's direction that reaches the point where it ended (followed up to
+``SEAM_SPAN`` either side), and when it ended (``sim_time``, from the world's clock: match it with the valve's
+closing to find a suspension's seam; where the sections of a raster meet, their designed overlap is a seam too).
 Operator actions: :meth:`mark_manual_taping` records a joint taped by hand (reported separately).
 Numbers: :meth:`summary`; pictures: :meth:`save_pictures` (one PNG per wall: joints, thickness, sanded).
 """
@@ -18,7 +25,7 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any, Dict, List
+from typing import Any, Callable, Dict, List, Optional
 
 import numpy as np
 
@@ -27,6 +34,11 @@ from .site import Site, Wall
 TAPE_BIN = 0.01          # m, resolution of the tape record along a joint
 TAPED_FRACTION = 0.95    # a joint counts as taped from this covered fraction on
 PASS_GRID = 0.005        # m, resolution of the pass maps (how often the spray axis / the tape crossed a point)
+SEAM_SPAN = 0.25         # m, how far either side of a spray pass's end its seam is followed
+SEAM_TOUCH = 0.01        # m, a gap or second coat belongs to the seam when it reaches this close to the pass's end
+SEAM_INSIDE = 0.02       # m, a pass ending at least this far inside a work area along its travel is a seam (lane
+                         # ends at the area's edges are not; a lane on the edge, along it, is)
+SEAM_TOLERANCE = 0.01    # m, how far outside an area's edges a point still counts as on it
 
 
 class _WallMaps:
@@ -56,8 +68,10 @@ class _WallMaps:
 class OutcomeRecorder:
     """Accumulates the outcome maps of one run (see the module docstring). Not thread-safe: the world's lock."""
 
-    def __init__(self, site: Site, tools_cfg: Dict[str, Any], outcome_cfg: Dict[str, Any]) -> None:
+    def __init__(self, site: Site, tools_cfg: Dict[str, Any], outcome_cfg: Dict[str, Any],
+                 clock: Optional[Callable[[], float]] = None) -> None:
         self.site = site
+        self.clock = clock               # sim time of the world (stamps where spray passes ended)
         self.tools = tools_cfg
         self.grid = float(outcome_cfg["grid"])
         self.lateral_tol = float(outcome_cfg["tape_lateral_tolerance"])
@@ -76,6 +90,10 @@ class OutcomeRecorder:
         self._tape_last: Dict[str, np.ndarray] = {j: np.zeros(len(b), dtype=np.int32) for j, b in self.tape.items()}
         self._pass = 0                   # counts the switchings on of any tool process
         self._active: Dict[str, bool] = {}
+        #: per wall, the last two spray-axis hit points (s, t) of the current pass
+        self._axis_hits: Dict[str, List[Any]] = {}
+        #: where spray passes ended: (wall id, end (s, t), unit direction (ds, dt) of travel, sim time or None)
+        self.spray_pass_ends: List[Any] = []
 
     # -- recording ---------------------------------------------------------------------------------------------
     def record(self, tool: str, active: bool, p0: np.ndarray, p1: np.ndarray, z_axis: np.ndarray, dt: float) -> None:
@@ -83,9 +101,12 @@ class OutcomeRecorder:
         was = self._active.get(tool, False)
         self._active[tool] = active
         if not active:
+            if was and tool == "spray_gun":
+                self._end_spray_pass()
             return
         if not was:
             self._pass += 1
+            self._axis_hits = {}
         if tool == "taping_tool":
             self._tape(p0, p1)
         elif tool == "spray_gun":
@@ -171,6 +192,8 @@ class OutcomeRecorder:
                 return
             hits.append(wall.to_wall_coords(p + (d / cos_in) * z)[:2])
         (s0, t0), (s1, t1) = hits
+        if math.hypot(s1 - s0, t1 - t0) > 1e-4:
+            self._axis_hits[wall.id] = [(float(s0), float(t0)), (float(s1), float(t1))]
         n = max(1, int(math.ceil(math.hypot(s1 - s0, t1 - t0) / (PASS_GRID / 2))))
         f = np.arange(0, n + 1) / n
         ci = ((s0 + (s1 - s0) * f) / PASS_GRID).astype(int)
@@ -180,6 +203,48 @@ class OutcomeRecorder:
             if m._last_pass[k, i] != self._pass:
                 m._last_pass[k, i] = self._pass
                 m.passes[k, i] += 1
+
+    def _end_spray_pass(self) -> None:
+        for wid, ((s0, t0), (s1, t1)) in self._axis_hits.items():
+            d = math.hypot(s1 - s0, t1 - t0)
+            self.spray_pass_ends.append((wid, (s1, t1), ((s1 - s0) / d, (t1 - t0) / d),
+                                         None if self.clock is None else float(self.clock())))
+        self._axis_hits = {}
+
+    def _seam(self, wall_id: str, end: Any, direction: Any, stamp: Optional[float]) -> Any:
+        """The seam at a spray pass's end, or None unless the pass crossed a work area for SEAM_INSIDE on both
+        sides of its end (along ``direction``): the longest run never crossed and crossed twice (m) along
+        ``direction`` within SEAM_SPAN of ``end``, on the area; each sample takes the most passes across the track
+        (one cell either side). Where sections of a raster meet, their designed overlap shows as a second coat."""
+        m = self.maps[wall_id]
+        s, t = end
+        ds, dt = direction
+
+        def inside(a: Any, ps: float, pt: float) -> bool:
+            return (a.s0 - SEAM_TOLERANCE <= ps <= a.s0 + a.width + SEAM_TOLERANCE and
+                    a.t0 - SEAM_TOLERANCE <= pt <= a.t0 + a.height + SEAM_TOLERANCE)
+        area = next((a for a in m.wall.areas if inside(a, s - SEAM_INSIDE * ds, t - SEAM_INSIDE * dt) and
+                     inside(a, s + SEAM_INSIDE * ds, t + SEAM_INSIDE * dt)), None)
+        if area is None:
+            return None
+        step = PASS_GRID / 2
+        counts, at = [], []
+        for u in np.arange(-SEAM_SPAN, SEAM_SPAN + step / 2, step):
+            ps, pt = s + u * ds, t + u * dt
+            if not inside(area, ps, pt):
+                continue
+            at.append(abs(u) <= SEAM_TOUCH)
+            best = 0
+            for w in (-1.0, 0.0, 1.0):              # across the track: perpendicular to the direction
+                i = int((ps - w * PASS_GRID * dt) / PASS_GRID)
+                k = int((pt + w * PASS_GRID * ds) / PASS_GRID)
+                if 0 <= k < m.passes.shape[0] and 0 <= i < m.passes.shape[1]:
+                    best = max(best, int(m.passes[k, i]))
+            counts.append(best)
+        return {"wall": wall_id, "area": area.id, "s": round(s, 4), "t": round(t, 4),
+                "sim_time": None if stamp is None else round(stamp, 3),
+                "gap_m": round(_touching_run([c == 0 for c in counts], at) * step, 4),
+                "double_m": round(_touching_run([c >= 2 for c in counts], at) * step, 4)}
 
     def _sand(self, p0: np.ndarray, p1: np.ndarray) -> None:
         rad = float(self.tools["sander"]["pad_radius"])
@@ -212,7 +277,12 @@ class OutcomeRecorder:
         joints = {}
         for jid, bins in self.tape.items():
             cov = float(bins.mean())
-            joints[jid] = {"coverage": cov, "taped": cov >= TAPED_FRACTION, "manual": jid in self.manual}
+            taped = np.flatnonzero(bins)
+            inner = bins[taped[0]:taped[-1] + 1] if taped.size else bins[:0]
+            joints[jid] = {"coverage": cov, "taped": cov >= TAPED_FRACTION, "manual": jid in self.manual,
+                           "double_m": round(_longest_run(self.tape_passes[jid] >= 2) * TAPE_BIN, 4),
+                           "gap_m": round(_longest_run(~inner) * TAPE_BIN, 4)}
+        seams = [x for x in (self._seam(*e) for e in self.spray_pass_ends) if x is not None]
         walls = {}
         total_cells = covered_cells = sanded_cells = 0
         for wid, m in self.maps.items():
@@ -242,6 +312,7 @@ class OutcomeRecorder:
             "sand_coverage": sanded_cells / total_cells if total_cells else 0.0,
             "joints": joints,
             "walls": walls,
+            "spray_seams": seams,
         }
 
     # -- pictures ----------------------------------------------------------------------------------------------
@@ -305,3 +376,27 @@ class OutcomeRecorder:
             img.save(path)
             out.append(path)
         return out
+
+
+def _touching_run(flags: List[bool], at: List[bool]) -> int:
+    """Length of the longest run of true ``flags`` that includes an index where ``at`` is true (0: none)."""
+    best = n = 0
+    touches = False
+    for f, a in list(zip(flags, at)) + [(False, False)]:
+        if f:
+            n += 1
+            touches = touches or a
+        else:
+            if touches:
+                best = max(best, n)
+            n, touches = 0, False
+    return best
+
+
+def _longest_run(flags: Any) -> int:
+    """Length of the longest run of true values in ``flags``."""
+    best = n = 0
+    for f in flags:
+        n = n + 1 if f else 0
+        best = max(best, n)
+    return best

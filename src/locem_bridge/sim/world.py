@@ -79,7 +79,7 @@ class World:
         self._mount_z = float(robot["arm"]["mount"]["xyz"][2])      # arm mount height now (moves with a lift)
         if lift is not None:
             self._mount_z = self._lift_bottom + float(lift.angle)
-        self.outcome = OutcomeRecorder(self.site, self.tools_cfg, sim["outcome"])
+        self.outcome = OutcomeRecorder(self.site, self.tools_cfg, sim["outcome"], clock=self.clock.now)
         # the scanner reports each area's finish (bare / sprayed / sanded) from what the outcome recorded
         self.scanner = WallScanner(self.site, robot["scanner"], sim["perception"]["position_noise"], sim["seed"],
                                    outcome=self.outcome)
