@@ -70,6 +70,7 @@ def bench_devices(repeats, time_scale):
         wheels = lambda: max(abs(v) for v in rig.drives.wheel_speeds())                # noqa: E731
 
         def arm_case(method):
+            run(core, "GOTO 2.4 1.2 1.5708")              # 2.4 m from the wall: the arm sweeps free
             run(core, "MOVE_J %s speed=1.0" % " ".join(map(str, Q_A)))
             ex = core.dispatcher.submit("MOVE_J %s speed=1.0" % " ".join(map(str, Q_B)), Interface.ACTION)
             wait_until(arm_moving, timeout=5.0)
@@ -90,6 +91,7 @@ def bench_devices(repeats, time_scale):
             return rest, go
 
         def base_case(method):
+            run(core, "MOVE_HOME")                        # the arm tucked in before the base nears the wall
             run(core, "GOTO 2.4 2.5 1.5708")
             ex = core.dispatcher.submit("GOTO 2.4 1.2 1.5708 speed=0.8", Interface.ACTION)
             wait_until(lambda: wheels() > 3.0, timeout=10.0)
@@ -106,6 +108,7 @@ def bench_devices(repeats, time_scale):
             return rest, go
 
         def spray_case(_method):
+            run(core, "MOVE_HOME")
             run(core, "GOTO 2.4 2.5 1.5708")
             feedback = []
             ex = core.dispatcher.submit(AREA, Interface.ACTION, listener=lambda e: feedback.append(e.message))
