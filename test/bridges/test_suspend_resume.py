@@ -1,7 +1,7 @@
 """Suspend, resume and halt a running device command (the skill methods of LOCEM's commands) through one LOCEM
 core with every bridge against the worksite stand-ins (UR controller, compressor, drives, PyBullet world): the
-devices come to rest within 300 ms of sim time, the valve closes and the compressor keeps its pressure, and
-after Resume the work goes on from the stop point with no gap and no second coat (the world's pass maps)."""
+devices come to rest within 300 ms of sim time, the valve closes and the compressor keeps its pressure, the sander
+lifts off the wall, and after Resume the work goes on from the stop point with no gap and no second coat (the world's pass maps)."""
 import time
 
 import numpy as np
@@ -179,3 +179,45 @@ def test_halt_mid_spray_ends_the_command_halted_with_every_device_safe(wall, cor
     r = run(core, "RESET id=%d" % ex.id)
     assert r.success and r.result["states"] == {str(ex.id): "Ready"}, r
     assert run(core, "COMPRESSOR_OFF").success
+
+
+def _sanded(rig):
+    m = rig.world.outcome.maps["wall_1"]
+    return float(m.sanded[(m.tc >= 0.9) & (m.tc <= 1.5)][:, (m.sc >= 0.2) & (m.sc <= 1.0)].mean())
+
+
+def _off_the_wall(rig):
+    """Distance (m) of the sander's pad from wall_1's surface, from the world's ground truth."""
+    with rig.world._lock:
+        pos, _z = rig.world._tcp()
+    return float(rig.world.outcome.maps["wall_1"].wall.to_wall_coords(pos)[2])
+
+
+def test_sander_suspended_mid_lane_lifts_off_the_wall_and_sands_on_from_there(wall, core):
+    rig, _ = wall
+    rig.world.mount_tool("sander")
+    assert run(core, "MOUNT_TOOL sander").success
+    assert run(core, "GOTO 2.4 2.6 1.5708").success
+    ex = core.dispatcher.submit("SAND_AREA 2.0 3.6 0.9 1 0 0 0.8 0.6 %s spacing=0.1 speed=0.15" % NORMAL,
+                                Interface.ACTION)
+    assert wait_until(lambda: _sanded(rig) >= 0.3, timeout=90.0)
+    assert rig.standin.get_standard_digital_outputs()[1] and abs(_off_the_wall(rig)) <= 0.01
+    t0 = rig.clock.now()
+    assert run(core, "SUSPEND id=%d cause=dust_check" % ex.id).success
+    arm_at, _ = _rest_times(rig, t0, valve=False)
+    print("sand: arm at rest %.3f s sim after Suspend" % arm_at)
+    assert arm_at is not None and arm_at <= REST_S, arm_at
+    assert not rig.standin.get_standard_digital_outputs()[1], "the sander is still on"
+    # then it backs off the wall along its axis and stays there, nothing sanded while suspended
+    assert wait_until(lambda: _off_the_wall(rig) >= 0.025, timeout=5.0), _off_the_wall(rig)
+    sanded = _sanded(rig)
+    while rig.clock.now() < t0 + 10.0:
+        time.sleep(0.05)
+    assert _off_the_wall(rig) >= 0.025 and _sanded(rig) == sanded
+    assert not rig.standin.get_state()["moving"] and ex.program.value == "Suspended"
+    assert run(core, "RESUME id=%d cause=checked" % ex.id).success
+    done = ex.wait(120.0)
+    assert done is not None and done.success and done.result["suspensions"] == 1, done
+    time.sleep(0.2)
+    assert _sanded(rig) >= 0.98, _sanded(rig)
+    assert rig.nothing_running(), rig.running()

@@ -228,23 +228,22 @@ class OutcomeRecorder:
         if area is None:
             return None
         step = PASS_GRID / 2
-        counts, at = [], []
-        for u in np.arange(-SEAM_SPAN, SEAM_SPAN + step / 2, step):
-            ps, pt = s + u * ds, t + u * dt
-            if not inside(area, ps, pt):
-                continue
-            at.append(abs(u) <= SEAM_TOUCH)
-            best = 0
-            for w in (-1.0, 0.0, 1.0):              # across the track: perpendicular to the direction
-                i = int((ps - w * PASS_GRID * dt) / PASS_GRID)
-                k = int((pt + w * PASS_GRID * ds) / PASS_GRID)
-                if 0 <= k < m.passes.shape[0] and 0 <= i < m.passes.shape[1]:
-                    best = max(best, int(m.passes[k, i]))
-            counts.append(best)
+        us = np.arange(-SEAM_SPAN, SEAM_SPAN + step / 2, step)
+        ps, pt = s + us * ds, t + us * dt
+        on = ((ps >= area.s0 - SEAM_TOLERANCE) & (ps <= area.s0 + area.width + SEAM_TOLERANCE) &
+              (pt >= area.t0 - SEAM_TOLERANCE) & (pt <= area.t0 + area.height + SEAM_TOLERANCE))
+        best = np.zeros(len(us), dtype=int)
+        nk, ni = m.passes.shape
+        for w in (-1.0, 0.0, 1.0):                  # across the track: perpendicular to the direction
+            i = ((ps - w * PASS_GRID * dt) / PASS_GRID).astype(int)
+            k = ((pt + w * PASS_GRID * ds) / PASS_GRID).astype(int)
+            ok = (i >= 0) & (i < ni) & (k >= 0) & (k < nk)
+            best[ok] = np.maximum(best[ok], m.passes[k[ok], i[ok]])
+        counts, at = best[on], (np.abs(us) <= SEAM_TOUCH)[on]
         return {"wall": wall_id, "area": area.id, "s": round(s, 4), "t": round(t, 4),
                 "sim_time": None if stamp is None else round(stamp, 3),
-                "gap_m": round(_touching_run([c == 0 for c in counts], at) * step, 4),
-                "double_m": round(_touching_run([c >= 2 for c in counts], at) * step, 4)}
+                "gap_m": round(_touching_run(list(counts == 0), list(at)) * step, 4),
+                "double_m": round(_touching_run(list(counts >= 2), list(at)) * step, 4)}
 
     def _sand(self, p0: np.ndarray, p1: np.ndarray) -> None:
         rad = float(self.tools["sander"]["pad_radius"])
