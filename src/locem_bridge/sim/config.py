@@ -30,8 +30,9 @@ SITE_KEYS: Dict[str, Sequence[str]] = {
     "site": ("name", "room", "walls", "robot_start"),
     "site.room": ("inside", "floor_size"),
     "wall": ("id", "material", "p0", "p1", "height", "thickness", "panel_width", "joint_width", "skirting",
-             "horizontal_joints", "areas"),
+             "horizontal_joints", "areas", "openings"),
     "area": ("id", "s", "t"),
+    "opening": ("id", "kind", "s", "t", "frame"),
     "simulation": ("time_scale", "world_rate", "seed", "gui", "perception", "outcome"),
     "simulation.perception": ("position_noise",),
     "simulation.outcome": ("grid", "tape_lateral_tolerance", "contact_tolerance", "spray_rate",
@@ -48,6 +49,63 @@ def _feature_id(value: Any, full: str) -> str:
     if not isinstance(value, str) or not FEATURE_ID.match(value):
         raise SimConfigError("%r is not a valid feature id" % (value,), key=full, allowed="[A-Za-z][A-Za-z0-9_]*")
     return value
+
+
+def _interval(item: Dict[str, Any], key: str, path: str, lo: float, hi: float) -> List[float]:
+    a, b = vec(item, key, path, 2)
+    if not lo - 1e-9 <= a < b <= hi + 1e-9:
+        raise SimConfigError("[%g, %g] is not an interval inside the wall" % (a, b), key="%s.%s" % (path, key),
+                             allowed="%g <= first < second <= %g m" % (lo, hi))
+    return [a, b]
+
+
+def _openings(wall: Dict[str, Any], path: str, ids: set) -> List[Dict[str, Any]]:
+    """The wall's door and window openings (``s``, ``t``: the clear opening in wall coordinates; ``frame``: the
+    width of the frame around it, in the wall plane), checked: inside the wall with their frames, a door
+    standing on the floor, a window above it, no two overlapping."""
+    length = math.hypot(wall["p1"][0] - wall["p0"][0], wall["p1"][1] - wall["p0"][1])
+    out = []
+    for k, op in enumerate(get(wall, "openings", path, list, default=[])):
+        opath = "%s.openings[%d]" % (path, k)
+        if not isinstance(op, dict):
+            raise SimConfigError("must be a mapping, found %r" % (op,), key=opath)
+        only(op, opath, SITE_KEYS["opening"])
+        oid = _feature_id(get(op, "id", opath), opath + ".id")
+        if oid in ids:
+            raise SimConfigError("%r is used twice; feature ids must be unique" % (oid,), key=opath + ".id")
+        ids.add(oid)
+        kind = get(op, "kind", opath, str, choices=("door", "window"))
+        frame = get(op, "frame", opath, float, default=0.05, lo=0.0, hi=0.3)
+        s = _interval(op, "s", opath, frame, length - frame)
+        if kind == "door":
+            t = _interval(op, "t", opath, 0.0, wall["height"] - frame)
+            if t[0] != 0.0:
+                raise SimConfigError("a door starts at the floor, found t from %g m" % t[0], key=opath + ".t",
+                                     allowed="t: [0, top]; an opening above the floor is a window")
+        else:
+            t = _interval(op, "t", opath, frame, wall["height"] - frame)
+            if t[0] <= 0.0:
+                raise SimConfigError("a window starts above the floor", key=opath + ".t",
+                                     allowed="t[0] > frame (%g m); an opening at the floor is a door" % frame)
+        item = {"id": oid, "kind": kind, "s": s, "t": t, "frame": frame}
+        for other in out:
+            if (s[0] - frame < other["s"][1] + other["frame"] and other["s"][0] - other["frame"] < s[1] + frame
+                    and t[0] - frame < other["t"][1] + other["frame"]
+                    and other["t"][0] - other["frame"] < t[1] + frame):
+                raise SimConfigError("overlaps opening %r (with their frames)" % other["id"], key=opath,
+                                     allowed="openings apart, frames included")
+        out.append(item)
+    return out
+
+
+def _area_not_in_opening(area: Dict[str, Any], wall: Dict[str, Any], apath: str) -> None:
+    s0, s1 = sorted(area["s"])
+    t0, t1 = sorted(area["t"])
+    for op in wall.get("openings", []):
+        f = op["frame"]
+        if (op["s"][0] - f <= s0 and s1 <= op["s"][1] + f and (op["t"][0] - f if op["t"][0] > 0 else 0.0) <= t0
+                and t1 <= op["t"][1] + f):
+            raise SimConfigError("lies inside opening %r: nothing to finish" % op["id"], key=apath)
 
 
 def validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
@@ -68,7 +126,7 @@ def _validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
     walls = get(site, "walls", "site", list)
     if not walls:
         raise SimConfigError("must list at least one wall", key="site.walls")
-    ids = set()
+    ids: set = set()
     for i, wall in enumerate(walls):
         path = "site.walls[%d]" % i
         if not isinstance(wall, dict):
@@ -88,6 +146,7 @@ def _validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
         wall["p0"], wall["p1"] = p0, p1
         wall["height"] = get(wall, "height", path, float, lo=0.1, hi=20.0)
         wall["thickness"] = get(wall, "thickness", path, float, default=0.0125, lo=0.001, hi=1.0)
+        wall["openings"] = _openings(wall, path, ids)
         if wall["material"] == "plasterboard":
             wall["panel_width"] = get(wall, "panel_width", path, float, lo=0.1, hi=100.0)
             wall["joint_width"] = get(wall, "joint_width", path, float, default=0.05, lo=0.001, hi=0.5)
@@ -106,8 +165,13 @@ def _validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
                     raise SimConfigError("must be a mapping, found %r" % (area,), key=apath)
                 only(area, apath, SITE_KEYS["area"])
                 area["id"] = _feature_id(get(area, "id", apath), apath + ".id")
+                if area["id"] in ids:
+                    raise SimConfigError("%r is used twice; feature ids must be unique" % (area["id"],),
+                                         key=apath + ".id")
+                ids.add(area["id"])
                 area["s"] = vec(area, "s", apath, 2)
                 area["t"] = vec(area, "t", apath, 2)
+                _area_not_in_opening(area, wall, apath)
             wall["areas"] = areas
     room["inside"] = vec(room, "inside", "site.room", 2, default=None) if room.get("inside") is not None else None
     room["floor_size"] = vec(room, "floor_size", "site.room", 2, default=[20.0, 20.0])
