@@ -84,6 +84,15 @@ def test_unreachable_pemkre_keeps_update_in_outbox_until_flushed(tmp_path):
      "areas[0].finish must be one of bare, sprayed, sanded, got 'painted'"),
     (lambda s: s["areas"][0].update(finish=1), "areas[0].finish must be one of bare, sprayed, sanded, got 1"),
     (lambda s: s["areas"][0].update(finish="Sanded"), "areas[0].finish must be one of bare, sprayed, sanded"),
+    (lambda s: s["walls"][0].update(openings=[{"id": "d1", "kind": "gate", "s": [1, 2], "t": [0, 2]}]),
+     "walls[0].openings[0].kind must be door or window, got 'gate'"),
+    (lambda s: s["walls"][0].update(openings=[{"id": "d1", "kind": "door", "s": [2, 1], "t": [0, 2]}]),
+     "walls[0].openings[0].s must be two numbers first < second"),
+    (lambda s: s["walls"][0].update(corners=[{"end": 2, "angle": 1.0}]), "walls[0].corners[0] must be an object "
+     "with end 0 (at p0) or 1 (at p1)"),
+    (lambda s: s["walls"][0].update(corners=[{"end": 0, "angle": 7.0}]), "walls[0].corners[0].angle must be "
+     "between 0 and 2 pi rad"),
+    (lambda s: s["areas"][0].update(holes=[{"s": [0.5, 1.0]}]), "areas[0].holes[0].t must be a list of 2 numbers"),
 ])
 def test_bad_scan_is_rejected_naming_the_field_and_nothing_is_stored(tmp_path, mutate, msg):
     hdh, sink, store = make(tmp_path)
@@ -163,3 +172,15 @@ def test_area_finish_reaches_the_pemkre_engine(tmp_path):
         assert engine.check_consistency(full_inference=True) == []
     finally:
         pstore.close()
+
+
+def test_openings_corners_and_holes_are_stored_with_the_geometry(tmp_path):
+    hdh, sink, store = make(tmp_path)
+    scan = copy.deepcopy(SITE)
+    scan["walls"][0].update(openings=[{"id": "door_1", "kind": "door", "s": [1.5, 2.4], "t": [0, 2.05],
+                                       "frame": 0.05}], corners=[{"end": 1, "angle": 2.0944}])
+    scan["areas"][0].update(holes=[{"s": [1.45, 2.45], "t": [0, 2.0]}])
+    hdh.ingest_scan(scan)
+    assert hdh.feature("wall_1", "wall")["openings"][0]["s"] == [1.5, 2.4]
+    assert hdh.feature("wall_1", "wall")["corners"] == [{"end": 1, "angle": 2.0944}]
+    assert hdh.feature(scan["areas"][0]["id"], "area")["holes"] == [{"s": [1.45, 2.45], "t": [0.0, 2.0]}]

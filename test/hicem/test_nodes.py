@@ -300,3 +300,29 @@ def test_log_level_outside_its_choices_is_a_load_error():
     e = ei.value
     assert (e.file, e.line) == ("log.xml", 2) and "port 'level'" in str(e)
     assert "debug, info, warning, error" in str(e)
+
+
+def test_get_area_raster_leaves_a_door_out_and_runs_the_lanes_on_past_its_frame():
+    rig = Rig('<GetAreaRaster area_id="wall_1_area_1" section_width="0.6" base_standoff="1.3" yaw_offset="0" '
+              'edge_extension="0.05" band_gap="0.15" sections="{s}" count="{c}"/>')
+    scan = {"walls": [dict(SITE["walls"][0], openings=[{"id": "door_1", "kind": "door", "s": [1.5, 2.4],
+                                                       "t": [0.0, 2.05], "frame": 0.05}])],
+            "areas": [{"id": "wall_1_area_1", "wall": "wall_1", "origin": [0.0, 3.0, 0.1], "u": [1.0, 0.0, 0.0],
+                       "width": 4.8, "height": 2.3, "holes": [{"s": [1.45, 2.45], "t": [0.0, 2.0]}]}]}
+    rig.hdh.ingest_scan(scan)
+    assert rig.tree.tick() == S
+    secs = rig.bb.get("s")
+    assert rig.bb.get("c") == len(secs) and [s["index"] for s in secs] == list(range(len(secs)))
+    door = (1.45, 2.45)          # along the wall (area origin at s 0), frame included, up to 2.1 m above the floor
+    for s in secs:
+        a, b = s["origin"][0], s["origin"][0] + s["width"]
+        z0, z1 = s["origin"][2], s["origin"][2] + s["height"]
+        overlap = min(b, door[1]) - max(a, door[0])
+        if z0 < 2.1 - 1e-9 and overlap > 0:
+            # only a section that ends at the frame runs on into it, by the edge extension
+            assert overlap == pytest.approx(0.05), s
+        # the approach faces the section's own middle, not the area's
+        assert s["approach"][0] == pytest.approx(a + s["width"] / 2.0, abs=0.06)
+    lintel = [s for s in secs if s["origin"][0] >= 1.45 - 1e-9 and s["origin"][0] + s["width"] <= 2.45 + 1e-9]
+    assert lintel and all(s["origin"][2] == pytest.approx(2.1) for s in lintel)
+    assert sum(s["width"] for s in lintel) == pytest.approx(1.0)     # shared sides: no run-on past them

@@ -83,10 +83,10 @@ def _openings(wall: Dict[str, Any], path: str, ids: set) -> List[Dict[str, Any]]
                 raise SimConfigError("a door starts at the floor, found t from %g m" % t[0], key=opath + ".t",
                                      allowed="t: [0, top]; an opening above the floor is a window")
         else:
-            t = _interval(op, "t", opath, frame, wall["height"] - frame)
-            if t[0] <= 0.0:
+            if vec(op, "t", opath, 2)[0] <= 0.0:
                 raise SimConfigError("a window starts above the floor", key=opath + ".t",
-                                     allowed="t[0] > frame (%g m); an opening at the floor is a door" % frame)
+                                     allowed="t[0] >= frame (%g m); an opening at the floor is a door" % frame)
+            t = _interval(op, "t", opath, frame, wall["height"] - frame)
         item = {"id": oid, "kind": kind, "s": s, "t": t, "frame": frame}
         for other in out:
             if (s[0] - frame < other["s"][1] + other["frame"] and other["s"][0] - other["frame"] < s[1] + frame

@@ -6,14 +6,15 @@ and some part of it lies within ``range`` and the horizontal field of view ``fov
 its clipped visible part is not empty; the reported start/end are that visible part. Areas are reported whole
 for every visible wall. Positions get zero-mean Gaussian noise of standard deviation ``position_noise``
 (in the wall plane, along the wall and in height), drawn from a seeded generator so runs repeat. Ids are the
-ground-truth ids, stable across scans. Output is the SCAN JSON shape of ``docs/contracts.md``.
+ground-truth ids, stable across scans. A wall carries its openings (doors, windows: exact, no noise) and the
+angles of its corners with the walls meeting it; an area the parts of openings inside it as ``holes``. Output is the SCAN JSON shape of ``docs/contracts.md``.
 
 With an :class:`~locem_bridge.sim.outcome.OutcomeRecorder` attached (constructor argument or the ``outcome``
 attribute) every reported area carries ``finish``, what a camera would see on the surface: ``sanded`` when at
 least :data:`FINISHED_FRACTION` of its cells are sprayed to the target thickness *and* sanded, ``sprayed`` when at
 least that fraction is sprayed, else ``bare`` (cells as in the recorder's coverage numbers: centres inside the
-area). Sanding bare board is not a sanded finish: ``sanded`` tells PEMKRE that spraying is done too. Without a
-recorder ``finish`` is left out (the contract's default, ``bare``, applies).
+area, outside its holes). Sanding bare board is not a sanded finish: ``sanded`` tells PEMKRE that spraying is
+done too. Without a recorder ``finish`` is left out (the contract's default, ``bare``, applies).
 """
 from __future__ import annotations
 
@@ -39,6 +40,8 @@ def area_coverage(outcome: Any, area: Area) -> Tuple[float, float]:
     along = (m.sc >= area.s0) & (m.sc <= area.s0 + area.width)
     up = (m.tc >= area.t0) & (m.tc <= area.t0 + area.height)
     cells = up[:, None] & along[None, :]
+    if area.holes:
+        cells &= ~area.in_hole(m.sc[None, :] - area.s0, m.tc[:, None] - area.t0)
     n = int(cells.sum())
     if n == 0:
         return 0.0, 0.0
@@ -119,7 +122,7 @@ class WallScanner:
             vis = self._visible_s_interval(wall, 0.0, wall.length, sensor, heading)
             if vis is None:
                 continue
-            wc = wall.to_contract()
+            wc = self.site.wall_contract(wall)
             if self.noise > 0.0:
                 e = self._rng.normal(0.0, self.noise, size=4)
                 p0 = wall.p0 + e[0] * wall.u[:2] + e[1] * wall.n[:2]

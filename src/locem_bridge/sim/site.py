@@ -284,7 +284,17 @@ class Site:
                 return j
         raise KeyError("unknown joint %r" % joint_id)
 
+    def wall_contract(self, wall: Wall) -> Dict[str, Any]:
+        """:meth:`Wall.to_contract` plus ``corners``: per end where another wall meets this one, ``end`` (0: at
+        ``p0``, 1: at ``p1``) and ``angle`` (rad) between the two faces seen from the room (pi/2 for a square
+        inside corner): what a planner needs to keep the tool and the robot off the neighbouring wall."""
+        out = wall.to_contract()
+        corners = [{"end": end, "angle": _r(math.radians(ang))} for end, _other, ang in self.corners(wall.id)]
+        if corners:
+            out["corners"] = corners
+        return out
+
     def to_contract(self, stamp: float = 0.0) -> Dict[str, Any]:
         """The complete ground truth in the SCAN JSON shape (all plasterboard walls, no noise)."""
-        return {"stamp": stamp, "walls": [w.to_contract() for w in self.work_walls],
+        return {"stamp": stamp, "walls": [self.wall_contract(w) for w in self.work_walls],
                 "joints": [j.to_contract() for j in self.joints], "areas": [a.to_contract() for a in self.areas]}

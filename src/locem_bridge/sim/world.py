@@ -49,12 +49,31 @@ from ..common.base_kinematics import kinematics_for
 from ..common.rate import FixedRate
 from .outcome import OutcomeRecorder
 from .perception import WallScanner
-from .site import Site
+from .site import Site, Wall
 
 log = logging.getLogger(__name__)
 
 BASE_SUBSTEP = 0.01    # sim s: the base pose is integrated through wheel angles at most this far apart
 
+
+
+def wall_boxes(wall: Wall) -> List[Tuple[float, float, float, float]]:
+    """``(s0, s1, t0, t1)`` rectangles (wall coordinates) that make up ``wall`` around its clear door and window
+    openings (frames are wall): full-height strips between the openings, and below / above each opening."""
+    cuts = sorted(wall.openings, key=lambda o: o.s0)
+    out: List[Tuple[float, float, float, float]] = []
+    s = 0.0
+    for o in cuts:
+        if o.s0 > s + 1e-9:
+            out.append((s, o.s0, 0.0, wall.height))
+        if o.t0 > 1e-9:
+            out.append((o.s0, o.s1, 0.0, o.t0))
+        if o.t1 < wall.height - 1e-9:
+            out.append((o.s0, o.s1, o.t1, wall.height))
+        s = o.s1
+    if wall.length > s + 1e-9:
+        out.append((s, wall.length, 0.0, wall.height))
+    return out
 
 class World:
     """The simulated worksite in PyBullet (see the module docstring)."""
@@ -129,15 +148,16 @@ class World:
         self.floor = pb.createMultiBody(0, floor, fvis, [inside[0], inside[1], -0.01], physicsClientId=c)
         self.wall_bodies: Dict[int, str] = {}
         for wall in self.site.walls:
-            half = [wall.length / 2, wall.thickness / 2, wall.height / 2]
-            col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=c)
             color = [0.93, 0.93, 0.88, 1] if wall.material == "plasterboard" else [0.55, 0.55, 0.55, 1]
-            vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=color, physicsClientId=c)
-            mid = (wall.p0 + wall.p1) / 2 - wall.n[:2] * wall.thickness / 2   # board behind the surface line
             yaw = math.atan2(wall.u[1], wall.u[0])
-            body = pb.createMultiBody(0, col, vis, [mid[0], mid[1], wall.height / 2],
-                                      pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=c)
-            self.wall_bodies[body] = wall.id
+            for s0, s1, t0, t1 in wall_boxes(wall):      # the wall around its door and window openings
+                half = [(s1 - s0) / 2, wall.thickness / 2, (t1 - t0) / 2]
+                col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=c)
+                vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=color, physicsClientId=c)
+                mid = wall.p0 + wall.u[:2] * (s0 + s1) / 2 - wall.n[:2] * wall.thickness / 2  # behind the face
+                body = pb.createMultiBody(0, col, vis, [mid[0], mid[1], (t0 + t1) / 2],
+                                          pb.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=c)
+                self.wall_bodies[body] = wall.id
         # mobile base: chassis + driven wheels (+ casters for a differential base) + pedestal, one kinematic multibody
         base = self.robot["base"]
         ch, wh, ped = base["chassis"], base["wheel"], self.robot["pedestal"]
@@ -340,6 +360,8 @@ class World:
             s, t, d = wall.to_wall_coords(p)
             if d >= 0.0 or d < -wall.thickness or not (-r <= s <= wall.length + r and -r <= t <= wall.height + r):
                 continue
+            if any(o.s0 + r < s < o.s1 - r and o.t0 + r <= t < o.t1 - r for o in wall.openings):
+                continue        # in a door or window opening: no wall under the tool
             if best is None or -d > best[0]:
                 best = (-d, rot.T.dot(wall.n).tolist())
         return best

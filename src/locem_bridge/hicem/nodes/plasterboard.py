@@ -17,6 +17,7 @@ from typing import Any, Dict, List, Tuple
 from py_trees.common import Status
 
 from ...common.geometry import wrap_angle
+from ...planning.area_pieces import area_pieces
 from ..errors import HicemError, PortError
 from ..interfaces import local_name
 from ..node_base import ConditionLeaf, Leaf
@@ -281,14 +282,18 @@ class GetLiftHeight(Leaf):
 class GetAreaRaster(Leaf):
     DESCRIPTION = ("Splits a wall area into sections no wider than section_width; for each: a base approach pose "
                    "facing the section's middle at base_standoff, and the raster rectangle (origin, u, width, "
-                   "height, wall normal) in the map frame.")
+                   "height, wall normal) in the map frame. An area with holes (door and window openings with "
+                   "their frames, the scan's holes) is first cut into pieces around them "
+                   "(locem_bridge.planning.area_pieces): no section covers a hole, the lanes run on past a hole's "
+                   "edge like past the area's ends, and a piece sitting on another starts one band_gap above it.")
     PORTS = (
         AREA_ID,
         input_port("section_width", FLOAT, None, "m", "widest strip covered from one base pose"),
         input_port("base_standoff", FLOAT, None, "m", "base centre distance from the wall"),
         input_port("yaw_offset", FLOAT, None, "rad", "added to the wall-facing heading"),
-        input_port("edge_extension", FLOAT, "0.0", "m", "the first and last section reach this far beyond the "
-                   "area's ends (spray run-in at the outer edges; sections meet exactly in between)"),
+        input_port("edge_extension", FLOAT, "0.0", "m", "the first and last section of a piece reach this far "
+                   "beyond the area's ends and a hole's edges (spray run-in at the outer edges; sections meet "
+                   "exactly in between)"),
         input_port("band_height", FLOAT, "0.0", "m", "tallest section (e.g. {@robot.work.spray.band_height}: what "
                    "the arm covers from one lift height); a taller area is cut into bands of equal height, bottom "
                    "first in the first column, then alternating (the next column starts in the band the last one "
@@ -306,8 +311,6 @@ class GetAreaRaster(Leaf):
         sw, bs = self.get("section_width"), self.get("base_standoff")
         if sw <= 0:
             raise PortError("%s: section_width must be > 0 m, got %g" % (self.name, sw))
-        count = max(1, int(math.ceil(a["width"] / sw - 1e-9)))
-        w = a["width"] / count
         nxy = math.hypot(n[0], n[1]) or 1.0
         heading = _facing([n[0] / nxy, n[1] / nxy], self.get("yaw_offset"))
         ext = self.get("edge_extension")
@@ -316,25 +319,34 @@ class GetAreaRaster(Leaf):
         band_h, gap = self.get("band_height"), self.get("band_gap")
         if band_h < 0 or gap < 0:
             raise PortError("%s: band_height and band_gap must be >= 0 m, got %g, %g" % (self.name, band_h, gap))
-        bands = 1
-        if band_h > 0 and a["height"] > band_h + 1e-9:
-            bands = int(math.ceil((a["height"] + gap) / (band_h + gap) - 1e-9))
-        bh = (a["height"] - gap * (bands - 1)) / bands
-        if bh <= 0:
-            raise PortError("%s: band_gap %g m leaves no band in the %g m high area" % (self.name, gap, a["height"]))
-        sections = []
-        for i in range(count):
-            o = [a["origin"][k] + a["u"][k] * w * i for k in range(3)]
-            mx, my = o[0] + a["u"][0] * w / 2.0, o[1] + a["u"][1] * w / 2.0
-            s0 = -ext if i == 0 else 0.0                   # along u, relative to the section's own start
-            s1 = w + ext if i == count - 1 else w
-            o = [o[k] + a["u"][k] * s0 for k in range(3)]
-            for b in (range(bands) if i % 2 == 0 else reversed(range(bands))):
-                ob = list(o)
-                ob[2] = o[2] + b * (bh + gap)
-                sections.append({"approach": [mx + n[0] / nxy * bs, my + n[1] / nxy * bs, heading], "origin": ob,
-                                 "u": list(a["u"]), "width": s1 - s0, "height": bh if bands > 1 else a["height"],
-                                 "normal": n, "index": len(sections), "z": [ob[2], ob[2] + bh]})
+        holes = [(h["s"][0], h["s"][1], h["t"][0], h["t"][1]) for h in a.get("holes", [])]
+        u = a["u"]
+        sections: List[Dict[str, Any]] = []
+        for piece in area_pieces(a["width"], a["height"], holes, gap):
+            count = max(1, int(math.ceil(piece.width / sw - 1e-9)))
+            w = piece.width / count
+            bands = 1
+            if band_h > 0 and piece.height > band_h + 1e-9:
+                bands = int(math.ceil((piece.height + gap) / (band_h + gap) - 1e-9))
+            bh = (piece.height - gap * (bands - 1)) / bands
+            if bh <= 0:
+                raise PortError("%s: band_gap %g m leaves no band in a %g m high piece of the area"
+                                % (self.name, gap, piece.height))
+            for i in range(count):
+                along = piece.s0 + w * i
+                o = [a["origin"][k] + u[k] * along for k in range(3)]
+                o[2] += piece.t0
+                mx, my = o[0] + u[0] * w / 2.0, o[1] + u[1] * w / 2.0
+                s0 = -ext if i == 0 and piece.open_left else 0.0     # along u, from the section's own start
+                s1 = w + ext if i == count - 1 and piece.open_right else w
+                o = [o[k] + u[k] * s0 for k in range(3)]
+                for b in (range(bands) if i % 2 == 0 else reversed(range(bands))):
+                    ob = list(o)
+                    ob[2] = o[2] + b * (bh + gap)
+                    sections.append({"approach": [mx + n[0] / nxy * bs, my + n[1] / nxy * bs, heading],
+                                     "origin": ob, "u": list(u), "width": s1 - s0,
+                                     "height": bh if bands > 1 else piece.height, "normal": n,
+                                     "index": len(sections), "z": [ob[2], ob[2] + bh]})
         self.set("sections", sections)
         self.set("count", len(sections))
         return Status.SUCCESS
