@@ -10,7 +10,12 @@ name, process on/off, segment start/end in map, tool z axis, sim duration) and k
   the distance and the deposit per pass falls with speed (it is integrated over time);
 - a sanded map (bool): sander on and its pad on the surface (``|d| <= contact_tolerance``).
 Spray and sand coverage, thickness mean and coefficient of variation count the cells of the wall's work areas
-(the areas SCAN reports); deposits outside them are overspray and show only in the pictures.
+(the areas SCAN reports) outside their holes (the openings and frames inside them); deposits outside them are
+overspray and show only in the pictures.
+Openings (doors, windows): where a clear opening is there is no wall, so nothing lands there: spray is kept apart
+(``sprayed_into_openings_m2``: opening cells reached with at least ``TRACE`` of the target thickness), the sander
+sands nothing and tape is not laid. Frames (around an opening, in the wall plane) take what reaches them, but a tool
+touching one is a fault: ``sprayed_on_frames_m2`` (at least ``TRACE`` of the target) and ``sanded_on_frames_m2``.
 Seams (where a tool process was interrupted inside the work, e.g. by a suspension, and went on later): the pass
 maps count how often the spray axis and the tape crossed each point (one count per switching on of the tool); per
 joint the longest stretch taped twice (``double_m``) and the longest untaped stretch between taped ones (``gap_m``);
@@ -19,17 +24,19 @@ crossed twice (``double_m``) along the pass's direction that reaches the point w
 ``SEAM_SPAN`` either side), and when it ended (``sim_time``, from the world's clock: match it with the valve's
 closing to find a suspension's seam; where the sections of a raster meet, their designed overlap is a seam too).
 Operator actions: :meth:`mark_manual_taping` records a joint taped by hand (reported separately).
-Numbers: :meth:`summary`; pictures: :meth:`save_pictures` (one PNG per wall: joints, thickness, sanded).
+Numbers: :meth:`summary`; pictures: :meth:`save_pictures` (one PNG per wall: joints, thickness, sanded; the
+openings drawn on all three, a title line and a legend row readable at any wall width: :func:`picture_layout`).
 """
 from __future__ import annotations
 
 import math
 import os
-from typing import Any, Callable, Dict, List, Optional
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .site import Site, Wall
+from .site import Area, Site, Wall
 
 TAPE_BIN = 0.01          # m, resolution of the tape record along a joint
 TAPED_FRACTION = 0.95    # a joint counts as taped from this covered fraction on
@@ -38,7 +45,10 @@ SEAM_SPAN = 0.25         # m, how far either side of a spray pass's end its seam
 SEAM_TOUCH = 0.01        # m, a gap or second coat belongs to the seam when it reaches this close to the pass's end
 SEAM_INSIDE = 0.02       # m, a pass ending at least this far inside a work area along its travel is a seam (lane
                          # ends at the area's edges are not; a lane on the edge, along it, is)
-SEAM_TOLERANCE = 0.01    # m, how far outside an area's edges a point still counts as on it
+SEAM_TOLERANCE = 0.01    # m, how far outside an area's edges a point still counts as on it (and how far into a
+                         # hole: a hole's edges are the area's edges too)
+TRACE = 0.1              # fraction of the target thickness from which a cell counts as sprayed into an opening or
+                         # on a frame
 
 
 class _WallMaps:
@@ -57,12 +67,28 @@ class _WallMaps:
         ps, pt = int(math.ceil(wall.length / PASS_GRID)), int(math.ceil(wall.height / PASS_GRID))
         self.passes = np.zeros((pt, ps), dtype=np.int16)
         self._last_pass = np.zeros((pt, ps), dtype=np.int32)
-        # the cells to be finished: centres inside one of the wall's areas (what SCAN reports as work)
+        # the cells to be finished: centres inside one of the wall's areas (what SCAN reports as work), outside
+        # its holes (the openings and their frames)
         self.work = np.zeros((self.nt, self.ns), dtype=bool)
         for a in wall.areas:
             ins = (self.sc >= a.s0) & (self.sc <= a.s0 + a.width)
             int_ = (self.tc >= a.t0) & (self.tc <= a.t0 + a.height)
-            self.work |= int_[:, None] & ins[None, :]
+            cells = int_[:, None] & ins[None, :]
+            if a.holes:
+                cells &= ~a.in_hole(self.sc[None, :] - a.s0, self.tc[:, None] - a.t0)
+            self.work |= cells
+        # openings: cells in a clear opening (no wall: nothing lands there) and on a frame (around it, in the
+        # wall plane: takes a deposit, but a tool there is a fault); what the spray put into openings, apart
+        s, t = self.sc[None, :], self.tc[:, None]
+        self.opening = np.zeros((self.nt, self.ns), dtype=bool)
+        outer = np.zeros((self.nt, self.ns), dtype=bool)
+        for o in wall.openings:
+            a0, a1, b0, b1 = o.outer
+            self.opening |= (s > o.s0) & (s < o.s1) & (t >= o.t0) & (t < o.t1)
+            outer |= (s > a0) & (s < a1) & (t >= b0) & (t < b1)
+        self.frame = outer & ~self.opening
+        self.has_openings = bool(self.opening.any())
+        self.into_openings = np.zeros((self.nt, self.ns))
 
 
 class OutcomeRecorder:
@@ -127,6 +153,8 @@ class OutcomeRecorder:
                 s, t, d = wall.to_wall_coords(p)
                 if abs(d) > self.contact_tol or not (0 <= s <= wall.length and 0 <= t <= wall.height):
                     continue
+                if wall.openings and wall.in_opening(s, t):
+                    continue                              # no wall to lay it on
                 hit = False
                 for j in wall.joints:
                     if j.kind == "vertical":
@@ -180,6 +208,10 @@ class OutcomeRecorder:
                 r2 = ds * ds + dtt * dtt
                 dep = rate * h * np.exp(-r2 / (2 * sigma * sigma))
                 dep[r2 > radius * radius] = 0.0
+                if m.has_openings:                         # into a clear opening: kept apart, no wall there
+                    op = m.opening[k0:k1, i0:i1]
+                    m.into_openings[k0:k1, i0:i1] += np.where(op, dep, 0.0)
+                    dep[op] = 0.0
                 m.thickness[k0:k1, i0:i1] += dep
 
     def _mark_axis(self, m: _WallMaps, p0: np.ndarray, p1: np.ndarray, z: np.ndarray, cos_in: float) -> None:
@@ -220,9 +252,8 @@ class OutcomeRecorder:
         s, t = end
         ds, dt = direction
 
-        def inside(a: Any, ps: float, pt: float) -> bool:
-            return (a.s0 - SEAM_TOLERANCE <= ps <= a.s0 + a.width + SEAM_TOLERANCE and
-                    a.t0 - SEAM_TOLERANCE <= pt <= a.t0 + a.height + SEAM_TOLERANCE)
+        def inside(a: Area, ps: float, pt: float) -> bool:
+            return bool(_on_area(a, np.array([ps]), np.array([pt]))[0])
         area = next((a for a in m.wall.areas if inside(a, s - SEAM_INSIDE * ds, t - SEAM_INSIDE * dt) and
                      inside(a, s + SEAM_INSIDE * ds, t + SEAM_INSIDE * dt)), None)
         if area is None:
@@ -230,8 +261,7 @@ class OutcomeRecorder:
         step = PASS_GRID / 2
         us = np.arange(-SEAM_SPAN, SEAM_SPAN + step / 2, step)
         ps, pt = s + us * ds, t + us * dt
-        on = ((ps >= area.s0 - SEAM_TOLERANCE) & (ps <= area.s0 + area.width + SEAM_TOLERANCE) &
-              (pt >= area.t0 - SEAM_TOLERANCE) & (pt <= area.t0 + area.height + SEAM_TOLERANCE))
+        on = _on_area(area, ps, pt)
         best = np.zeros(len(us), dtype=int)
         nk, ni = m.passes.shape
         for w in (-1.0, 0.0, 1.0):                  # across the track: perpendicular to the direction
@@ -258,7 +288,10 @@ class OutcomeRecorder:
                 if i0 >= i1 or k0 >= k1:
                     continue
                 r2 = (m.sc[i0:i1][None, :] - s) ** 2 + (m.tc[k0:k1][:, None] - t) ** 2
-                m.sanded[k0:k1, i0:i1] |= r2 <= rad * rad
+                pad = r2 <= rad * rad
+                if m.has_openings:
+                    pad &= ~m.opening[k0:k1, i0:i1]      # nothing to sand in a clear opening
+                m.sanded[k0:k1, i0:i1] |= pad
 
     def mark_manual_taping(self, joint_id: str) -> None:
         """The operator taped ``joint_id`` by hand."""
@@ -272,7 +305,9 @@ class OutcomeRecorder:
         return float(bins.mean())
 
     def summary(self) -> Dict[str, Any]:
-        """Numbers of the run: per joint, per wall and totals (fractions 0..1, thickness in m)."""
+        """Numbers of the run: per joint, per wall and totals (fractions 0..1, thickness in m); per wall and in
+        total the faults at openings (m2): ``sprayed_into_openings_m2``, ``sprayed_on_frames_m2``,
+        ``sanded_on_frames_m2`` (0.0 on a wall without openings)."""
         joints = {}
         for jid, bins in self.tape.items():
             cov = float(bins.mean())
@@ -284,6 +319,7 @@ class OutcomeRecorder:
         seams = [x for x in (self._seam(*e) for e in self.spray_pass_ends) if x is not None]
         walls = {}
         total_cells = covered_cells = sanded_cells = 0
+        fault_totals = {"sprayed_into_openings_m2": 0.0, "sprayed_on_frames_m2": 0.0, "sanded_on_frames_m2": 0.0}
         for wid, m in self.maps.items():
             # coverage and uniformity over the wall's work areas (cells outside them are overspray)
             cells = int(m.work.sum())
@@ -291,11 +327,19 @@ class OutcomeRecorder:
             vals = m.thickness[covered]
             cv = float(vals.std() / vals.mean()) if vals.size > 1 and vals.mean() > 0 else 0.0
             sanded = m.sanded & m.work
+            cell_m2 = m.grid * m.grid
+            trace = TRACE * self.target
+            faults = {"sprayed_into_openings_m2": round(int((m.into_openings >= trace).sum()) * cell_m2, 6),
+                      "sprayed_on_frames_m2": round(int(((m.thickness >= trace) & m.frame).sum()) * cell_m2, 6),
+                      "sanded_on_frames_m2": round(int((m.sanded & m.frame).sum()) * cell_m2, 6)}
             walls[wid] = {"spray_coverage": float(covered.sum()) / cells if cells else 0.0,
                           "thickness_mean": float(vals.mean()) if vals.size else 0.0,
                           "thickness_cv": cv, "thickness_max": float(m.thickness.max()),
                           "sand_coverage": float(sanded.sum()) / cells if cells else 0.0,
-                          "work_area_m2": cells * m.grid * m.grid}
+                          "work_area_m2": cells * cell_m2}
+            walls[wid].update(faults)
+            for k, v in faults.items():
+                fault_totals[k] += v
             total_cells += cells
             covered_cells += int(covered.sum())
             sanded_cells += int(sanded.sum())
@@ -309,72 +353,282 @@ class OutcomeRecorder:
             "tape_off_joint_m": self.tape_off_joint,
             "spray_coverage": covered_cells / total_cells if total_cells else 0.0,
             "sand_coverage": sanded_cells / total_cells if total_cells else 0.0,
+            "sprayed_into_openings_m2": round(fault_totals["sprayed_into_openings_m2"], 6),
+            "sprayed_on_frames_m2": round(fault_totals["sprayed_on_frames_m2"], 6),
+            "sanded_on_frames_m2": round(fault_totals["sanded_on_frames_m2"], 6),
             "joints": joints,
             "walls": walls,
             "spray_seams": seams,
         }
 
     # -- pictures ----------------------------------------------------------------------------------------------
+    def picture_layout(self, wall_id: str, px_per_m: float = 100.0) -> "PictureLayout":
+        """Where :meth:`save_pictures` puts the panels, texts and legend of wall ``wall_id``'s picture."""
+        wall = self.maps[wall_id].wall
+        return picture_layout(_title(wall), PANEL_LABELS, self._legend(wall), *_wall_px(wall, px_per_m))
+
+    def _legend(self, wall: Wall) -> List[Tuple[str, str]]:
+        """The legend items (key, text) of ``wall``'s picture: the joint states shown on it, the scales, the
+        outlines, the openings if it has any."""
+        bins = [(self.tape[j.id], j.id in self.manual) for j in wall.joints]
+        items = [(key, text) for key, text, shown in (
+            ("taped", "taped", any(b.any() for b, _ in bins)),
+            ("manual", "taped by hand", any(manual and not b.all() for b, manual in bins)),
+            ("open", "open joint", any(not manual and not b.all() for b, manual in bins))) if shown]
+        items += [("thickness", "spray 0 .. %.1f mm" % (2000.0 * self.target)), ("sanded", "sanded"),
+                  ("area", "work area and its holes")]
+        if wall.openings:
+            items += [("opening", "opening (door: leaf arc, window: cross)"), ("frame", "frame")]
+        return items
+
     def save_pictures(self, folder: str, px_per_m: float = 100.0) -> List[str]:
-        """Write ``<wall>.png`` per plasterboard wall: joints (green taped, blue manual, red open), spray thickness
-        (white 0 -> dark blue at 2x target) and sanded area (brown); returns the file paths."""
+        """Write ``<wall>.png`` per plasterboard wall: a title line (wall, size, openings), three panels -- joints
+        (green taped, blue manual, red open), spray thickness (white 0 -> dark blue at 2x target), sanded area
+        (brown) -- with the openings (dark grey, frame outlined brown) on each and the work areas with their
+        holes outlined on the last two, and a legend row below (:meth:`picture_layout`); returns the file paths."""
         from PIL import Image, ImageDraw
 
         os.makedirs(folder, exist_ok=True)
+        font = _default_font()
         out = []
         for wid, m in self.maps.items():
             wall = m.wall
-            w_px, h_px = max(1, int(wall.length * px_per_m)), max(1, int(wall.height * px_per_m))
-            pad, title = 10, 18
-            img = Image.new("RGB", (3 * w_px + 4 * pad, h_px + 2 * pad + title), (255, 255, 255))
+            lay = self.picture_layout(wid, px_per_m)
+            w_px, h_px = _wall_px(wall, px_per_m)
+            img = Image.new("RGB", lay.size, WHITE)
             dr = ImageDraw.Draw(img)
+            xs = [p[0] for p in lay.panels]
+            y0 = lay.panels[0][1]
 
-            def panel(k: int) -> int:
-                return pad + k * (w_px + pad)
-            labels = ("joints: green taped, blue manual, red open",
-                      "spray: white 0 .. dark blue %.1f mm" % (2000.0 * self.target),
-                      "sanded: brown")
-            for k, label in enumerate(labels):
-                dr.text((panel(k), 2), "%s %s" % (wid, label), fill=(0, 0, 0))
-            # panel 1: joints
-            x0, y0 = panel(0), pad + title
-            dr.rectangle([x0, y0, x0 + w_px, y0 + h_px], fill=(235, 235, 225), outline=(0, 0, 0))
-            jw = max(2, int(0.05 * px_per_m))
-
-            def to_px(s: float, t: float, x_off: int) -> tuple:
+            def to_px(s: float, t: float, x_off: int) -> Tuple[float, float]:
                 return (x_off + s * px_per_m, y0 + h_px - t * px_per_m)
+            # panel 1: joints
+            dr.rectangle([xs[0], y0, xs[0] + w_px, y0 + h_px], fill=BOARD, outline=BLACK)
+            jw = max(2, int(0.05 * px_per_m))
             for j in wall.joints:
                 bins = self.tape[j.id]
                 s0 = wall.to_wall_coords(j.start)[0]
                 t0 = float(j.start[2])
                 for b, done in enumerate(bins):
                     a, e = b * TAPE_BIN, min(j.length, (b + 1) * TAPE_BIN)
-                    color = (30, 160, 60) if done else ((40, 90, 220) if j.id in self.manual else (210, 40, 40))
+                    color = TAPED if done else (MANUAL if j.id in self.manual else OPEN)
                     if j.kind == "vertical":
-                        p, q = to_px(s0, t0 + a, x0), to_px(s0, t0 + e, x0)
+                        p, q = to_px(s0, t0 + a, xs[0]), to_px(s0, t0 + e, xs[0])
                     else:
-                        p, q = to_px(s0 + a, t0, x0), to_px(s0 + e, t0, x0)
+                        p, q = to_px(s0 + a, t0, xs[0]), to_px(s0 + e, t0, xs[0])
                     dr.line([p, q], fill=color, width=jw)
-            # panel 2: thickness
+            # panel 2: thickness, panel 3: sanded (maps of whole cells, cut to the wall at its foot)
             norm = np.clip(m.thickness / (2.0 * self.target), 0.0, 1.0)
-            rgb = np.stack([255 * (1 - norm), 255 * (1 - 0.7 * norm), 255 - 90 * norm], axis=-1).astype(np.uint8)
-            timg = Image.fromarray(rgb[::-1]).resize((w_px, h_px), Image.NEAREST)
-            img.paste(timg, (panel(1), y0))
-            dr.rectangle([panel(1), y0, panel(1) + w_px, y0 + h_px], outline=(0, 0, 0))
-            # panel 3: sanded
-            srgb = np.where(m.sanded[..., None], np.array([150, 100, 50], dtype=np.uint8),
-                            np.array([235, 235, 225], dtype=np.uint8)).astype(np.uint8)
-            simg = Image.fromarray(srgb[::-1]).resize((w_px, h_px), Image.NEAREST)
-            img.paste(simg, (panel(2), y0))
-            dr.rectangle([panel(2), y0, panel(2) + w_px, y0 + h_px], outline=(0, 0, 0))
-            for k in (1, 2):     # the work areas, outlined
+            for k, rgb in ((1, _thickness_rgb(norm)),
+                           (2, np.where(m.sanded[..., None], np.array(SANDED, dtype=np.uint8),
+                                        np.array(BOARD, dtype=np.uint8)).astype(np.uint8))):
+                full_w = max(w_px, int(round(m.ns * m.grid * px_per_m)))
+                full_h = max(h_px, int(round(m.nt * m.grid * px_per_m)))
+                pic = Image.fromarray(rgb[::-1]).resize((full_w, full_h), Image.NEAREST)
+                img.paste(pic.crop((0, full_h - h_px, w_px, full_h)), (xs[k], y0))
+                dr.rectangle([xs[k], y0, xs[k] + w_px, y0 + h_px], outline=BLACK)
+            for k in range(3):   # the openings on every panel
+                for o in wall.openings:
+                    a0, a1, b0, b1 = o.outer
+                    p, q = to_px(o.s0, o.t1, xs[k]), to_px(o.s1, o.t0, xs[k])
+                    dr.rectangle([p, q], fill=OPENING)
+                    if o.kind == "window":
+                        dr.line([p, q], fill=OPENING_MARK)
+                        dr.line([(p[0], q[1]), (q[0], p[1])], fill=OPENING_MARK)
+                    else:                                   # the leaf swinging open from its hinge at s0
+                        r = min(q[0] - p[0], q[1] - p[1])
+                        dr.arc([p[0] - r, q[1] - r, p[0] + r, q[1] + r], 270, 360, fill=OPENING_MARK)
+                        dr.line([(p[0], q[1]), (p[0] + r * math.sqrt(0.5), q[1] - r * math.sqrt(0.5))],
+                                fill=OPENING_MARK)
+                    dr.rectangle([to_px(a0, b1, xs[k]), to_px(a1, b0, xs[k])], outline=FRAME, width=2)
+            for k in (1, 2):     # the work areas and their holes, outlined
                 for a in wall.areas:
-                    p, q = to_px(a.s0, a.t0 + a.height, panel(k)), to_px(a.s0 + a.width, a.t0, panel(k))
-                    dr.rectangle([p, q], outline=(200, 120, 0))
+                    rects = [(a.s0, a.s0 + a.width, a.t0, a.t0 + a.height)]
+                    rects += [(a.s0 + h0, a.s0 + h1, a.t0 + v0, a.t0 + v1) for h0, h1, v0, v1 in a.holes]
+                    for r0, r1, u0, u1 in rects:
+                        dr.rectangle([to_px(r0, u1, xs[k]), to_px(r1, u0, xs[k])], outline=AREA)
+            for t in lay.texts:
+                dr.text(t.xy, t.text, fill=BLACK, font=font)
+            for key, (bx0, by0, bx1, by1) in lay.swatches:
+                _swatch(dr, key, bx0, by0, bx1, by1)
             path = os.path.join(folder, "%s.png" % wid)
             img.save(path)
             out.append(path)
         return out
+
+
+WHITE, BLACK, BOARD = (255, 255, 255), (0, 0, 0), (235, 235, 225)
+TAPED, MANUAL, OPEN = (30, 160, 60), (40, 90, 220), (210, 40, 40)
+SANDED, AREA = (150, 100, 50), (200, 120, 0)
+OPENING, OPENING_MARK, FRAME = (70, 70, 70), (150, 150, 150), (110, 60, 15)
+PANEL_LABELS = ("joints", "spray thickness", "sanded")
+MIN_PANEL_PX = 160       # px, narrowest panel column (a narrower wall drawing is centred in it)
+PIC_PAD = 10             # px, margin around the picture and between the panel columns
+PIC_GAP = 6              # px, between the title, the labels, the panels and the legend
+SWATCH = (16, 10)        # px, a legend swatch
+
+
+@dataclass
+class PlacedText:
+    """One line of text in a picture: ``role`` (``title``, ``label<panel>``, ``legend``), where it is drawn
+    (``xy``, PIL's default anchor) and the box it covers (x0, y0, x1, y1; px)."""
+    role: str
+    xy: Tuple[int, int]
+    text: str
+    box: Tuple[int, int, int, int]
+
+
+@dataclass
+class PictureLayout:
+    """A wall picture's layout (px): its ``size``, the x range of each panel's column, the box of the wall
+    drawing in each panel (x0, y0, x1, y1: the wall's s = 0 at x0, its foot at y1), the text lines and the legend
+    swatches (key, box)."""
+    size: Tuple[int, int]
+    columns: List[Tuple[int, int]]
+    panels: List[Tuple[int, int, int, int]]
+    texts: List[PlacedText]
+    swatches: List[Tuple[str, Tuple[int, int, int, int]]]
+
+
+def picture_layout(title: str, labels: Sequence[str], legend: Sequence[Tuple[str, str]], w_px: int, h_px: int,
+                   font: Any = None) -> PictureLayout:
+    """Lay out a picture of three panels of a ``w_px`` x ``h_px`` wall drawing: the ``title`` across the picture,
+    each of the three ``labels`` above its panel, the ``legend`` items (key, text) flowing in rows below the
+    panels; text is wrapped to the width it has (measured with ``font``, default PIL's default font), a panel
+    column is at least MIN_PANEL_PX wide."""
+    from PIL import Image, ImageDraw
+
+    dr = ImageDraw.Draw(Image.new("RGB", (1, 1)))
+    font = font or _default_font()
+
+    def box(xy: Tuple[int, int], text: str) -> Tuple[int, int, int, int]:
+        if hasattr(dr, "textbbox"):
+            b = dr.textbbox(xy, text, font=font)
+            return (int(math.floor(b[0])), int(math.floor(b[1])), int(math.ceil(b[2])), int(math.ceil(b[3])))
+        w, h = font.getsize(text)                          # Pillow < 8
+        return (xy[0], xy[1], xy[0] + w, xy[1] + h)
+
+    def width(text: str) -> int:
+        b = box((0, 0), text)
+        return b[2] - min(0, b[0])
+
+    ref = box((0, 0), "Ag")
+    line_h = ref[3] - min(0, ref[1]) + 3
+    y_off = max(0, -ref[1])                                 # a font drawing above its anchor
+    texts: List[PlacedText] = []
+
+    def put(role: str, x: int, y: int, text: str) -> None:
+        xy = (x - min(0, box((0, 0), text)[0]), y + y_off)      # a glyph reaching left of its anchor
+        texts.append(PlacedText(role, xy, text, box(xy, text)))
+
+    cell_w = max(int(w_px), MIN_PANEL_PX)
+    size_w = 4 * PIC_PAD + 3 * cell_w
+    y = PIC_PAD
+    for line in _wrap(width, title, size_w - 2 * PIC_PAD):
+        put("title", PIC_PAD, y, line)
+        y += line_h
+    y += PIC_GAP
+    columns = [(PIC_PAD + k * (cell_w + PIC_PAD), PIC_PAD + k * (cell_w + PIC_PAD) + cell_w) for k in range(3)]
+    rows = 0
+    for k, label in enumerate(labels):
+        lines = _wrap(width, label, cell_w)
+        for i, line in enumerate(lines):
+            put("label%d" % k, columns[k][0], y + i * line_h, line)
+        rows = max(rows, len(lines))
+    y += rows * line_h + PIC_GAP // 2
+    panels = [(x0 + (cell_w - w_px) // 2, y, x0 + (cell_w - w_px) // 2 + w_px, y + h_px) for x0, _ in columns]
+    y += h_px + 2 * PIC_GAP
+    swatches: List[Tuple[str, Tuple[int, int, int, int]]] = []
+    left, right = PIC_PAD, size_w - PIC_PAD
+    x = left
+    for key, text in legend:
+        if x > left and x + SWATCH[0] + 4 + width(text) > right:
+            x, y = left, y + line_h
+        sy = y + (line_h - SWATCH[1]) // 2
+        swatches.append((key, (x, sy, x + SWATCH[0], sy + SWATCH[1])))
+        tx = x + SWATCH[0] + 4
+        lines = _wrap(width, text, right - tx)
+        for i, line in enumerate(lines):
+            put("legend", tx, y + i * line_h, line)
+        y += (len(lines) - 1) * line_h
+        x = right if len(lines) > 1 else tx + width(text) + 12
+    y += line_h
+    return PictureLayout((size_w, y + PIC_PAD), columns, panels, texts, swatches)
+
+
+def _wrap(width: Callable[[str], int], text: str, room: int) -> List[str]:
+    """``text`` in lines no wider than ``room`` px (by words; a word too long alone is cut)."""
+    lines: List[str] = []
+    line = ""
+    for word in text.split():
+        cand = line + " " + word if line else word
+        if width(cand) <= room:
+            line = cand
+            continue
+        if line:
+            lines.append(line)
+        while len(word) > 1 and width(word) > room:
+            k = max(1, max((n for n in range(1, len(word)) if width(word[:n]) <= room), default=1))
+            lines.append(word[:k])
+            word = word[k:]
+        line = word
+    if line:
+        lines.append(line)
+    return lines
+
+
+_FONT: List[Any] = []
+
+
+def _default_font() -> Any:
+    """PIL's default font (one instance: layout and drawing measure alike)."""
+    if not _FONT:
+        from PIL import ImageFont
+        _FONT.append(ImageFont.load_default())
+    return _FONT[0]
+
+
+def _wall_px(wall: Wall, px_per_m: float) -> Tuple[int, int]:
+    return max(1, int(wall.length * px_per_m)), max(1, int(wall.height * px_per_m))
+
+
+def _title(wall: Wall) -> str:
+    out = "%s: %.2f m long, %.2f m high" % (wall.id, wall.length, wall.height)
+    if wall.openings:
+        out += "; openings: " + ", ".join("%s (%s %.2f x %.2f m)" % (o.id, o.kind, o.s1 - o.s0, o.t1 - o.t0)
+                                          for o in wall.openings)
+    return out
+
+
+def _thickness_rgb(norm: np.ndarray) -> np.ndarray:
+    """White (0) to dark blue (1) for a thickness normalised to 2x the target."""
+    return np.stack([255 * (1 - norm), 255 * (1 - 0.7 * norm), 255 - 90 * norm], axis=-1).astype(np.uint8)
+
+
+def _swatch(dr: Any, key: str, x0: int, y0: int, x1: int, y1: int) -> None:
+    """A legend swatch for ``key`` in the box (x0, y0, x1, y1)."""
+    fills = {"taped": TAPED, "manual": MANUAL, "open": OPEN, "sanded": SANDED, "opening": OPENING}
+    if key in fills:
+        dr.rectangle([x0, y0, x1, y1], fill=fills[key], outline=BLACK if key == "sanded" else None)
+    elif key == "thickness":
+        ramp = _thickness_rgb(np.linspace(0.0, 1.0, x1 - x0 + 1))
+        for i, c in enumerate(ramp):
+            dr.line([(x0 + i, y0), (x0 + i, y1)], fill=tuple(int(v) for v in c))
+        dr.rectangle([x0, y0, x1, y1], outline=BLACK)
+    elif key == "area":
+        dr.rectangle([x0, y0, x1, y1], outline=AREA)
+    elif key == "frame":
+        dr.rectangle([x0, y0, x1, y1], outline=FRAME, width=2)
+
+
+def _on_area(a: Area, ps: np.ndarray, pt: np.ndarray) -> np.ndarray:
+    """Whether the wall points ``(ps, pt)`` lie on area ``a`` to within SEAM_TOLERANCE of its edges, a hole's
+    edges included (a point in a hole farther than that from its edges is off the area)."""
+    tol = SEAM_TOLERANCE
+    on = (ps >= a.s0 - tol) & (ps <= a.s0 + a.width + tol) & (pt >= a.t0 - tol) & (pt <= a.t0 + a.height + tol)
+    for h0, h1, v0, v1 in a.holes:
+        on &= ~((ps > a.s0 + h0 + tol) & (ps < a.s0 + h1 - tol) & (pt > a.t0 + v0 + tol) & (pt < a.t0 + v1 - tol))
+    return on
 
 
 def _touching_run(flags: List[bool], at: List[bool]) -> int:
