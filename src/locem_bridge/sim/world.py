@@ -341,6 +341,33 @@ class World:
         rot, origin = self._ur_base_in_map
         return origin.tolist(), list(matrix_to_quat(rot))
 
+    def touching(self, q: Sequence[float], clearance: float = 0.0) -> List[Tuple[str, str]]:
+        """``(part, wall)`` pairs -- part ``base``, ``arm`` or ``tool`` -- that come within ``clearance`` m of a
+        wall with the arm at joint positions ``q`` and the mounted tool on it (for checking planned poses before
+        the robot moves; the scene is put back as it was)."""
+        c = self._cid
+        with self._lock:
+            keep_q = list(self._q)
+            try:
+                self._q = [float(v) for v in q]
+                self._place_robot()
+                if self.mounted_tool is not None:
+                    self._place_tool()
+                bodies = [(self.base_body, "base"), (self.arm_body, "arm")]
+                if self.mounted_tool is not None:
+                    bodies.append((self.tool_bodies[self.mounted_tool], "tool"))
+                out = set()
+                for body, part in bodies:
+                    for wb, wid in self.wall_bodies.items():
+                        if pb.getClosestPoints(body, wb, clearance, physicsClientId=c):
+                            out.add((part, wid))
+                return sorted(out)
+            finally:
+                self._q = keep_q
+                self._place_robot()
+                if self.mounted_tool is not None:
+                    self._place_tool()
+
     def wall_contact(self, tcp_pose: Sequence[float]) -> Optional[Tuple[float, List[float]]]:
         """Contact provider for the UR stand-in (``set_contact_provider``): how deep the TCP (a pose in the UR
         base frame, as the controller reports it) is inside a wall of the site, and that wall's normal out of

@@ -1,0 +1,157 @@
+"""Plan before touching (planning.reach): what the robot can work near corners of any angle, checked against the
+PyBullet worksite -- the planned base and tool poses touch nothing but the wall being worked, while the pose an
+unplanned raster would take in the same corner does."""
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from locem_bridge.planning.reach import RobotEnvelope, Wall2D, plan_area, plan_joint, plan_site, wall_reach
+from locem_bridge.robot_facts import derive
+from locem_bridge.sim.config import load_robot, validate_site
+from locem_bridge.sim.site import Site
+
+TUNING = {"spray": {"lane_overrun": 0.1, "lane_ratio": 0.52}, "sand": {"lane_overrun": 0.1, "lane_ratio": 0.8}}
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot()
+
+
+@pytest.fixture(scope="module")
+def envelope(robot):
+    return RobotEnvelope.from_robot(robot["robot"], derive(robot["robot"], TUNING), overrun={"spray": 0.1, "sand": 0.1})
+
+
+def corner_site(angle_deg, length=3.0):
+    """wall_1 (plasterboard) along x from (0, 3) to (length, 3), the room below it; at its p1 a concrete wall_2
+    meets it at ``angle_deg`` between the faces, at its p0 a square corner; a fourth wall closes the room."""
+    a = math.radians(angle_deg)
+    p1 = np.array([length, 3.0])
+    p2 = p1 + 3.0 * np.array([-math.cos(a), -math.sin(a)])   # along wall_2, away from the corner
+    p3 = np.array([0.0, -1.0])
+    inside = (np.array([0.0, 3.0]) + p1 + p2 + p3) / 4.0
+    doc = {"site": {"name": "corner_%d" % angle_deg, "room": {"inside": inside.tolist()},
+                    "robot_start": [float(inside[0]), float(inside[1]), 1.5708], "walls": [
+        {"id": "wall_1", "p0": [0.0, 3.0], "p1": p1.tolist(), "height": 2.0, "panel_width": 0.75,
+         "horizontal_joints": [1.2]},
+        {"id": "wall_2", "material": "concrete", "p0": p1.tolist(), "p1": p2.tolist(), "height": 2.0},
+        {"id": "wall_3", "material": "concrete", "p0": p2.tolist(), "p1": p3.tolist(), "height": 2.0},
+        {"id": "wall_4", "material": "concrete", "p0": p3.tolist(), "p1": [0.0, 3.0], "height": 2.0}]}}
+    return validate_site(doc)
+
+
+def _reach(angle, envelope, work):
+    scan = Site(copy.deepcopy(corner_site(angle))).to_contract()
+    w1 = Wall2D.from_scan(scan["walls"][0])
+    return w1, wall_reach(w1, [w1], envelope, work), scan
+
+
+@pytest.mark.parametrize("work", ["taping", "spray", "sand"])
+def test_the_sharper_the_corner_the_more_is_left_to_the_hand(envelope, work):
+    ends, bases = {}, {}
+    for angle in (60, 90, 120, 150):
+        w1, r, _ = _reach(angle, envelope, work)
+        assert len(r.tool) == 1
+        ends[angle], bases[angle] = r.tool[0][1], r.base[-1][1]
+    tool = envelope.tools[work]
+    arm = envelope.wrist_offset + envelope.arm_radius          # the wrist beside the tool axis
+    room = max(tool.tip_radius, tool.body_radius, arm) + envelope.clearance
+    for angle in (60, 90, 120, 150):                          # the square corner at p0: only the tool's own size
+        assert _reach(angle, envelope, work)[1].tool[0][0] == pytest.approx(room, abs=0.011)
+    # a square or wider corner: the working end keeps its radius plus the clearance from the corner's edge; an
+    # acute one leaves more (the neighbour leans over the wall)
+    for angle in (90, 120, 150):
+        assert ends[angle] == pytest.approx(3.0 - room, abs=0.011)
+    assert ends[60] < ends[90] - 0.2
+    # the base gets closer to the corner the wider it is
+    assert bases[60] < bases[90] < bases[120] < bases[150]
+
+
+def test_an_area_into_a_corner_is_cut_where_the_robot_stops_and_the_rest_is_manual_with_its_extent(envelope):
+    w1, r, scan = _reach(60, envelope, "sand")
+    area = scan["areas"][0]
+    plan = plan_area(area, w1, r)
+    (s0, s1, t0, t1), = plan.parts
+    assert s0 == pytest.approx(r.tool[0][0]) and s1 == pytest.approx(r.tool[0][1])
+    corner = [m for m in plan.manual if m["along"][1] == pytest.approx(area["width"])]
+    assert len(corner) == 1 and corner[0]["along"][0] == pytest.approx(s1)
+    assert corner[0]["height"] == [area["origin"][2], area["origin"][2] + area["height"]]
+    assert "base" in corner[0]["reason"] or "touch" in corner[0]["reason"]
+    # the manual parts and the worked part tile the area along the wall
+    along = sorted([(s0, s1)] + [tuple(m["along"]) for m in plan.manual if m["height"][1] - m["height"][0] >= area["height"] - 1e-9])
+    assert along[0][0] == pytest.approx(0.0) and along[-1][1] == pytest.approx(area["width"])
+    assert all(a[1] == pytest.approx(b[0]) for a, b in zip(along, along[1:]))
+
+
+def test_a_joint_too_close_to_a_sharp_corner_is_manual_and_a_horizontal_one_is_cut_there(envelope):
+    w1, r, scan = _reach(60, envelope, "taping")
+    plans = {j["id"]: plan_joint(j, w1, r) for j in scan["joints"]}
+    last = max((j for j in scan["joints"] if j["kind"] == "vertical"), key=lambda j: j["start"][0])
+    assert last["start"][0] == pytest.approx(2.25) and plans[last["id"]].piece is None
+    horizontal = next(j for j in scan["joints"] if j["kind"] == "horizontal")
+    piece = plans[horizontal["id"]].piece
+    assert piece[1][0] == pytest.approx(r.tool[0][1], abs=1e-6)
+    assert plans[horizontal["id"]].manual[-1]["to"][0] == pytest.approx(3.0)
+
+
+def test_planning_takes_milliseconds_per_wall(envelope):
+    scan = Site(copy.deepcopy(corner_site(90))).to_contract()
+    plan = plan_site(scan, envelope)
+    assert set(plan.seconds) == {"wall_1"} and plan.seconds["wall_1"] < 1.0
+
+
+@pytest.fixture(scope="module")
+def kinematics(robot):
+    from locem_bridge.sim.config import resolve_arm_urdf
+    from locem_bridge.sim.ur.kinematics import ArmKinematics
+    return ArmKinematics(resolve_arm_urdf(robot["robot"]["arm"])[0])
+
+
+TOOL = {"taping": "taping_tool", "spray": "spray_gun", "sand": "sander"}
+
+
+def _touches(world, kinematics, robot, wall, base_s, tool_s, z, work, envelope):
+    """What the robot touches with its base at ``base_s`` facing ``wall`` and the tool working at ``tool_s``, z."""
+    from locem_bridge.sim.ur.kinematics import KinematicsError
+    tool = envelope.tools[work]
+    heading = math.atan2(-wall.n[1], -wall.n[0])
+    bx, by = wall.p0[:2] + base_s * wall.u[:2] + tool.base_standoff * wall.n[:2]
+    world.set_base_pose(float(bx), float(by), heading)
+    world.step()
+    point = wall.from_wall_coords(tool_s, z, tool.tip_distance)
+    pose = world.tcp_target_in_arm_base(point, -wall.n)
+    seed = robot["robot"]["arm"]["named_poses"]["wall_ready"]
+    length = robot["robot"]["tools"][TOOL[work]]["tcp"][2]
+    try:
+        q = kinematics.ik(pose, seed, tcp_pose=[0.0, 0.0, length, 0.0, 0.0, 0.0])
+    except KinematicsError:
+        return [("ik", "unreachable")]
+    return [(part, wid) for part, wid in world.touching(q) if not (part == "tool" and wid == wall.id)]
+
+
+@pytest.mark.parametrize("angle", [60, 90, 120])
+@pytest.mark.parametrize("work", ["taping", "spray", "sand"])
+def test_planned_poses_touch_nothing_but_the_worked_wall_in_the_simulated_world(angle, work, robot, envelope,
+                                                                                kinematics):
+    from locem_bridge.sim.world import World
+    site_doc = corner_site(angle)
+    world = World(copy.deepcopy(site_doc), robot, gui=False)
+    try:
+        world.mount_tool(TOOL[work])
+        wall = world.site.wall("wall_1")
+        w1, r, _ = _reach(angle, envelope, work)
+        (a, b), = r.tool
+        for s in (b, b - 0.2):                        # the last point reached at the corner, and just before it
+            base = r.base_for(s, s, envelope.tools[work].reach)
+            assert base is not None
+            for z in (0.3, 1.0, 1.7):
+                assert _touches(world, kinematics, robot, wall, base, s, z, work, envelope) == [], (s, z)
+        if angle <= 90:
+            # without planning: the base centred on the last 0.6 m of an area that runs into the corner
+            naive = _touches(world, kinematics, robot, wall, 3.0 - 0.3, 3.0 - 0.05, 1.0, work, envelope)
+            assert naive != []
+    finally:
+        world.close()
