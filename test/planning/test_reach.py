@@ -61,11 +61,10 @@ def test_the_sharper_the_corner_the_more_is_left_to_the_hand(envelope, work):
     room = max(tool.tip_radius, tool.body_radius, arm) + envelope.clearance
     for angle in (60, 90, 120, 150):                          # the square corner at p0: only the tool's own size
         assert _reach(angle, envelope, work)[1].tool[0][0] == pytest.approx(room, abs=0.011)
-    # a square or wider corner: the working end keeps its radius plus the clearance from the corner's edge; an
-    # acute one leaves more (the neighbour leans over the wall)
-    for angle in (90, 120, 150):
-        assert ends[angle] == pytest.approx(3.0 - room, abs=0.011)
-    assert ends[60] < ends[90] - 0.2
+    # a square corner: the tool and the wrist beside it keep their radius plus the clearance from the corner's
+    # edge; an acute one leaves more (the neighbour leans over the wall), an obtuse one less
+    assert ends[90] == pytest.approx(3.0 - room, abs=0.011)
+    assert ends[60] < ends[90] - 0.2 and ends[90] <= ends[120] <= ends[150]
     # the base gets closer to the corner the wider it is
     assert bases[60] < bases[90] < bases[120] < bases[150]
 
