@@ -35,6 +35,10 @@ HICEM puts the result on the root blackboard (:meth:`RobotFacts.blackboard_entri
 ``robot.work.<work>.section_width`` m, 2 x (lateral_reach - tuning lane_overrun); only with ``lane_overrun``
 ``robot.work.<work>.lane_spacing``  m, work_width x tuning lane_ratio, rounded down to whole mm; only with
                                     ``lane_ratio``
+``robot.work.<work>.tip_radius``    m, radius of the tool's working end (a pad's radius; else its body's)
+``robot.work.<work>.body_radius``   m, radius of the tool's body (``body.radius``)
+``robot.base.footprint``            m, [length, width] of the chassis (``base.chassis``), centred on the base frame
+``robot.arm.shoulder_x``            m, the arm's mount ahead of the base centre (``arm.mount.xyz[0]``)
 ==================================  ================================================================================
 
 Lengths are rounded to 0.1 mm (so 0.82 + 0.18 + 0.30 is 1.30, not 1.3000000000000003).
@@ -116,8 +120,12 @@ class RobotFacts:
     """Every derived robot fact: ``work`` (work name -> :class:`WorkFacts`), ``tools``, ``reach``, ``tcp_bound``."""
 
     def __init__(self, name: str, tools: List[str], reach: float, bound: float, work: Dict[str, WorkFacts],
-                 path: str = "", lift_range: Optional[List[float]] = None, transit_pose: str = "") -> None:
+                 path: str = "", lift_range: Optional[List[float]] = None, transit_pose: str = "",
+                 footprint: Optional[List[float]] = None, shoulder_x: float = 0.0) -> None:
         self.name = name
+        #: [length, width] of the chassis; the arm's mount ahead of the base centre
+        self.footprint = list(footprint or [0.0, 0.0])
+        self.shoulder_x = shoulder_x
         #: named arm pose for driving ('' = the arm stays where it is)
         self.transit_pose = transit_pose
         #: [bottom, top] of the lift carrying the arm; None without a lift
@@ -134,7 +142,9 @@ class RobotFacts:
                                prefix + ".reach": self.reach, prefix + ".tcp_bound": self.tcp_bound,
                                prefix + ".arm.transit_pose": self.transit_pose,
                                prefix + ".lift.fitted": self.lift_range is not None,
-                               prefix + ".lift.range": list(self.lift_range or [])}
+                               prefix + ".lift.range": list(self.lift_range or []),
+                               prefix + ".base.footprint": list(self.footprint),
+                               prefix + ".arm.shoulder_x": self.shoulder_x}
         works: Dict[str, Any] = {}
         for name, facts in self.work.items():
             entry = dict(facts.entries, tool=facts.tool)
@@ -180,6 +190,8 @@ def derive(robot: Mapping[str, Any], tuning: Optional[Mapping[str, Any]] = None,
             "z_range": [_r(ww["z_band"][0]), _r(ww["z_band"][1] + travel)], "lateral_reach": _r(ww["lateral_reach"]),
             "band_height": _r(ww["z_band"][1] - ww["z_band"][0]) if lift_range else 0.0,
             "segment_length": _r(ww["line_length"]),
+            "body_radius": _r(tool["body"]["radius"]),
+            "tip_radius": _r(max(float(tool.get("pad_radius", 0.0)), float(tool["body"]["radius"]))),
         }
         reach = float(ww["lateral_reach"])
         overrun = _tuning(tuning, work, "lane_overrun", lambda v: v >= 0.0, ">= 0")
@@ -196,7 +208,9 @@ def derive(robot: Mapping[str, Any], tuning: Optional[Mapping[str, Any]] = None,
                                   key="%s.lane_ratio" % work)
         works[work] = WorkFacts(work, name, entries)
     return RobotFacts(str(robot.get("name", "")), list(robot["tools"]), _r(robot["arm"]["reach"]), tcp_bound(robot),
-                      works, path, lift_range, str(robot["arm"].get("transit_pose") or ""))
+                      works, path, lift_range, str(robot["arm"].get("transit_pose") or ""),
+                      [_r(robot["base"]["chassis"]["length"]), _r(robot["base"]["chassis"]["width"])],
+                      _r(robot["arm"]["mount"]["xyz"][0]))
 
 
 def load_facts(robot_file: Optional[str] = None, tuning: Optional[Mapping[str, Any]] = None,

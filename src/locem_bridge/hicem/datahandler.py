@@ -251,6 +251,10 @@ class DataHandler:
                 kind or "feature", fid, ", ".join(known[:20]) or "none"))
         return v
 
+    def features(self, kind: str) -> List[Dict[str, Any]]:
+        """Every stored feature of ``kind`` (wall, joint, area), with its id."""
+        return [dict(e.value, id=e.key) for e in self.store.entries(FEATURES) if e.value.get("type") == kind]
+
     def mark_feature(self, fid: str, status: str) -> None:
         with self.store.transaction():
             v = self.feature(fid)

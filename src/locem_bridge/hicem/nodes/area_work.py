@@ -295,6 +295,37 @@ class LeaveSectionManual(Leaf):
         return Status.SUCCESS
 
 
+class LeavePlannedManual(Leaf):
+    DESCRIPTION = ("Records the parts of an area the plan leaves to the hand (GetAreaRaster's manual: out of "
+                   "reach, near a corner, above the tool's band) as manual work in the data store collection "
+                   "'progress', numbered after the area's sections, before any section is worked: the task "
+                   "detail and the run report list them with their extent and reason.")
+    PORTS = (
+        AREA_ID, WORK,
+        input_port("manual", JSON, None, "", "[{along: [a, b], height: [c, d], reason}] (GetAreaRaster manual)"),
+        input_port("first_index", INT, None, "", "the number of sections (the first manual part's index)"),
+    )
+
+    def on_tick(self) -> Status:
+        store = self.ctx.require("store", self.name)
+        work, area_id, first = _check_work(self), self.get("area_id"), self.get("first_index")
+        parts = self.get("manual") or []
+        if not isinstance(parts, list):
+            raise PortError("%s: manual must be a list of {along, height, reason}, got %r" % (self.name, parts))
+        if not parts:
+            return Status.SUCCESS
+        with store.transaction():
+            record = _record(store, work, area_id)
+            planned = [{"index": first + k, "along": [float(x) for x in m["along"]],
+                        "height": [float(x) for x in m["height"]], "reason": "planned: %s" % m.get("reason", "")}
+                       for k, m in enumerate(parts)]
+            keep = [m for m in record.get("manual", []) if int(m["index"]) < first]
+            record["manual"] = keep + planned
+            store.put(PROGRESS, progress_key(work, area_id), record, source="tree")
+        self.feedback_message = "%d part(s) left for manual work by the plan" % len(parts)
+        return Status.SUCCESS
+
+
 class AreaDetail(Leaf):
     DESCRIPTION = ("The task detail of an area task: `done` alone, or followed by the sections left for manual work "
                    "('sanded; manual work on wall_1_area_1: section 3 (along 1.2..1.8 m, height 0..2.5 m)'), "
@@ -326,5 +357,5 @@ class ForgetSectionsDone(Leaf):
         return Status.SUCCESS
 
 
-LIBRARY = (PendingSections, RecordSectionDone, ForgetSectionsDone, LeaveSectionManual, AreaDetail, RecordSectionProgress,
-           SectionResume)
+LIBRARY = (PendingSections, RecordSectionDone, ForgetSectionsDone, LeaveSectionManual, LeavePlannedManual, AreaDetail,
+           RecordSectionProgress, SectionResume)

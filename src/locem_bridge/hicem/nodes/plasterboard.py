@@ -18,6 +18,7 @@ from py_trees.common import Status
 
 from ...common.geometry import wrap_angle
 from ...planning.area_pieces import area_pieces
+from ...planning.reach import RobotEnvelope, ToolEnvelope, Wall2D, WallReach, plan_area, wall_reach
 from ..errors import HicemError, PortError
 from ..interfaces import local_name
 from ..node_base import ConditionLeaf, Leaf
@@ -279,6 +280,59 @@ class GetLiftHeight(Leaf):
         return Status.SUCCESS
 
 
+class GetWallReach(Leaf):
+    DESCRIPTION = ("Plans, before the robot moves, what one wall work can reach on the wall of a joint or area "
+                   "(locem_bridge.planning.reach): from the scanned walls, their corners (any angle) and the robot's "
+                   "outline -- chassis, the tool's working end, body and the wrist beside it, each keeping clearance "
+                   "from every wall -- the stretches along the wall the tool can work from a free base pose, the "
+                   "free base centres and the height band. GetAreaRaster cuts an area to it; the rest is manual "
+                   "work with its extent and reason.")
+    PORTS = (
+        input_port("feature_id", STRING, None, "", "stored joint or area id (its wall is planned)"),
+        input_port("work", STRING, None, "", "the wall work (taping, spray, sand): its robot facts are used"),
+        input_port("footprint", FLOAT_LIST, "{@robot.base.footprint}", "m", "chassis length;width"),
+        input_port("shoulder_x", FLOAT, "{@robot.arm.shoulder_x}", "m", "arm mount ahead of the base centre"),
+        input_port("works", JSON, "{@robot.work}", "", "the robot facts per work (robot.work)"),
+        input_port("reach", FLOAT, "0.0", "m", "how far to either side of the base the tool works (0: the work's "
+                   "section_width / 2, else its lateral_reach)"),
+        input_port("clearance", FLOAT, "{@cfg.plan.clearance}", "m", "what every part keeps from every wall"),
+        input_port("arm_radius", FLOAT, "{@cfg.plan.arm_radius}", "m", "radius of the wrist and forearm links"),
+        input_port("wrist_length", FLOAT, "{@cfg.plan.wrist_length}", "m", "wrist and forearm behind the flange"),
+        input_port("wrist_offset", FLOAT, "{@cfg.plan.wrist_offset}", "m", "wrist links beside the tool axis"),
+        output_port("plan", JSON, None, "", "{wall, work, tool: [[s0, s1]...], base: [[s0, s1]...], t: [lo, hi], "
+                    "reach, why: [[[s0, s1], reason]...]} along the wall from p0 (m)"),
+    )
+
+    def on_tick(self) -> Status:
+        hdh = self.ctx.require("data_handler", self.name)
+        fid = self.get("feature_id")
+        feature = hdh.feature(fid)
+        work = self.get("work")
+        facts = (self.get("works") or {}).get(work)
+        if not isinstance(facts, dict):
+            return self.fail("this robot has no tool for work '%s'" % work)
+        walls = [Wall2D.from_scan(w) for w in hdh.features("wall")]
+        wall = next((w for w in walls if w.id == feature["wall"]), None)
+        if wall is None:
+            return self.fail("wall '%s' of %s is not stored" % (feature["wall"], fid))
+        fp = list(self.get("footprint"))
+        if len(fp) != 2 or min(fp) <= 0:
+            raise PortError("%s: footprint must be length;width > 0, got %s" % (self.name, fp))
+        reach = self.get("reach") or float(facts.get("section_width", 2.0 * facts["lateral_reach"])) / 2.0
+        tool = ToolEnvelope(work=work, tip_radius=float(facts.get("tip_radius", 0.05)),
+                            tip_distance=float(facts["tool_standoff"]), body_radius=float(facts.get("body_radius", 0.05)),
+                            length=float(facts["tool_length"]), base_standoff=float(facts["base_standoff"]),
+                            reach=reach, z_range=(float(facts["z_range"][0]), float(facts["z_range"][1])),
+                            contact=float(facts["tool_standoff"]) == 0.0)
+        env = RobotEnvelope(fp[0], fp[1], self.get("shoulder_x"), {work: tool}, self.get("clearance"),
+                            self.get("arm_radius"), self.get("wrist_length"), self.get("wrist_offset"))
+        r = wall_reach(wall, walls, env, work)
+        self.set("plan", {"wall": r.wall, "work": work, "tool": [list(iv) for iv in r.tool],
+                          "base": [list(iv) for iv in r.base], "t": list(r.t), "reach": reach,
+                          "why": [[list(iv), why] for iv, why in r.why]})
+        return Status.SUCCESS
+
+
 class GetAreaRaster(Leaf):
     DESCRIPTION = ("Splits a wall area into sections no wider than section_width; for each: a base approach pose "
                    "facing the section's middle at base_standoff, and the raster rectangle (origin, u, width, "
@@ -300,8 +354,12 @@ class GetAreaRaster(Leaf):
                    "ended in: the lift moves once between two columns, not twice); 0: one band"),
         input_port("band_gap", FLOAT, "0.0", "m", "a band starts this far above the band below it (the lane "
                    "spacing: its bottom lane is one lane above the lower band's top lane, no lane twice)"),
+        input_port("plan", JSON, "null", "", "what the work reaches on the area's wall (GetWallReach); null: the "
+                   "whole area, each section's base in front of its middle"),
         output_port("sections", JSON, None, "", "list of {approach, origin, u, width, height, normal, index, z}"),
         output_port("count", INT, None, "", "number of sections"),
+        output_port("manual", JSON, None, "", "the parts of the area the plan leaves to the hand: "
+                    "[{along: [a, b], height: [c, d], reason}] (along from the area's origin, height above the floor)"),
     )
 
     def on_tick(self) -> Status:
@@ -321,6 +379,18 @@ class GetAreaRaster(Leaf):
             raise PortError("%s: band_height and band_gap must be >= 0 m, got %g, %g" % (self.name, band_h, gap))
         holes = [(h["s"][0], h["s"][1], h["t"][0], h["t"][1]) for h in a.get("holes", [])]
         u = a["u"]
+        plan, reach, manual = self.get("plan"), None, []
+        if plan:
+            wall = Wall2D.from_scan(hdh.feature(a["wall"], "wall"))
+            reach = WallReach(plan["wall"], plan["work"], [tuple(iv) for iv in plan["tool"]],
+                              [tuple(iv) for iv in plan["base"]], tuple(plan["t"]),
+                              [(tuple(iv), why) for iv, why in plan.get("why", [])])
+            worked = plan_area(a, wall, reach)
+            manual = worked.manual
+            # the parts out of reach become holes: the pieces stop there and run no lanes into them
+            holes += [(m["along"][0], m["along"][1], m["height"][0] - a["origin"][2], m["height"][1] - a["origin"][2])
+                      for m in manual]
+            along0 = float((a["origin"][0] - wall.p0[0]) * wall.u[0] + (a["origin"][1] - wall.p0[1]) * wall.u[1])
         sections: List[Dict[str, Any]] = []
         for piece in area_pieces(a["width"], a["height"], holes, gap):
             count = max(1, int(math.ceil(piece.width / sw - 1e-9)))
@@ -340,6 +410,13 @@ class GetAreaRaster(Leaf):
                 s0 = -ext if i == 0 and piece.open_left else 0.0     # along u, from the section's own start
                 s1 = w + ext if i == count - 1 and piece.open_right else w
                 o = [o[k] + u[k] * s0 for k in range(3)]
+                if reach is not None:      # the free base pose nearest the section's middle (planned)
+                    sa, sb = along0 + along, along0 + along + w      # the section without its run-in
+                    at = reach.base_for(sa, sb, float(plan["reach"]))
+                    if at is None:
+                        return self.fail("no free base pose reaches section along %.2f..%.2f m of %s"
+                                         % (sa, sb, a["id"]))
+                    mx, my = wall.p0[0] + wall.u[0] * at, wall.p0[1] + wall.u[1] * at
                 for b in (range(bands) if i % 2 == 0 else reversed(range(bands))):
                     ob = list(o)
                     ob[2] = o[2] + b * (bh + gap)
@@ -349,6 +426,7 @@ class GetAreaRaster(Leaf):
                                      "index": len(sections), "z": [ob[2], ob[2] + bh]})
         self.set("sections", sections)
         self.set("count", len(sections))
+        self.set("manual", manual)
         return Status.SUCCESS
 
 
@@ -433,4 +511,4 @@ class CheckArmTransit(ConditionLeaf):
 
 
 LIBRARY = (TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments, CheckLift, GetLiftHeight,
-           GetAreaRaster, PlanTransit, CheckArmTransit)
+           GetWallReach, GetAreaRaster, PlanTransit, CheckArmTransit)
