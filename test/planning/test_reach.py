@@ -154,3 +154,20 @@ def test_planned_poses_touch_nothing_but_the_worked_wall_in_the_simulated_world(
             assert naive != []
     finally:
         world.close()
+
+
+def test_under_a_ceiling_a_pad_stays_its_radius_below_it_and_a_free_standing_wall_is_worked_to_its_top(envelope):
+    doc = corner_site(90)
+    scan = Site(copy.deepcopy(doc)).to_contract()
+    free = Wall2D.from_scan(scan["walls"][0])
+    assert wall_reach(free, [free], envelope, "sand").t[1] == envelope.tools["sand"].z_range[1]
+    doc["site"]["room"]["ceiling"] = 2.0
+    scan = Site(validate_site(doc)).to_contract()
+    assert scan["walls"][0]["ceiling"] == 2.0
+    under = Wall2D.from_scan(scan["walls"][0])
+    sand = envelope.tools["sand"]
+    assert wall_reach(under, [under], envelope, "sand").t[1] == pytest.approx(2.0 - sand.tip_radius - envelope.clearance)
+    area = scan["areas"][0]
+    top = [m for m in plan_area(area, under, wall_reach(under, [under], envelope, "sand")).manual
+           if m["height"][0] > 1.0]
+    assert len(top) == 1 and "ceiling" in top[0]["reason"] and top[0]["height"][1] == pytest.approx(2.0)

@@ -138,7 +138,8 @@ def validate_scan(scan: Any, known_walls: Sequence[str] = ()) -> Dict[str, List[
                              "height": _pos(w.get("height"), where + ".height"),
                              "thickness": _num(w.get("thickness", 0.0), where + ".thickness"),
                              "normal": _unit(_vec(w.get("normal"), 3, where + ".normal"), where + ".normal")})
-        for key, parse in (("openings", lambda: _openings(w, where, fid)), ("corners", lambda: _corners(w, where))):
+        for key, parse in (("openings", lambda: _openings(w, where, fid)), ("corners", lambda: _corners(w, where)),
+                           ("ceiling", lambda: _pos(w.get("ceiling"), where + ".ceiling"))):
             if key in w:
                 out["walls"][-1][key] = parse()
     walls = {w["id"] for w in out["walls"]} | set(known_walls)

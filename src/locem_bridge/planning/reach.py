@@ -13,8 +13,9 @@ The model, in one wall's frame (``s`` along the wall from ``p0``, ``t`` up, ``d`
 - **The tool** working at ``s`` stands perpendicular to the wall: its working end (the pad or roller on the wall,
   the nozzle ``tool_standoff`` off it) with its radius (a sander's pad, the tool body), its body up to the flange,
   and the wrist behind the flange (``wrist_length``, ``arm_radius``). Each keeps ``clearance`` from every
-  obstacle. The floor and the ceiling (the wall's top) bound the heights: a pad keeps its radius plus the
-  clearance below the ceiling; every tool stays in the height band the arm reaches (``z_range``).
+  obstacle. Every tool stays in the height band the arm reaches (``z_range``); under a ceiling (a wall's
+  ``ceiling`` in the scan: the room's ceiling height) the working end keeps its radius plus the clearance below
+  it. A wall without one stands free (a mock-up wall): its top edge is worked like its ends.
 - **The base** stands ``base_standoff`` off the wall facing it (as every wall tree drives it); its chassis
   rectangle keeps ``clearance`` from every obstacle, and so does the arm's shoulder. From a base centre at
   ``s_b`` the tool reaches ``s_b +- reach`` along the wall (the robot's lateral reach less the room a raster lane
@@ -122,6 +123,7 @@ class Wall2D:
     n: np.ndarray          # unit normal into the room (2D)
     height: float
     corners: List[Dict[str, Any]]
+    ceiling: Optional[float] = None        # m above the floor; None: open above the wall (a free-standing wall)
 
     @property
     def u(self) -> np.ndarray:
@@ -135,8 +137,10 @@ class Wall2D:
     @classmethod
     def from_scan(cls, w: Mapping[str, Any]) -> "Wall2D":
         n = np.array(w["normal"][:2], dtype=float)
+        ceiling = w.get("ceiling")
         return cls(str(w["id"]), np.array(w["p0"], dtype=float), np.array(w["p1"], dtype=float),
-                   n / np.linalg.norm(n), float(w["height"]), list(w.get("corners", [])))
+                   n / np.linalg.norm(n), float(w["height"]), list(w.get("corners", [])),
+                   float(ceiling) if ceiling is not None else None)
 
     def point(self, s: Any, d: Any) -> np.ndarray:
         """Map points of wall coordinates ``(s, d)`` (arrays broadcast), shape (..., 2)."""
@@ -258,7 +262,9 @@ def wall_reach(wall: Wall2D, others: Sequence[Wall2D], robot: RobotEnvelope, wor
         within |= padded[off:off + n]
     ok = tool_ok & within
     lo = tool.z_range[0]
-    hi = min(tool.z_range[1], wall.height - (tool.tip_radius + c if tool.contact else 0.0))
+    hi = tool.z_range[1]
+    if wall.ceiling is not None:          # the working end keeps its radius and the clearance from the ceiling
+        hi = min(hi, wall.ceiling - tool.tip_radius - c)
     why: List[Tuple[Interval, str]] = []
     for a, b in _intervals(s, ~tool_ok):
         why.append(((a, b), "the %s would touch a wall or frame there" % work))

@@ -28,7 +28,7 @@ FEATURE_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 SITE_KEYS: Dict[str, Sequence[str]] = {
     "": ("site", "simulation"),
     "site": ("name", "room", "walls", "robot_start"),
-    "site.room": ("inside", "floor_size"),
+    "site.room": ("inside", "floor_size", "ceiling"),
     "wall": ("id", "material", "p0", "p1", "height", "thickness", "panel_width", "joint_width", "skirting",
              "horizontal_joints", "areas", "openings"),
     "area": ("id", "s", "t"),
@@ -175,6 +175,14 @@ def _validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
             wall["areas"] = areas
     room["inside"] = vec(room, "inside", "site.room", 2, default=None) if room.get("inside") is not None else None
     room["floor_size"] = vec(room, "floor_size", "site.room", 2, default=[20.0, 20.0])
+    room["ceiling"] = (get(room, "ceiling", "site.room", float, lo=0.5, hi=20.0) if room.get("ceiling") is not None
+                       else None)
+    if room["ceiling"] is not None:
+        for i, wall in enumerate(walls):
+            if wall["height"] > room["ceiling"] + 1e-9:
+                raise SimConfigError("%g m reaches above the ceiling" % wall["height"],
+                                     key="site.walls[%d].height" % i, allowed="<= site.room.ceiling (%g m)"
+                                     % room["ceiling"])
     site["room"] = room
     site["robot_start"] = vec(site, "robot_start", "site", 3, default=[0.0, 0.0, 0.0])
     sim = get(data, "simulation", "", dict, default={})

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -173,6 +173,8 @@ class Site:
         self.name: str = site["name"]
         self.robot_start: List[float] = list(site["robot_start"])
         self.floor_size: List[float] = list(site["room"]["floor_size"])
+        #: m, the room's ceiling above the floor; None: open above the walls (free-standing mock-up walls)
+        self.ceiling: Optional[float] = site["room"].get("ceiling")
         walls_cfg = site["walls"]
         inside = site["room"].get("inside")
         if inside is None:
@@ -289,6 +291,8 @@ class Site:
         ``p0``, 1: at ``p1``) and ``angle`` (rad) between the two faces seen from the room (pi/2 for a square
         inside corner): what a planner needs to keep the tool and the robot off the neighbouring wall."""
         out = wall.to_contract()
+        if self.ceiling is not None:
+            out["ceiling"] = self.ceiling
         corners = [{"end": end, "angle": _r(math.radians(ang))} for end, _other, ang in self.corners(wall.id)]
         if corners:
             out["corners"] = corners
