@@ -58,7 +58,7 @@ def test_the_sharper_the_corner_the_more_is_left_to_the_hand(envelope, work):
         ends[angle], bases[angle] = r.tool[0][1], r.base[-1][1]
     tool = envelope.tools[work]
     arm = envelope.wrist_offset + envelope.arm_radius          # the wrist beside the tool axis
-    room = max(tool.tip_radius, tool.body_radius, arm) + envelope.clearance
+    room = max(tool.tip_radius, tool.body_radius, arm) + envelope.clearance + tool.run_on   # lanes run on
     for angle in (60, 90, 120, 150):                          # the square corner at p0: only the tool's own size
         assert _reach(angle, envelope, work)[1].tool[0][0] == pytest.approx(room, abs=0.011)
     # a square corner: the tool and the wrist beside it keep their radius plus the clearance from the corner's

@@ -10,7 +10,8 @@ The model, in one wall's frame (``s`` along the wall from ``p0``, ``t`` up, ``d`
 - **Obstacles** are 2D segments on the floor plan: every other wall of the scan, and at each end of the wall
   where another wall meets it at an inside corner (``corners[].angle`` below pi) the neighbour's face, a ray from
   the corner at that angle (a concrete wall the scan does not report still has a face the robot must not touch).
-- **The tool** working at ``s`` stands perpendicular to the wall: its working end (the pad or roller on the wall,
+- **The tool** working at ``s`` (and up to ``run_on`` either side of it: a raster lane runs on past its
+  section's end) stands perpendicular to the wall: its working end (the pad or roller on the wall,
   the nozzle ``tool_standoff`` off it) with its radius (a sander's pad, the tool body), its body up to the flange,
   and the wrist behind the flange (``wrist_length``, ``arm_radius``). Each keeps ``clearance`` from every
   obstacle. Every tool stays in the height band the arm reaches (``z_range``); under a ceiling (a wall's
@@ -49,6 +50,8 @@ class ToolEnvelope:
     reach: float
     z_range: Interval
     contact: bool
+    run_on: float = 0.0        # m the tool travels past the worked part along the wall (a raster lane's run-in and
+                               # run-up past its section's end)
 
 
 @dataclass
@@ -85,7 +88,8 @@ class RobotEnvelope:
                 work=work, tip_radius=max(pad, body_r), tip_distance=float(wf["tool_standoff"]), body_radius=body_r,
                 length=float(wf["tool_length"]), base_standoff=float(wf["base_standoff"]),
                 reach=float(wf["lateral_reach"]) - float((overrun or {}).get(work, 0.0)),
-                z_range=(float(wf["z_range"][0]), float(wf["z_range"][1])), contact=float(wf["tool_standoff"]) == 0.0)
+                z_range=(float(wf["z_range"][0]), float(wf["z_range"][1])), contact=float(wf["tool_standoff"]) == 0.0,
+                run_on=float((overrun or {}).get(work, 0.0)))
         return cls(float(chassis["length"]), float(chassis["width"]), float(robot["arm"]["mount"]["xyz"][0]), tools,
                    clearance, arm_radius, wrist_length, wrist_offset)
 
@@ -254,6 +258,14 @@ def wall_reach(wall: Wall2D, others: Sequence[Wall2D], robot: RobotEnvelope, wor
             base_ok &= clear(float(ds), dd, c)
     base_ok &= clear(0.0, tool.base_standoff - robot.shoulder_x, robot.arm_radius + c)
     base_ok &= ~_crosses(wall, s, d0 - c, d1 + c, hw + c, segs)
+    # the tool also travels run_on past the worked part: a point is worked only when the tool fits that far on
+    if tool.run_on > 0.0:
+        m = int(math.ceil(tool.run_on / STEP - 1e-9))
+        padded = np.pad(tool_ok, m, mode="edge")      # past a wall end as at the end (a corner blocks there)
+        eroded = np.ones(n, dtype=bool)
+        for off in range(2 * m + 1):
+            eroded &= padded[off:off + n]
+        tool_ok = eroded
     # a working point is reached when a free base centre lies within reach of it
     k = int(math.floor(tool.reach / STEP + 1e-9))
     padded = np.concatenate([np.zeros(k, dtype=bool), base_ok, np.zeros(k, dtype=bool)])

@@ -295,6 +295,8 @@ class GetWallReach(Leaf):
         input_port("works", JSON, "{@robot.work}", "", "the robot facts per work (robot.work)"),
         input_port("reach", FLOAT, "0.0", "m", "how far to either side of the base the tool works (0: the work's "
                    "section_width / 2, else its lateral_reach)"),
+        input_port("run_on", FLOAT, "-1.0", "m", "how far the tool travels past the worked part (a raster lane's "
+                   "run-in and run-up; -1: lateral_reach - section_width / 2 for a raster work, 0 otherwise)"),
         input_port("clearance", FLOAT, "{@cfg.plan.clearance}", "m", "what every part keeps from every wall"),
         input_port("arm_radius", FLOAT, "{@cfg.plan.arm_radius}", "m", "radius of the wrist and forearm links"),
         input_port("wrist_length", FLOAT, "{@cfg.plan.wrist_length}", "m", "wrist and forearm behind the flange"),
@@ -319,11 +321,15 @@ class GetWallReach(Leaf):
         if len(fp) != 2 or min(fp) <= 0:
             raise PortError("%s: footprint must be length;width > 0, got %s" % (self.name, fp))
         reach = self.get("reach") or float(facts.get("section_width", 2.0 * facts["lateral_reach"])) / 2.0
+        run_on = self.get("run_on")
+        if run_on < 0:
+            run_on = max(0.0, float(facts["lateral_reach"]) - float(facts.get("section_width",
+                                                                              2.0 * facts["lateral_reach"])) / 2.0)
         tool = ToolEnvelope(work=work, tip_radius=float(facts.get("tip_radius", 0.05)),
                             tip_distance=float(facts["tool_standoff"]), body_radius=float(facts.get("body_radius", 0.05)),
                             length=float(facts["tool_length"]), base_standoff=float(facts["base_standoff"]),
                             reach=reach, z_range=(float(facts["z_range"][0]), float(facts["z_range"][1])),
-                            contact=float(facts["tool_standoff"]) == 0.0)
+                            contact=float(facts["tool_standoff"]) == 0.0, run_on=run_on)
         env = RobotEnvelope(fp[0], fp[1], self.get("shoulder_x"), {work: tool}, self.get("clearance"),
                             self.get("arm_radius"), self.get("wrist_length"), self.get("wrist_offset"))
         r = wall_reach(wall, walls, env, work)
