@@ -40,7 +40,8 @@ def envelope() -> RobotEnvelope:
     return RobotEnvelope.from_robot(load_robot()["robot"], params.robot, clearance=plan.get("clearance", 0.05),
                                     arm_radius=plan.get("arm_radius", 0.06),
                                     wrist_length=plan.get("wrist_length", 0.35),
-                                    wrist_offset=plan.get("wrist_offset", 0.10), overrun=overrun)
+                                    wrist_offset=plan.get("wrist_offset", 0.10),
+                                    shoulder_radius=plan.get("shoulder_radius", 0.45), overrun=overrun)
 
 
 def measure(scan, env, repeats):

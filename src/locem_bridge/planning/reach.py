@@ -60,7 +60,10 @@ class RobotEnvelope:
     the arm's shoulder ``shoulder_x`` ahead of it, and one :class:`ToolEnvelope` per wall work. Behind the
     flange the arm's wrist and forearm stay within ``wrist_length`` along the tool axis and ``wrist_offset`` to
     either side of it (a UR arm working perpendicular to a wall: the wrist links sit beside the tool axis, on
-    either side depending on the arm's branch), links of ``arm_radius``; every part keeps ``clearance``."""
+    either side depending on the arm's branch), links of ``arm_radius``; the upper arm and the elbow stay within
+    ``shoulder_radius`` of the shoulder's axis on the floor plan (they swing out sideways as the tool reaches
+    along the wall: a base close to a corner lets the forearm meet the neighbouring wall); every part keeps
+    ``clearance``."""
     base_length: float
     base_width: float
     shoulder_x: float
@@ -69,10 +72,11 @@ class RobotEnvelope:
     arm_radius: float = 0.06
     wrist_length: float = 0.35
     wrist_offset: float = 0.10
+    shoulder_radius: float = 0.45
 
     @classmethod
     def from_robot(cls, robot: Mapping[str, Any], facts: Any, clearance: float = 0.05, arm_radius: float = 0.06,
-                   wrist_length: float = 0.35, wrist_offset: float = 0.10,
+                   wrist_length: float = 0.35, wrist_offset: float = 0.10, shoulder_radius: float = 0.45,
                    overrun: Optional[Mapping[str, float]] = None) -> "RobotEnvelope":
         """From a validated robot section (``load_robot(...)["robot"]``) and its :class:`RobotFacts`;
         ``overrun``: per work the room a raster lane needs past its section's end (HICEM ``<work>.lane_overrun``),
@@ -91,7 +95,7 @@ class RobotEnvelope:
                 z_range=(float(wf["z_range"][0]), float(wf["z_range"][1])), contact=float(wf["tool_standoff"]) == 0.0,
                 run_on=float((overrun or {}).get(work, 0.0)))
         return cls(float(chassis["length"]), float(chassis["width"]), float(robot["arm"]["mount"]["xyz"][0]), tools,
-                   clearance, arm_radius, wrist_length, wrist_offset)
+                   clearance, arm_radius, wrist_length, wrist_offset, shoulder_radius)
 
 
 @dataclass
@@ -256,7 +260,7 @@ def wall_reach(wall: Wall2D, others: Sequence[Wall2D], robot: RobotEnvelope, wor
     for ds in np.linspace(-hw, hw, max(2, int(math.ceil(2 * hw / 0.05)) + 1)):
         for dd in (d0, d1):
             base_ok &= clear(float(ds), dd, c)
-    base_ok &= clear(0.0, tool.base_standoff - robot.shoulder_x, robot.arm_radius + c)
+    base_ok &= clear(0.0, tool.base_standoff - robot.shoulder_x, robot.shoulder_radius + c)
     base_ok &= ~_crosses(wall, s, d0 - c, d1 + c, hw + c, segs)
     # the tool also travels run_on past the worked part: a point is worked only when the tool fits that far on
     if tool.run_on > 0.0:
@@ -311,8 +315,10 @@ class AreaPlan:
     manual: List[Dict[str, Any]]
 
 
-def plan_area(area: Mapping[str, Any], wall: Wall2D, reach: WallReach) -> AreaPlan:
-    """Cut an area (SCAN shape) into what ``reach`` can work and what is manual."""
+def plan_area(area: Mapping[str, Any], wall: Wall2D, reach: WallReach, min_manual: float = 0.0) -> AreaPlan:
+    """Cut an area (SCAN shape) into what ``reach`` can work and what is manual. A manual strip narrower than
+    ``min_manual`` is not reported: the tool's footprint past the worked part's edge (a spray fan, a pad) covers
+    it."""
     rel = np.array(area["origin"][:2], dtype=float) - wall.p0
     s0 = float(rel @ wall.u)
     t0 = float(area["origin"][2])
@@ -332,6 +338,7 @@ def plan_area(area: Mapping[str, Any], wall: Wall2D, reach: WallReach) -> AreaPl
         if hi < t0 + h - 1e-9:
             manual.append({"along": [a - s0, b - s0], "height": [max(hi, t0), t0 + h],
                            "reason": "above the tool's reach (arm or ceiling)"})
+    manual = [m for m in manual if min(m["along"][1] - m["along"][0], m["height"][1] - m["height"][0]) >= min_manual]
     return AreaPlan(str(area["id"]), reach.work, parts, manual)
 
 

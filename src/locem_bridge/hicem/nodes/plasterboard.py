@@ -301,6 +301,8 @@ class GetWallReach(Leaf):
         input_port("arm_radius", FLOAT, "{@cfg.plan.arm_radius}", "m", "radius of the wrist and forearm links"),
         input_port("wrist_length", FLOAT, "{@cfg.plan.wrist_length}", "m", "wrist and forearm behind the flange"),
         input_port("wrist_offset", FLOAT, "{@cfg.plan.wrist_offset}", "m", "wrist links beside the tool axis"),
+        input_port("shoulder_radius", FLOAT, "{@cfg.plan.shoulder_radius}", "m", "upper arm and elbow around the "
+                   "shoulder's axis (floor plan)"),
         output_port("plan", JSON, None, "", "{wall, work, tool: [[s0, s1]...], base: [[s0, s1]...], t: [lo, hi], "
                     "reach, why: [[[s0, s1], reason]...]} along the wall from p0 (m)"),
     )
@@ -331,7 +333,8 @@ class GetWallReach(Leaf):
                             reach=reach, z_range=(float(facts["z_range"][0]), float(facts["z_range"][1])),
                             contact=float(facts["tool_standoff"]) == 0.0, run_on=run_on)
         env = RobotEnvelope(fp[0], fp[1], self.get("shoulder_x"), {work: tool}, self.get("clearance"),
-                            self.get("arm_radius"), self.get("wrist_length"), self.get("wrist_offset"))
+                            self.get("arm_radius"), self.get("wrist_length"), self.get("wrist_offset"),
+                            self.get("shoulder_radius"))
         r = wall_reach(wall, walls, env, work)
         self.set("plan", {"wall": r.wall, "work": work, "tool": [list(iv) for iv in r.tool],
                           "base": [list(iv) for iv in r.base], "t": list(r.t), "reach": reach,
@@ -360,6 +363,8 @@ class GetAreaRaster(Leaf):
                    "ended in: the lift moves once between two columns, not twice); 0: one band"),
         input_port("band_gap", FLOAT, "0.0", "m", "a band starts this far above the band below it (the lane "
                    "spacing: its bottom lane is one lane above the lower band's top lane, no lane twice)"),
+        input_port("min_manual", FLOAT, "{@cfg.plan.min_manual}", "m", "a planned manual strip narrower than this "
+                   "is not reported (the fan or pad past the worked part's edge covers it)"),
         input_port("plan", JSON, "null", "", "what the work reaches on the area's wall (GetWallReach); null: the "
                    "whole area, each section's base in front of its middle"),
         output_port("sections", JSON, None, "", "list of {approach, origin, u, width, height, normal, index, z}"),
@@ -391,7 +396,7 @@ class GetAreaRaster(Leaf):
             reach = WallReach(plan["wall"], plan["work"], [tuple(iv) for iv in plan["tool"]],
                               [tuple(iv) for iv in plan["base"]], tuple(plan["t"]),
                               [(tuple(iv), why) for iv, why in plan.get("why", [])])
-            worked = plan_area(a, wall, reach)
+            worked = plan_area(a, wall, reach, self.get("min_manual"))
             manual = worked.manual
             # the parts out of reach become holes: the pieces stop there and run no lanes into them
             holes += [(m["along"][0], m["along"][1], m["height"][0] - a["origin"][2], m["height"][1] - a["origin"][2])
