@@ -17,7 +17,8 @@ The cut: the area is gridded at every hole edge; each grid row's free cells form
 open: within a row every hole spans the row's full height); a run is split where what lies below it changes
 (free, hole or the area's bottom), and a split point is a shared side; a run whose interval and side kinds
 equal those of the piece right below it, and which sits on it, is merged into that piece (a full-height column
-beside a window stays one piece).
+beside a window stays one piece). A strip on top of a piece no taller than ``gap`` is merged into the piece
+below it, whatever its sides (it would get no lane of its own: above a door's columns, under the ceiling).
 """
 from dataclasses import dataclass
 from typing import List, Sequence, Tuple
@@ -97,9 +98,13 @@ def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float =
                 merged = False
                 if sits:
                     for c0, c1, p in below:
-                        if (c0, c1) == (a, b) and (p.open_left, p.open_right) == (piece.open_left, piece.open_right):
+                        same = (c0, c1) == (a, b) and (p.open_left, p.open_right) == (piece.open_left, piece.open_right)
+                        # a strip no taller than the gap on top of a piece: that piece runs on up to its top (one
+                        # more lane there, not a piece with no lane of its own)
+                        thin = T[j + 1] - T[j] <= gap + _EPS and c0 <= a and b <= c1
+                        if same or thin:
                             p.t1 = T[j + 1]
-                            row.append((a, b, p))
+                            row.append((c0, c1, p) if thin and not same else (a, b, p))
                             merged = True
                             break
                 if not merged and piece.height > _EPS:

@@ -363,6 +363,8 @@ class GetAreaRaster(Leaf):
                    "ended in: the lift moves once between two columns, not twice); 0: one band"),
         input_port("band_gap", FLOAT, "0.0", "m", "a band starts this far above the band below it (the lane "
                    "spacing: its bottom lane is one lane above the lower band's top lane, no lane twice)"),
+        input_port("hole_margin", FLOAT, "0.0", "m", "lanes keep this far from a hole (an opening's frame): a pad's "
+                   "radius, whose edge then works right up to the frame without touching it"),
         input_port("min_manual", FLOAT, "{@cfg.plan.min_manual}", "m", "a planned manual strip narrower than this "
                    "is not reported (the fan or pad past the worked part's edge covers it)"),
         input_port("plan", JSON, "null", "", "what the work reaches on the area's wall (GetWallReach); null: the "
@@ -388,7 +390,11 @@ class GetAreaRaster(Leaf):
         band_h, gap = self.get("band_height"), self.get("band_gap")
         if band_h < 0 or gap < 0:
             raise PortError("%s: band_height and band_gap must be >= 0 m, got %g, %g" % (self.name, band_h, gap))
-        holes = [(h["s"][0], h["s"][1], h["t"][0], h["t"][1]) for h in a.get("holes", [])]
+        margin = self.get("hole_margin")
+        if margin < 0:
+            raise PortError("%s: hole_margin must be >= 0 m, got %g" % (self.name, margin))
+        holes = [(h["s"][0] - margin, h["s"][1] + margin, h["t"][0] - margin if h["t"][0] > 1e-9 else h["t"][0],
+                  h["t"][1] + margin) for h in a.get("holes", [])]
         u = a["u"]
         plan, reach, manual = self.get("plan"), None, []
         if plan:
