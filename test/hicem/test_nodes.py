@@ -326,3 +326,25 @@ def test_get_area_raster_leaves_a_door_out_and_runs_the_lanes_on_past_its_frame(
     lintel = [s for s in secs if s["origin"][0] >= 1.45 - 1e-9 and s["origin"][0] + s["width"] <= 2.45 + 1e-9]
     assert lintel and all(s["origin"][2] == pytest.approx(2.1) for s in lintel)
     assert sum(s["width"] for s in lintel) == pytest.approx(1.0)     # shared sides: no run-on past them
+
+
+def test_get_area_raster_keeps_a_pad_its_radius_off_a_frame_and_runs_the_columns_up_beside_a_low_door():
+    body = ('<GetAreaRaster area_id="wall_1_area_1" section_width="0.6" base_standoff="1.0" yaw_offset="0" '
+            'band_gap="0.18" hole_margin="%s" sections="{s}" count="{c}"/>')
+    scan = {"walls": [dict(SITE["walls"][0], openings=[{"id": "door_1", "kind": "door", "s": [1.5, 2.4],
+                                                       "t": [0.0, 1.8], "frame": 0.05}])],
+            "areas": [{"id": "wall_1_area_1", "wall": "wall_1", "origin": [0.0, 3.0, 0.1], "u": [1.0, 0.0, 0.0],
+                       "width": 4.8, "height": 1.9, "holes": [{"s": [1.45, 2.45], "t": [0.0, 1.75]}]}]}
+    for margin in (0.0, 0.1125):
+        rig = Rig(body % margin)
+        rig.hdh.ingest_scan(scan)
+        assert rig.tree.tick() == S
+        secs = rig.bb.get("s")
+        beside = [s for s in secs if s["origin"][2] == pytest.approx(0.1)]
+        left = max(s["origin"][0] + s["width"] for s in beside if s["origin"][0] < 1.45)
+        right = min(s["origin"][0] for s in beside if s["origin"][0] > 1.45)
+        assert left == pytest.approx(1.45 - margin) and right == pytest.approx(2.45 + margin)
+        # the 0.15 m above the door's frame is no taller than a lane gap: the columns beside it run up to the top
+        assert all(s["origin"][2] + s["height"] == pytest.approx(2.0) for s in beside)
+        lintel = [s for s in secs if s["origin"][2] > 0.1 + 1e-9]
+        assert lintel and all(s["origin"][2] == pytest.approx(1.85 + margin) for s in lintel)
