@@ -32,7 +32,8 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-STEP = 0.01                       # m, sampling step along the wall
+STEP = 0.02                       # m, sampling step along the wall
+OUTLINE_STEP = 0.10               # m, spacing of the sample points on the chassis outline
 Interval = Tuple[float, float]
 
 
@@ -250,14 +251,15 @@ def wall_reach(wall: Wall2D, others: Sequence[Wall2D], robot: RobotEnvelope, wor
     for d in np.linspace(flange, flange + robot.wrist_length, 4):
         for ds in (-w, 0.0, w):
             tool_ok &= clear(ds, float(d), c)
-    # the base at s_b: its chassis outline (every 5 cm) and the arm's shoulder
+    # the base at s_b: its chassis outline (every OUTLINE_STEP; _crosses catches a wall end between two points)
+    # and the arm's shoulder
     d0, d1 = tool.base_standoff - robot.base_length / 2.0, tool.base_standoff + robot.base_length / 2.0
     hw = robot.base_width / 2.0
     base_ok = np.ones(n, dtype=bool)
-    for dd in np.linspace(d0, d1, max(2, int(math.ceil((d1 - d0) / 0.05)) + 1)):
+    for dd in np.linspace(d0, d1, max(2, int(math.ceil((d1 - d0) / OUTLINE_STEP)) + 1)):
         for side in (-hw, hw):
             base_ok &= clear(side, float(dd), c)
-    for ds in np.linspace(-hw, hw, max(2, int(math.ceil(2 * hw / 0.05)) + 1)):
+    for ds in np.linspace(-hw, hw, max(2, int(math.ceil(2 * hw / OUTLINE_STEP)) + 1)):
         for dd in (d0, d1):
             base_ok &= clear(float(ds), dd, c)
     base_ok &= clear(0.0, tool.base_standoff - robot.shoulder_x, robot.shoulder_radius + c)

@@ -11,6 +11,7 @@ default from the robot facts (``robot.work.taping.*``, ``robot.tools``: the robo
 :mod:`locem_bridge.robot_facts`) and the ``taping``/``site`` sections of the HICEM parameters
 (``config/hicem/plasterboard.yaml``).
 """
+import json
 import math
 from typing import Any, Dict, List, Tuple
 
@@ -280,6 +281,9 @@ class GetLiftHeight(Leaf):
         return Status.SUCCESS
 
 
+_REACH_CACHE: Dict[str, WallReach] = {}
+
+
 class GetWallReach(Leaf):
     DESCRIPTION = ("Plans, before the robot moves, what one wall work can reach on the wall of a joint or area "
                    "(locem_bridge.planning.reach): from the scanned walls, their corners (any angle) and the robot's "
@@ -335,7 +339,15 @@ class GetWallReach(Leaf):
         env = RobotEnvelope(fp[0], fp[1], self.get("shoulder_x"), {work: tool}, self.get("clearance"),
                             self.get("arm_radius"), self.get("wrist_length"), self.get("wrist_offset"),
                             self.get("shoulder_radius"))
-        r = wall_reach(wall, walls, env, work)
+        key = json.dumps([sorted(hdh.features("wall"), key=lambda w: w["id"]), wall.id, env.base_length,
+                          env.base_width, env.shoulder_x, env.clearance, env.arm_radius, env.wrist_length,
+                          env.wrist_offset, env.shoulder_radius, vars(tool)], sort_keys=True, default=str)
+        r = _REACH_CACHE.get(key)
+        if r is None:            # the areas of one wall share its plan: planned once per scan and robot
+            r = wall_reach(wall, walls, env, work)
+            if len(_REACH_CACHE) > 64:
+                _REACH_CACHE.clear()
+            _REACH_CACHE[key] = r
         self.set("plan", {"wall": r.wall, "work": work, "tool": [list(iv) for iv in r.tool],
                           "base": [list(iv) for iv in r.base], "t": list(r.t), "reach": reach,
                           "why": [[list(iv), why] for iv, why in r.why]})
