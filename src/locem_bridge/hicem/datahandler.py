@@ -60,51 +60,40 @@ def _interval(v: Any, where: str) -> List[float]:
     return [a, b]
 
 
-def _openings(w: Dict[str, Any], where: str, fid: Callable[[Any, str], str]) -> List[Dict[str, Any]]:
-    ops = w.get("openings", [])
-    if not isinstance(ops, list):
-        raise ScanFormatError("%s.openings must be a list, got %r" % (where, ops))
-    out = []
-    for k, o in enumerate(ops):
-        ow = "%s.openings[%d]" % (where, k)
+def _items(d: Dict[str, Any], key: str, where: str, parse: Callable[[Any, str], Dict[str, Any]]) -> List[Dict[str, Any]]:
+    """``d[key]`` (default: none), a list whose items ``parse(item, path)`` checks one by one."""
+    items = d.get(key, [])
+    if not isinstance(items, list):
+        raise ScanFormatError("%s.%s must be a list, got %r" % (where, key, items))
+    return [parse(x, "%s.%s[%d]" % (where, key, k)) for k, x in enumerate(items)]
+
+
+def _opening(fid: Callable[[Any, str], str]) -> Callable[[Any, str], Dict[str, Any]]:
+    def parse(o: Any, ow: str) -> Dict[str, Any]:
         i = fid(o, ow)
         if o.get("kind") not in ("door", "window"):
             raise ScanFormatError("%s.kind must be door or window, got %r" % (ow, o.get("kind")))
         frame = _num(o.get("frame", 0.0), ow + ".frame")
         if frame < 0:
             raise ScanFormatError("%s.frame must be >= 0 m, got %r" % (ow, frame))
-        out.append({"id": i, "kind": o["kind"], "s": _interval(o.get("s"), ow + ".s"),
-                    "t": _interval(o.get("t"), ow + ".t"), "frame": frame})
-    return out
+        return {"id": i, "kind": o["kind"], "s": _interval(o.get("s"), ow + ".s"),
+                "t": _interval(o.get("t"), ow + ".t"), "frame": frame}
+    return parse
 
 
-def _corners(w: Dict[str, Any], where: str) -> List[Dict[str, Any]]:
-    cs = w.get("corners", [])
-    if not isinstance(cs, list):
-        raise ScanFormatError("%s.corners must be a list, got %r" % (where, cs))
-    out = []
-    for k, c in enumerate(cs):
-        cw = "%s.corners[%d]" % (where, k)
-        if not isinstance(c, dict) or c.get("end") not in (0, 1) or isinstance(c.get("end"), bool):
-            raise ScanFormatError("%s must be an object with end 0 (at p0) or 1 (at p1), got %r" % (cw, c))
-        ang = _num(c.get("angle"), cw + ".angle")
-        if not 0.0 < ang < 2.0 * math.pi:
-            raise ScanFormatError("%s.angle must be between 0 and 2 pi rad, got %r" % (cw, ang))
-        out.append({"end": c["end"], "angle": ang})
-    return out
+def _corner(c: Any, cw: str) -> Dict[str, Any]:
+    if not isinstance(c, dict) or c.get("end") not in (0, 1) or isinstance(c.get("end"), bool):
+        raise ScanFormatError("%s must be an object with end 0 (at p0) or 1 (at p1), got %r" % (cw, c))
+    ang = _num(c.get("angle"), cw + ".angle")
+    if not 0.0 < ang < 2.0 * math.pi:
+        raise ScanFormatError("%s.angle must be between 0 and 2 pi rad, got %r" % (cw, ang))
+    return {"end": c["end"], "angle": ang}
 
 
-def _holes(a: Dict[str, Any], where: str) -> List[Dict[str, Any]]:
-    hs = a.get("holes", [])
-    if not isinstance(hs, list):
-        raise ScanFormatError("%s.holes must be a list, got %r" % (where, hs))
-    out = []
-    for k, h in enumerate(hs):
-        hw = "%s.holes[%d]" % (where, k)
-        if not isinstance(h, dict):
-            raise ScanFormatError("%s must be an object {s: [a, b], t: [a, b]}" % hw)
-        out.append({"s": _interval(h.get("s"), hw + ".s"), "t": _interval(h.get("t"), hw + ".t")})
-    return out
+def _hole(h: Any, hw: str) -> Dict[str, Any]:
+    if not isinstance(h, dict):
+        raise ScanFormatError("%s must be an object {s: [a, b], t: [a, b]}" % hw)
+    return {"s": _interval(h.get("s"), hw + ".s"), "t": _interval(h.get("t"), hw + ".t")}
 
 
 def validate_scan(scan: Any, known_walls: Sequence[str] = ()) -> Dict[str, List[Dict[str, Any]]]:
@@ -138,7 +127,8 @@ def validate_scan(scan: Any, known_walls: Sequence[str] = ()) -> Dict[str, List[
                              "height": _pos(w.get("height"), where + ".height"),
                              "thickness": _num(w.get("thickness", 0.0), where + ".thickness"),
                              "normal": _unit(_vec(w.get("normal"), 3, where + ".normal"), where + ".normal")})
-        for key, parse in (("openings", lambda: _openings(w, where, fid)), ("corners", lambda: _corners(w, where)),
+        for key, parse in (("openings", lambda: _items(w, "openings", where, _opening(fid))),
+                           ("corners", lambda: _items(w, "corners", where, _corner)),
                            ("ceiling", lambda: _pos(w.get("ceiling"), where + ".ceiling"))):
             if key in w:
                 out["walls"][-1][key] = parse()
@@ -166,7 +156,7 @@ def validate_scan(scan: Any, known_walls: Sequence[str] = ()) -> Dict[str, List[
                 "width": _pos(a.get("width"), where + ".width"),
                 "height": _pos(a.get("height"), where + ".height")}
         if "holes" in a:
-            area["holes"] = _holes(a, where)
+            area["holes"] = _items(a, "holes", where, _hole)
         finish = a.get("finish")
         if finish is not None:
             if not isinstance(finish, str) or finish not in AREA_FINISHES:

@@ -54,6 +54,16 @@ class ToolEnvelope:
     run_on: float = 0.0        # m the tool travels past the worked part along the wall (a raster lane's run-in and
                                # run-up past its section's end)
 
+    @classmethod
+    def from_facts(cls, work: str, facts: Mapping[str, Any], reach: float, run_on: float) -> "ToolEnvelope":
+        """From one work's robot facts (``robot.work.<work>``: tool_standoff, tool_length, tip_radius,
+        body_radius, base_standoff, z_range)."""
+        return cls(work=work, tip_radius=float(facts["tip_radius"]), tip_distance=float(facts["tool_standoff"]),
+                   body_radius=float(facts["body_radius"]), length=float(facts["tool_length"]),
+                   base_standoff=float(facts["base_standoff"]), reach=reach,
+                   z_range=(float(facts["z_range"][0]), float(facts["z_range"][1])),
+                   contact=float(facts["tool_standoff"]) == 0.0, run_on=run_on)
+
 
 @dataclass
 class RobotEnvelope:
@@ -85,16 +95,8 @@ class RobotEnvelope:
         chassis = robot["base"]["chassis"]
         tools: Dict[str, ToolEnvelope] = {}
         for work, wf in facts.work.items():
-            tool = robot["tools"][wf.tool]
-            body = tool.get("body", {}) or {}
-            body_r = float(body.get("radius", 0.05))
-            pad = float(tool.get("pad_radius", 0.0))
-            tools[work] = ToolEnvelope(
-                work=work, tip_radius=max(pad, body_r), tip_distance=float(wf["tool_standoff"]), body_radius=body_r,
-                length=float(wf["tool_length"]), base_standoff=float(wf["base_standoff"]),
-                reach=float(wf["lateral_reach"]) - float((overrun or {}).get(work, 0.0)),
-                z_range=(float(wf["z_range"][0]), float(wf["z_range"][1])), contact=float(wf["tool_standoff"]) == 0.0,
-                run_on=float((overrun or {}).get(work, 0.0)))
+            run_on = float((overrun or {}).get(work, 0.0))
+            tools[work] = ToolEnvelope.from_facts(work, wf.entries, float(wf["lateral_reach"]) - run_on, run_on)
         return cls(float(chassis["length"]), float(chassis["width"]), float(robot["arm"]["mount"]["xyz"][0]), tools,
                    clearance, arm_radius, wrist_length, wrist_offset, shoulder_radius)
 
@@ -295,15 +297,22 @@ def _clip(lo: float, hi: float, intervals: Sequence[Interval]) -> List[Interval]
     return [(max(lo, a), min(hi, b)) for a, b in intervals if min(hi, b) - max(lo, a) > 1e-9]
 
 
-def _minus(lo: float, hi: float, keep: Sequence[Interval]) -> List[Interval]:
-    out, x = [], lo
-    for a, b in sorted(keep):
-        if a > x + 1e-9:
-            out.append((x, min(a, hi)))
-        x = max(x, b)
-    if hi > x + 1e-9:
-        out.append((x, hi))
-    return [(a, b) for a, b in out if b - a > 1e-9]
+def interval_minus(lo: float, hi: float, cuts: Sequence[Interval], shortest: float = 1e-9) -> List[Interval]:
+    """``[lo, hi]`` without the intervals ``cuts`` (in any order, overlapping or not); pieces shorter than
+    ``shortest`` are dropped."""
+    pieces = [(lo, hi)]
+    for a, b in sorted(cuts):
+        nxt = []
+        for p, q in pieces:
+            if b <= p or a >= q:
+                nxt.append((p, q))
+                continue
+            if a > p:
+                nxt.append((p, a))
+            if b < q:
+                nxt.append((b, q))
+        pieces = nxt
+    return [(p, q) for p, q in pieces if q - p >= shortest]
 
 
 @dataclass
@@ -331,7 +340,7 @@ def plan_area(area: Mapping[str, Any], wall: Wall2D, reach: WallReach, min_manua
     along = _clip(s0, s0 + w, reach.tool)
     if hi - lo > 1e-9:
         parts = [(a - s0, b - s0, lo - t0, hi - t0) for a, b in along]
-    for a, b in _minus(s0, s0 + w, along):
+    for a, b in interval_minus(s0, s0 + w, along):
         reason = next((r for (p, q), r in reach.why if p <= b and q >= a), "out of reach")
         manual.append({"along": [a - s0, b - s0], "height": [t0, t0 + h], "reason": reason})
     for a, b in along:
@@ -416,7 +425,6 @@ def plan_site(scan: Mapping[str, Any], robot: RobotEnvelope, works: Sequence[str
     import time
     clock = clock or time.perf_counter
     walls = [Wall2D.from_scan(w) for w in scan.get("walls", [])]
-    by_id = {w.id: w for w in walls}
     reach: Dict[Tuple[str, str], WallReach] = {}
     areas: Dict[Tuple[str, str], AreaPlan] = {}
     joints: Dict[str, JointPlan] = {}
@@ -436,5 +444,4 @@ def plan_site(scan: Mapping[str, Any], robot: RobotEnvelope, works: Sequence[str
                 if work != "taping" and (w.id, work) in reach:
                     areas[(a["id"], work)] = plan_area(a, w, reach[(w.id, work)])
         seconds[w.id] = clock() - t0
-    del by_id
     return SitePlan(reach, areas, joints, seconds)

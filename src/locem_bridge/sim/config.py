@@ -17,7 +17,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from .. import robot_file
 from ..common.config_errors import ConfigError
-from ..common.config_keys import get, load_mapping, only, vec
+from ..common.config_keys import get, item, load_mapping, only, vec
 from ..common.paths import checkout_root
 from .errors import SimConfigError
 
@@ -51,6 +51,15 @@ def _feature_id(value: Any, full: str) -> str:
     return value
 
 
+def _unique_id(d: Dict[str, Any], path: str, ids: set, what: str = "feature") -> str:
+    """``d["id"]``, a valid feature id not in ``ids`` (then added): wall, opening and area ids share one space."""
+    fid = _feature_id(get(d, "id", path), path + ".id")
+    if fid in ids:
+        raise SimConfigError("%r is used twice; %s ids must be unique" % (fid, what), key=path + ".id")
+    ids.add(fid)
+    return fid
+
+
 def _interval(item: Dict[str, Any], key: str, path: str, lo: float, hi: float) -> List[float]:
     a, b = vec(item, key, path, 2)
     if not lo - 1e-9 <= a < b <= hi + 1e-9:
@@ -67,13 +76,8 @@ def _openings(wall: Dict[str, Any], path: str, ids: set) -> List[Dict[str, Any]]
     out = []
     for k, op in enumerate(get(wall, "openings", path, list, default=[])):
         opath = "%s.openings[%d]" % (path, k)
-        if not isinstance(op, dict):
-            raise SimConfigError("must be a mapping, found %r" % (op,), key=opath)
-        only(op, opath, SITE_KEYS["opening"])
-        oid = _feature_id(get(op, "id", opath), opath + ".id")
-        if oid in ids:
-            raise SimConfigError("%r is used twice; feature ids must be unique" % (oid,), key=opath + ".id")
-        ids.add(oid)
+        item(op, opath, SITE_KEYS["opening"])
+        oid = _unique_id(op, opath, ids)
         kind = get(op, "kind", opath, str, choices=("door", "window"))
         frame = get(op, "frame", opath, float, default=0.05, lo=0.0, hi=0.3)
         s = _interval(op, "s", opath, frame, length - frame)
@@ -87,14 +91,13 @@ def _openings(wall: Dict[str, Any], path: str, ids: set) -> List[Dict[str, Any]]
                 raise SimConfigError("a window starts above the floor", key=opath + ".t",
                                      allowed="t[0] >= frame (%g m); an opening at the floor is a door" % frame)
             t = _interval(op, "t", opath, frame, wall["height"] - frame)
-        item = {"id": oid, "kind": kind, "s": s, "t": t, "frame": frame}
         for other in out:
             if (s[0] - frame < other["s"][1] + other["frame"] and other["s"][0] - other["frame"] < s[1] + frame
                     and t[0] - frame < other["t"][1] + other["frame"]
                     and other["t"][0] - other["frame"] < t[1] + frame):
                 raise SimConfigError("overlaps opening %r (with their frames)" % other["id"], key=opath,
                                      allowed="openings apart, frames included")
-        out.append(item)
+        out.append({"id": oid, "kind": kind, "s": s, "t": t, "frame": frame})
     return out
 
 
@@ -132,10 +135,7 @@ def _validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
         if not isinstance(wall, dict):
             raise SimConfigError("must be a mapping, found %r" % (wall,), key=path)
         only(wall, path, SITE_KEYS["wall"])
-        wid = _feature_id(get(wall, "id", path), path + ".id")
-        if wid in ids:
-            raise SimConfigError("%r is used twice; wall ids must be unique" % (wid,), key=path + ".id")
-        ids.add(wid)
+        _unique_id(wall, path, ids, "wall")
         wall["material"] = get(wall, "material", path, str, default="plasterboard",
                                choices=("plasterboard", "concrete"))
         p0 = vec(wall, "p0", path, 2)
@@ -161,14 +161,8 @@ def _validate_site(data: Dict[str, Any]) -> Dict[str, Any]:
             areas = get(wall, "areas", path, list, default=[])
             for k, area in enumerate(areas):
                 apath = "%s.areas[%d]" % (path, k)
-                if not isinstance(area, dict):
-                    raise SimConfigError("must be a mapping, found %r" % (area,), key=apath)
-                only(area, apath, SITE_KEYS["area"])
-                area["id"] = _feature_id(get(area, "id", apath), apath + ".id")
-                if area["id"] in ids:
-                    raise SimConfigError("%r is used twice; feature ids must be unique" % (area["id"],),
-                                         key=apath + ".id")
-                ids.add(area["id"])
+                item(area, apath, SITE_KEYS["area"])
+                area["id"] = _unique_id(area, apath, ids)
                 area["s"] = vec(area, "s", apath, 2)
                 area["t"] = vec(area, "t", apath, 2)
                 _area_not_in_opening(area, wall, apath)

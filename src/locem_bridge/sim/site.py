@@ -20,6 +20,8 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
+from ..planning.reach import interval_minus
+
 
 def _r(x: float) -> float:
     """Round for JSON output (micrometres) and drop negative zero."""
@@ -60,33 +62,16 @@ class Opening:
     @property
     def outer(self) -> Tuple[float, float, float, float]:
         """``(s0, s1, t0, t1)`` of the opening with its frame (a door's frame stops at the floor)."""
-        return (self.s0 - self.frame, self.s1 + self.frame, max(0.0, self.t0 - self.frame) if self.t0 > 0 else 0.0,
+        return (self.s0 - self.frame, self.s1 + self.frame, self.t0 - self.frame if self.t0 > 0 else 0.0,
                 self.t1 + self.frame)
 
-    def contains(self, s: float, t: float) -> bool:
-        """Whether wall point ``(s, t)`` lies in the clear opening (no wall there)."""
-        return self.s0 < s < self.s1 and self.t0 <= t < self.t1
+    def contains(self, s: float, t: float, margin: float = 0.0) -> bool:
+        """Whether wall point ``(s, t)`` lies in the clear opening (no wall there), at least ``margin`` inside it."""
+        return self.s0 + margin < s < self.s1 - margin and self.t0 + margin <= t < self.t1 - margin
 
     def to_contract(self) -> Dict[str, Any]:
         return {"id": self.id, "kind": self.kind, "s": [_r(self.s0), _r(self.s1)], "t": [_r(self.t0), _r(self.t1)],
                 "frame": _r(self.frame)}
-
-
-def _minus(lo: float, hi: float, cuts: List[Tuple[float, float]], shortest: float) -> List[Tuple[float, float]]:
-    """``[lo, hi]`` without the intervals ``cuts``; pieces shorter than ``shortest`` are dropped."""
-    pieces = [(lo, hi)]
-    for a, b in sorted(cuts):
-        nxt = []
-        for p, q in pieces:
-            if b <= p or a >= q:
-                nxt.append((p, q))
-                continue
-            if a > p:
-                nxt.append((p, a))
-            if b < q:
-                nxt.append((b, q))
-        pieces = nxt
-    return [(p, q) for p, q in pieces if q - p >= shortest]
 
 
 #: m, a joint piece shorter than this between an opening's frame and the wall's edge (or another frame) is left
@@ -137,9 +122,10 @@ class Wall:
     areas: List[Area] = field(default_factory=list)
     openings: List[Opening] = field(default_factory=list)
 
-    def in_opening(self, s: float, t: float) -> bool:
-        """Whether wall point ``(s, t)`` lies in a clear opening (a door or window: no wall there)."""
-        return any(o.contains(s, t) for o in self.openings)
+    def in_opening(self, s: float, t: float, margin: float = 0.0) -> bool:
+        """Whether wall point ``(s, t)`` lies in a clear opening (a door or window: no wall there), at least
+        ``margin`` inside it."""
+        return any(o.contains(s, t, margin) for o in self.openings)
 
     @property
     def length(self) -> float:
@@ -212,14 +198,14 @@ class Site:
             if s >= wall.length - 1e-6:
                 break
             cuts = [(c, d) for a, b, c, d in outer if a - half < s < b + half]
-            for t0, t1 in _minus(low, wall.height, cuts, SHORTEST_JOINT):
+            for t0, t1 in interval_minus(low, wall.height, cuts, SHORTEST_JOINT):
                 wall.joints.append(Joint(id="%s_joint_%d" % (wall.id, k), wall=wall.id, kind="vertical",
                                          start=wall.from_wall_coords(s, t0), end=wall.from_wall_coords(s, t1),
                                          width=wc["joint_width"]))
                 k += 1
         for h in wc.get("horizontal_joints", []):
             cuts = [(a, b) for a, b, c, d in outer if c - half < h < d + half]
-            for s0, s1 in _minus(0.0, wall.length, cuts, SHORTEST_JOINT):
+            for s0, s1 in interval_minus(0.0, wall.length, cuts, SHORTEST_JOINT):
                 wall.joints.append(Joint(id="%s_joint_%d" % (wall.id, k), wall=wall.id, kind="horizontal",
                                          start=wall.from_wall_coords(s0, h), end=wall.from_wall_coords(s1, h),
                                          width=wc["joint_width"]))

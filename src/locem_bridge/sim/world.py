@@ -387,7 +387,7 @@ class World:
             s, t, d = wall.to_wall_coords(p)
             if d >= 0.0 or d < -wall.thickness or not (-r <= s <= wall.length + r and -r <= t <= wall.height + r):
                 continue
-            if any(o.s0 + r < s < o.s1 - r and o.t0 + r <= t < o.t1 - r for o in wall.openings):
+            if wall.in_opening(s, t, r):
                 continue        # in a door or window opening: no wall under the tool
             if best is None or -d > best[0]:
                 best = (-d, rot.T.dot(wall.n).tolist())

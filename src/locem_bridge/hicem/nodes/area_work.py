@@ -61,6 +61,15 @@ def _record(store: Any, work: str, area_id: str) -> Dict[str, Any]:
     return value
 
 
+def _put_manual(store: Any, work: str, area_id: str, keep: Any, new: List[Dict[str, Any]]) -> None:
+    """Replace the manual parts of (work, area_id) whose index ``keep(index)`` refuses by ``new``, in one
+    transaction."""
+    with store.transaction():
+        record = _record(store, work, area_id)
+        record["manual"] = [m for m in record.get("manual", []) if keep(int(m["index"]))] + new
+        store.put(PROGRESS, progress_key(work, area_id), record, source="tree")
+
+
 def _num(v: float) -> str:
     s = ("%.2f" % v).rstrip("0").rstrip(".")
     return "0" if s in ("-0", "") else s
@@ -285,11 +294,8 @@ class LeaveSectionManual(Leaf):
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise PortError("%s: section must be a GetAreaRaster section of area %s (%s)" % (self.name, area_id, exc))
         along = [max(0.0, along[0]), min(float(area["width"]), along[1])]
-        with store.transaction():
-            record = _record(store, work, area_id)
-            record["manual"] = [m for m in record.get("manual", []) if int(m["index"]) != index] + [
-                {"index": index, "along": along, "height": height, "reason": "%s: %s" % (code, message)}]
-            store.put(PROGRESS, progress_key(work, area_id), record, source="tree")
+        _put_manual(store, work, area_id, lambda i: i != index,
+                    [{"index": index, "along": along, "height": height, "reason": "%s: %s" % (code, message)}])
         self.ctx.log.warning("%s of %s, section %d left for manual work: %s", work, area_id, index + 1, message)
         self.feedback_message = "section %d left for manual work" % (index + 1)
         return Status.SUCCESS
@@ -314,14 +320,10 @@ class LeavePlannedManual(Leaf):
             raise PortError("%s: manual must be a list of {along, height, reason}, got %r" % (self.name, parts))
         if not parts:
             return Status.SUCCESS
-        with store.transaction():
-            record = _record(store, work, area_id)
-            planned = [{"index": first + k, "along": [float(x) for x in m["along"]],
-                        "height": [float(x) for x in m["height"]], "reason": "planned: %s" % m.get("reason", "")}
-                       for k, m in enumerate(parts)]
-            keep = [m for m in record.get("manual", []) if int(m["index"]) < first]
-            record["manual"] = keep + planned
-            store.put(PROGRESS, progress_key(work, area_id), record, source="tree")
+        _put_manual(store, work, area_id, lambda i: i < first,
+                    [{"index": first + k, "along": [float(x) for x in m["along"]],
+                      "height": [float(x) for x in m["height"]], "reason": "planned: %s" % m.get("reason", "")}
+                     for k, m in enumerate(parts)])
         self.feedback_message = "%d part(s) left for manual work by the plan" % len(parts)
         return Status.SUCCESS
 

@@ -13,6 +13,7 @@ default from the robot facts (``robot.work.taping.*``, ``robot.tools``: the robo
 """
 import json
 import math
+from dataclasses import asdict
 from typing import Any, Dict, List, Tuple
 
 from py_trees.common import Status
@@ -319,7 +320,8 @@ class GetWallReach(Leaf):
         facts = (self.get("works") or {}).get(work)
         if not isinstance(facts, dict):
             return self.fail("this robot has no tool for work '%s'" % work)
-        walls = [Wall2D.from_scan(w) for w in hdh.features("wall")]
+        stored = sorted(hdh.features("wall"), key=lambda w: w["id"])
+        walls = [Wall2D.from_scan(w) for w in stored]
         wall = next((w for w in walls if w.id == feature["wall"]), None)
         if wall is None:
             return self.fail("wall '%s' of %s is not stored" % (feature["wall"], fid))
@@ -331,17 +333,11 @@ class GetWallReach(Leaf):
         if run_on < 0:
             run_on = max(0.0, float(facts["lateral_reach"]) - float(facts.get("section_width",
                                                                               2.0 * facts["lateral_reach"])) / 2.0)
-        tool = ToolEnvelope(work=work, tip_radius=float(facts.get("tip_radius", 0.05)),
-                            tip_distance=float(facts["tool_standoff"]), body_radius=float(facts.get("body_radius", 0.05)),
-                            length=float(facts["tool_length"]), base_standoff=float(facts["base_standoff"]),
-                            reach=reach, z_range=(float(facts["z_range"][0]), float(facts["z_range"][1])),
-                            contact=float(facts["tool_standoff"]) == 0.0, run_on=run_on)
+        tool = ToolEnvelope.from_facts(work, facts, reach, run_on)
         env = RobotEnvelope(fp[0], fp[1], self.get("shoulder_x"), {work: tool}, self.get("clearance"),
                             self.get("arm_radius"), self.get("wrist_length"), self.get("wrist_offset"),
                             self.get("shoulder_radius"))
-        key = json.dumps([sorted(hdh.features("wall"), key=lambda w: w["id"]), wall.id, env.base_length,
-                          env.base_width, env.shoulder_x, env.clearance, env.arm_radius, env.wrist_length,
-                          env.wrist_offset, env.shoulder_radius, vars(tool)], sort_keys=True, default=str)
+        key = json.dumps([stored, wall.id, asdict(env)], sort_keys=True)
         r = _REACH_CACHE.get(key)
         if r is None:            # the areas of one wall share its plan: planned once per scan and robot
             r = wall_reach(wall, walls, env, work)
