@@ -1,5 +1,6 @@
 """Each shipped action tree, run against the LOCEM test double with the shipped parameters and a scanned site:
 the LOCEM commands it sends, with the numbers computed from the scan and the parameters."""
+import copy
 import math
 import threading
 import time
@@ -85,15 +86,62 @@ def test_sand_area_uses_the_sanding_parameters():
 def test_tape_line_on_a_horizontal_joint():
     st, locem, bb, *_ = run("TAPE_LINE", line="wall_2_joint_1")
     assert st == Status.SUCCESS
-    assert locem.sent == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854", "GOTO 1.4 1.4 0", "GOTO 3.75 1.5 0",
-                          "APPLY_TAPE 4.8 2.5 1.2 4.8 0.5 1.2 -1 0 0 speed=0.15"]
+    # planned before the base moves: the 2 m joint is longer than the 1.2 m the arm tapes from one pose
+    # (robot.work.taping.segment_length), so it is taped in two 1 m pieces, each from in front of its middle
+    assert locem.sent == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854", "GOTO 1.4 1.4 0", "GOTO 3.75 2 0",
+                          "APPLY_TAPE 4.8 2.5 1.2 4.8 1.5 1.2 -1 0 0 speed=0.15", "WALL_READY", "GET_POSE",
+                          "GOTO 3.75 1 0", "APPLY_TAPE 4.8 1.5 1.2 4.8 0.5 1.2 -1 0 0 speed=0.15"]
+    assert bb.get("task_detail") == "taped"
+
+
+def _with_joint(monkeypatch, joint):
+    site = copy.deepcopy(SITE)
+    site["joints"].append(dict({"width": 0.05}, **joint))
+    monkeypatch.setitem(globals(), "SITE", site)
+
+
+def test_tape_line_leaves_a_joint_in_the_corner_to_the_hand_without_moving(monkeypatch):
+    # 5 cm from the inside corner with wall_2: neither the tool nor a base pose fits there
+    _with_joint(monkeypatch, {"id": "wall_1_joint_9", "wall": "wall_1", "kind": "vertical", "start": [4.75, 3.0, 0.0],
+                              "end": [4.75, 3.0, 2.5]})
+    st, locem, bb, ctx, hdh = run("TAPE_LINE", line="wall_1_joint_9")
+    assert st == Status.SUCCESS, ctx.failures
+    assert not any(c.startswith(("GOTO", "APPLY_TAPE", "WALL_READY")) for c in locem.sent), locem.sent
+    assert hdh.feature("wall_1_joint_9")["status"] == "manual"
+    assert bb.get("task_detail").startswith("manual work on wall_1_joint_9: part 1 (along 0..2.5 m; ")
+
+
+def test_tape_line_tapes_a_horizontal_joint_up_to_where_the_corner_allows(monkeypatch):
+    # runs from the inside corner with wall_1 (y 3.0) along wall_2
+    _with_joint(monkeypatch, {"id": "wall_2_joint_9", "wall": "wall_2", "kind": "horizontal", "start": [4.8, 3.0, 1.0],
+                              "end": [4.8, 0.5, 1.0]})
+    st, locem, bb, ctx, hdh = run("TAPE_LINE", line="wall_2_joint_9")
+    assert st == Status.SUCCESS, ctx.failures
+    tapes = [[float(x) for x in c.split()[1:7]] for c in locem.sent if c.startswith("APPLY_TAPE ")]
+    ys = sorted(y for t in tapes for y in (t[1], t[4]))
+    corner_gap = 3.0 - ys[-1]
+    assert len(tapes) == math.ceil((2.5 - corner_gap) / 1.2)   # the rest, in pieces of <= 1.2 m
+    assert 0.1 < corner_gap < 0.6 and ys[0] == pytest.approx(0.5)
+    assert all(abs(t[1] - t[4]) <= 1.2 + 1e-6 for t in tapes)
+    detail = bb.get("task_detail")
+    assert detail.startswith("taped; manual work on wall_2_joint_9: part 1 (along 0..%s m; " % (
+        ("%.2f" % corner_gap).rstrip("0").rstrip(".")))
+    assert hdh.feature("wall_2_joint_9")["status"] == "taped"
+
+
+def test_validate_tape_line_of_a_joint_out_of_reach_is_invalid_without_moving(monkeypatch):
+    _with_joint(monkeypatch, {"id": "wall_1_joint_9", "wall": "wall_1", "kind": "vertical", "start": [4.75, 3.0, 0.0],
+                              "end": [4.75, 3.0, 2.5]})
+    st, locem, bb, *_ = run("VALIDATE_TAPE_LINE", line="wall_1_joint_9")
+    assert st == Status.SUCCESS and bb.get("task_detail") == "invalid"
+    assert not any(c.startswith(("GOTO", "APPLY_TAPE")) for c in locem.sent)
 
 
 def test_validate_tape_line_answer_becomes_the_detail():
     st, locem, bb, *_ = run("VALIDATE_TAPE_LINE", answers={"validate_line": "invalid"}, line="wall_1_joint_1")
     assert st == Status.SUCCESS and bb.get("task_detail") == "invalid"
     assert locem.sent == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854", "GOTO 1.4 1.4 1.570796",
-                          "GOTO 1.2 1.95 1.570796", "APPLY_TAPE_START 1.2 3 0 1.2 3 2.5 0 -1 0"]
+                          "GOTO 1.2 1.95 1.570796", "APPLY_TAPE_START 1.2 3 0.1 1.2 3 2.15 0 -1 0"]
 
 
 def test_go_home_to_a_named_location_and_unknown_location():

@@ -32,14 +32,16 @@ def system(tmp_path):
 
 def test_taping_process_runs_to_the_end_with_numbers_from_the_scan(system):
     assert system.ctrl.run_process(P) == "ended"
-    done = [(a, st, d) for a, _t, st, d, _p in system.pemkre.executed()]
+    # the test site's vertical joints run 0..2.5 m, the arm's band is 0.10..2.15 m: their ends are planned manual
+    # work, named in the detail after "taped"
+    done = [(a, st, d.split(";")[0]) for a, _t, st, d, _p in system.pemkre.executed()]
     assert done == [("SCAN", "succeeded", ""), ("GET_TOOL", "succeeded", "taping_tool")] + [
         ("VALIDATE_TAPE_LINE", "succeeded", "valid"), ("TAPE_LINE", "succeeded", "taped")] * 3 + [
         ("GO_HOME", "succeeded", "")]
     sent = system.locem.sent
     assert sent[:6] == ["SCAN", "WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854", "HOME", "MOUNT_TOOL taping_tool"]
     assert "GOTO 1.2 1.95 1.570796" in sent  # 1.05 m in front of wall_1_joint_1, facing the wall
-    assert "APPLY_TAPE 1.2 3 0 1.2 3 2.5 0 -1 0 speed=0.15" in sent
+    assert "APPLY_TAPE 1.2 3 0.1 1.2 3 2.15 0 -1 0 speed=0.15" in sent     # clipped to the arm's band
     # home is reached by driving out keeping the heading and turning there, not next to the last wall
     assert sent[-5:] == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0", "GOTO 1.4 1.4 0.7854", "HOME"]
     assert system.locem.running() == []
@@ -80,7 +82,8 @@ def test_stop_halts_cleanly_mid_action(tmp_path):
         assert wait_for(lambda: s.ctrl.state()["node"] == "locem_command")
         st = s.ctrl.state()
         assert (st["tree"], st["action_type"], st["phase"]) == ("TAPE_LINE", "TAPE_LINE", "running")
-        assert st["path"] == "tape_line/one_pose_or_height_bands/from_one_pose/apply_tape/guarded_command/locem_command"
+        assert st["path"] == ("tape_line/one_pose_or_height_bands/planned_pieces/each_piece/tape_piece/apply_tape/"
+                              "guarded_command/locem_command")
         with pytest.raises(ControllerError):
             s.ctrl.start_process(P)  # one process at a time
         s.ctrl.stop("operator pressed STOP")

@@ -38,7 +38,8 @@ def test_taping_process_with_validation_and_one_rejected_line(tmp_path, engine):
     phase, locem, state, op = run(tmp_path, engine, {"validateLines": True}, reject=["wall_1_joint_2"])
     assert phase == "ended", state
     tapes = [c for c in locem.sent if c.startswith("APPLY_TAPE ")]
-    assert len(tapes) == len(SITE["joints"]) - 1 and not any(c.startswith("APPLY_TAPE 2.4") for c in tapes)
+    # every joint but the rejected one, the 2 m horizontal one in two pieces (1.2 m at most from one pose)
+    assert len(tapes) == len(SITE["joints"]) and not any(c.startswith("APPLY_TAPE 2.4") for c in tapes)
     assert op.asked.count("validate_line") == len(SITE["joints"]) and op.asked.count("manual_taping") == 1
     assert locem.sent[0] == "SCAN" and locem.sent[-2].startswith("GOTO") and locem.sent[-1] == "HOME"
     assert locem.running() == []
@@ -48,4 +49,5 @@ def test_taping_process_without_validation(tmp_path, engine):
     phase, locem, state, op = run(tmp_path, engine, {"validateLines": False})
     assert phase == "ended", state
     assert "validate_line" not in op.asked
-    assert len([c for c in locem.sent if c.startswith("APPLY_TAPE ")]) == len(SITE["joints"])
+    # one piece per joint, two for the 2 m horizontal one (1.2 m at most from one pose)
+    assert len([c for c in locem.sent if c.startswith("APPLY_TAPE ")]) == len(SITE["joints"]) + 1

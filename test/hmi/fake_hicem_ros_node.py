@@ -7,8 +7,10 @@ joint (invalid -> a manual_taping prompt for it), then ended. The running action
 machine per process run (Start at start_process, Halted at stop), /hicem/{suspend,resume,halt,reset}
 (SkillControl) and /hicem/skill_state (SkillTransition, latched). The simulator side: /sim/remove_tool,
 /sim/mount_tool, /sim/manual_taping, /sim/outcome, /sim/save_outcome (locem_bridge/JsonCall; save_outcome writes
-one PNG per wall with Pillow). Every call is appended to a JSON-lines log (``~log``) so the test can check what
-the operator_hmi node did, in order. Not the executive, not the simulator."""
+one PNG per wall with Pillow). ``~feed_states`` (locem_bridge/JsonCall, ``{"states": [partial state dicts]}``)
+publishes the given states on /hicem/state one after the other, at once (what HICEM publishes as its tasks
+report, e.g. a SPRAY_AREA report naming manual work). Every call is appended to a JSON-lines log (``~log``) so
+the test can check what the operator_hmi node did, in order. Not the executive, not the simulator."""
 import io
 import json
 import os
@@ -38,7 +40,7 @@ class FakeHicem:
                       "tree": "", "node": "", "path": "", "detail": ""}
         self.prompts = []
         self.step = -1
-        self.pub = rospy.Publisher("~state", HicemState, queue_size=10, latch=True)
+        self.pub = rospy.Publisher("~state", HicemState, queue_size=20, latch=True)
         self.diag = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         self.services = [rospy.Service("~start_process", HicemStartProcess, self.start),
                          rospy.Service("~stop", HicemStop, self.stop),
@@ -48,6 +50,7 @@ class FakeHicem:
         self.skill_services = [rospy.Service("~%s" % m.value.lower(), SkillControl, self.skill_handler(m))
                                for m in (Method.SUSPEND, Method.RESUME, Method.HALT, Method.RESET)]
         self.mounted = None
+        self.feed_service = rospy.Service("~feed_states", JsonCall, self.feed_states)
         self.sim_services = [rospy.Service("/sim/%s" % op, JsonCall, self.sim_handler(op))
                              for op in ("remove_tool", "mount_tool", "manual_taping", "outcome", "save_outcome")]
         self.publish()
@@ -73,6 +76,18 @@ class FakeHicem:
                             fh.write(buf.getvalue())
             return JsonCallResponse(True, "%s done" % op, "{}")
         return handle
+
+    def feed_states(self, req):
+        states = json.loads(req.args or "{}").get("states", [])
+        with self.lock:
+            self.record("feed_states", len(states))
+            for st in states:
+                unknown = sorted(set(st) - set(self.state))
+                if unknown:
+                    return JsonCallResponse(False, "unknown state field(s) %s" % ", ".join(unknown), "{}")
+                self.state.update(st)
+                self.publish()
+        return JsonCallResponse(True, "%d states published" % len(states), "{}")
 
     def transition(self, tr) -> None:
         self.skill_pub.publish(SkillTransition(instance=tr.instance, skill=tr.skill, number=tr.number,

@@ -129,3 +129,87 @@ def test_early_means_the_job_did_not_run_to_its_end():
     assert JobEnd("process_timeout").as_dict()["early"] is True
     assert JobEnd("process_failed", "spraying failed").as_dict()["early"] is False        # the job went on to its end
     assert JobEnd("process_failed", "taping not started", not_run=["spraying"]).as_dict()["early"] is True
+
+
+def _measured(manual):
+    """A real measurement: a 4 m wall sprayed up to the strip planned for the hand, joint 1 taped above its
+    manual foot, joint 3 planned wholly manual (and a bit of tape laid on it), joint 2 sent to manual taping."""
+    import numpy as np
+    from locem_bridge.sim.config import load_robot, validate_site
+    from locem_bridge.sim.outcome import OutcomeRecorder
+    from locem_bridge.sim.site import Site
+    cfg = validate_site({
+        "site": {"name": "bay", "room": {"inside": [2.0, 1.5]}, "walls": [
+            {"id": "wall_1", "p0": [0.0, 3.0], "p1": [4.0, 3.0], "height": 2.4, "panel_width": 1.2}]},
+        "simulation": {"outcome": {"grid": 0.02, "tape_lateral_tolerance": 0.015, "contact_tolerance": 0.01,
+                                   "spray_rate": 0.004, "spray_target_thickness": 0.001}}})
+    site = Site(cfg)
+    tools = load_robot()["robot"]["tools"]
+    rec = OutcomeRecorder(site, tools, cfg["simulation"]["outcome"])
+    wall = site.wall("wall_1")
+    off = tools["spray_gun"]["standoff"] * wall.n
+    for t in np.arange(0.0, 2.4 + 1e-9, 0.15):
+        rec.record("spray_gun", True, wall.from_wall_coords(-0.1, t) + off, wall.from_wall_coords(3.4, t) + off,
+                   -wall.n, 7.0)
+    for s, t0, t1 in ((1.2, 0.4, 2.4), (3.6, 1.0, 1.5)):
+        a, b = wall.from_wall_coords(s, t0), wall.from_wall_coords(s, t1)
+        rec.record("taping_tool", True, a, b, -wall.n, 1.0)
+        rec.record("taping_tool", False, b, b, -wall.n, 0.1)
+    rec.mark_manual_taping("wall_1_joint_2")
+    return rec.summary(manual)
+
+
+def test_the_reachable_figures_and_the_joint_parts_left_for_manual_work_are_reported(tmp_path):
+    areas = [{"work": "spray", "area": "wall_1_area_1", "section": 4, "along": [3.4, 4.0], "height": [0.0, 2.4]}]
+    joints = [{"joint": "wall_1_joint_1", "part": 1, "along": [0.0, 0.4], "reason": "below the tool's reach"},
+              {"joint": "wall_1_joint_3", "part": 1, "along": [0.0, 2.4], "reason": "out of reach"}]
+    plan = {"areas": [{k: m[k] for k in ("work", "area", "along", "height")} for m in areas],
+            "joints": [{"joint": m["joint"], "along": m["along"]} for m in joints]}
+    folder = write_report(record(tmp_path, outcome=_measured(plan), manual_areas=areas, manual_joints=joints),
+                          str(tmp_path / "results"))
+    report = json.loads(open(os.path.join(folder, "report.json")).read())
+    o = report["outcome"]
+    assert set(REQUIRED_OUTCOME_KEYS) <= set(o) and o["areas_manual"] == areas
+    assert o["joints_planned_manual"] == joints
+    r = o["reachable"]
+    assert set(r) == {"tape_coverage_min", "tape_coverage", "spray_coverage", "sand_coverage", "spray_thickness_cv"}
+    # robot joints: joint 1 (taped on its reachable part); joint 2 went to manual taping, joint 3 is wholly manual
+    assert r["tape_coverage"] == r["tape_coverage_min"] == pytest.approx(1.0)
+    assert o["tape_coverage"] == pytest.approx((2.0 / 2.4 + 0.5 / 2.4) / 2, abs=0.01)    # the plain figure: 1 and 3
+    assert r["spray_coverage"] >= 0.995 and o["spray_coverage"] == pytest.approx(0.85, abs=0.01)
+    assert 0.0 < r["spray_thickness_cv"] < 0.1
+    assert o["manual_touched"]["tape_m"] == pytest.approx(0.5, abs=0.03)     # tape laid on joint 3
+    assert o["manual_touched"]["spray_m2"] == 0.0 and o["manual_touched"]["sand_m2"] == 0.0
+    assert o["joints"]["wall_1_joint_3"]["coverage_reachable"] is None
+    md = open(os.path.join(folder, "report.md")).read()
+    assert "| tape coverage of the reachable parts | 100.0 % (lowest joint 100.0 %) |" in md
+    assert "| spray coverage of the reachable parts | %.1f %% (thickness CV %.3f) |" % (
+        100 * r["spray_coverage"], r["spray_thickness_cv"]) in md
+    assert "| sand coverage of the reachable parts | 0.0 % |" in md
+    assert ("| joint parts left for manual work | wall_1_joint_1 part 1 (along 0..0.4 m; below the tool's reach); "
+            "wall_1_joint_3 part 1 (along 0..2.4 m; out of reach) |") in md
+    assert "| work done inside the planned manual parts | tape %.2f m, spray 0.000 m2, sand 0.000 m2 |" % (
+        o["manual_touched"]["tape_m"]) in md
+    assert "| area sections left for manual work | spray wall_1_area_1 section 4" in md
+
+
+def test_without_planned_manual_parts_the_reachable_figures_are_the_plain_ones(tmp_path):
+    folder = write_report(record(tmp_path, outcome=_measured(None)), str(tmp_path / "results"))
+    o = json.loads(open(os.path.join(folder, "report.json")).read())["outcome"]
+    r = o["reachable"]
+    assert (r["tape_coverage"], r["spray_coverage"], r["sand_coverage"], r["spray_thickness_cv"]) == \
+        (o["tape_coverage"], o["spray_coverage"], o["sand_coverage"], o["spray_thickness_cv"])
+    assert r["tape_coverage_min"] == pytest.approx(0.5 / 2.4, abs=0.01)      # joint 3, partly taped
+    assert o["joints_planned_manual"] == [] and o["manual_touched"] == {"tape_m": 0.0, "spray_m2": 0.0, "sand_m2": 0.0}
+    md = open(os.path.join(folder, "report.md")).read()
+    assert "| joint parts left for manual work | none |" in md
+
+
+def test_an_outcome_measured_without_a_plan_still_reports_the_reachable_figures(tmp_path):
+    """An outcome without the reachable figures (read before the plan was known, or an older worksite): the
+    report's reachable figures are the plain ones, nothing touched."""
+    folder = write_report(record(tmp_path), str(tmp_path / "results"))
+    o = json.loads(open(os.path.join(folder, "report.json")).read())["outcome"]
+    assert o["reachable"] == {"tape_coverage_min": 0.98, "tape_coverage": 0.99, "spray_coverage": 0.991,
+                              "sand_coverage": 0.985, "spray_thickness_cv": 0.11}
+    assert o["manual_touched"] == {"tape_m": 0.0, "spray_m2": 0.0, "sand_m2": 0.0}

@@ -113,3 +113,37 @@ def test_a_task_realized_by_another_skill_names_it_in_its_progress_line():
         t.on_state(s)
     assert lines[1:] == ["[1/2 taping] GET_TOOL (skill CHANGE_TOOL)", "[1/2 taping] TAPE_LINE, joint 1 of 3",
                          "[1/2 taping] GO_HOME"]
+
+
+def test_joint_parts_left_for_manual_work_are_collected_from_the_reported_taping_detail():
+    from locem_bridge.hicem.nodes.area_work import manual_joint_text
+    t, _lines, _clock = tracker()
+    t.begin(0)
+    detail = "taped; " + manual_joint_text("wall_1_joint_3", [
+        {"along": [1.9, 2.4], "reason": "above the tool's reach"}, {"along": [0.0, 0.42], "reason": "near a corner"}])
+    for s in [state("urn:p#Taping", "running", "TAPE_LINE", "t1"),
+              state("urn:p#Taping", "reporting", "TAPE_LINE", "t1", "taped"),
+              state("urn:p#Taping", "running", "TAPE_LINE", "t2"),
+              state("urn:p#Taping", "reporting", "TAPE_LINE", "t2", detail),
+              state("urn:p#Taping", "reporting", "TAPE_LINE", "t2", detail),              # repeated: counted once
+              state("urn:p#Taping", "reporting", "VALIDATE_TAPE_LINE", "t3", detail.replace("3", "4"))]:  # not taping
+        t.on_state(s)
+    assert t.manual_joints == [
+        {"joint": "wall_1_joint_3", "part": 1, "along": [0.0, 0.42], "reason": "near a corner"},
+        {"joint": "wall_1_joint_3", "part": 2, "along": [1.9, 2.4], "reason": "above the tool's reach"}]
+    assert t.manual_areas == []
+
+
+def test_the_manual_plan_for_the_worksite_holds_the_area_and_joint_parts_so_far():
+    t, _lines, _clock = tracker()
+    assert t.manual_plan() == {"areas": [], "joints": []}
+    t.begin(0)
+    t.on_state(state("urn:p#Taping", "reporting", "TAPE_LINE", "t1",
+                     "taped; manual work on wall_1_joint_1: part 1 (along 0..0.3 m; below the tool's reach)"))
+    t.end()
+    t.begin(1)
+    t.on_state(state("urn:p#Spraying", "reporting", "SPRAY_AREA", "a1",
+                     "sprayed; manual work on wall_1_area_1: section 3 (along 3.4..4 m, height 0..2.4 m)"))
+    assert t.manual_plan() == {
+        "areas": [{"work": "spray", "area": "wall_1_area_1", "along": [3.4, 4.0], "height": [0.0, 2.4]}],
+        "joints": [{"joint": "wall_1_joint_1", "along": [0.0, 0.3]}]}

@@ -4,7 +4,7 @@ import random
 
 import pytest
 
-from locem_bridge.planning.area_pieces import area_pieces
+from locem_bridge.planning.area_pieces import area_pieces, shared_ends
 
 
 def _covers(pieces, width, height, holes, gap, step=0.01):
@@ -80,3 +80,41 @@ def test_random_holes_every_point_outside_them_is_worked_once(seed):
 def test_a_size_that_is_not_positive_is_refused_by_name():
     with pytest.raises(ValueError, match="positive size"):
         area_pieces(0.0, 2.0, [])
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_random_shared_ends_every_point_is_still_worked_once_and_a_side_is_shared_exactly_there(seed):
+    rng = random.Random(100 + seed)
+    width, height = rng.uniform(1.0, 3.0), rng.uniform(1.8, 2.6)
+    holes = [] if rng.random() < 0.5 else [(width * 0.4, width * 0.6, 0.0, rng.uniform(1.0, 1.6))]
+    ends = []
+    for _ in range(2):            # a neighbour over all, part or none of each end
+        c = rng.choice([0.0, rng.uniform(0.3, 1.0)])
+        ends.append([] if rng.random() < 0.25 else [(c, rng.choice([height, rng.uniform(c + 0.4, height)]))])
+    pieces = area_pieces(width, height, holes, 0.15, *ends)
+    assert _covers(pieces, width, height, holes, 0.15) == []
+    for p in pieces:
+        tm = p.t0 + 1e-3          # where the piece begins (a strip thinner than a lane on top keeps its sides)
+        for k, s, open_ in ((0, p.s0, p.open_left), (1, p.s1, p.open_right)):
+            if (k == 0 and s == 0.0) or (k == 1 and s == width):      # the area's own end
+                assert open_ == (not any(c < tm < d for c, d in ends[k])), (k, p, ends)
+
+
+def test_shared_ends_of_two_touching_areas_and_what_is_not_a_neighbour():
+    def area(aid, s0, s1, t0=0.1, t1=2.0, wall="wall_1", **kw):
+        return dict({"id": aid, "wall": wall, "origin": [s0, 3.0, t0], "u": [1.0, 0.0, 0.0], "width": s1 - s0,
+                     "height": t1 - t0}, **kw)
+    a, b = area("a", 0.3, 1.3), area("b", 1.3, 2.7)
+    assert shared_ends(a, [a, b], 0.02, 0.15) == ([], [(0.0, 1.9)])
+    assert shared_ends(b, [a, b], 0.02, 0.15) == ([(0.0, 1.9)], [])
+    assert shared_ends(a, [a, area("b", 1.3, 2.7, wall="wall_2")], 0.02, 0.15) == ([], [])    # another wall
+    assert shared_ends(a, [a, area("b", 1.35, 2.7)], 0.02, 0.15) == ([], [])                  # 5 cm apart
+    assert shared_ends(a, [a, area("b", 1.31, 2.7)], 0.02, 0.15) == ([], [(0.0, 1.9)])        # 1 cm: a scan's
+    assert shared_ends(a, [a, area("b", 0.5, 1.0)], 0.02, 0.15) == ([], [])                   # inside it
+    # over part of the end; above and below another area of the same column
+    assert shared_ends(a, [a, area("b", 1.3, 2.7, t1=1.2), area("c", 1.3, 2.7, t0=1.2)], 0.02, 0.15) == \
+        ([], [(0.0, 1.9)])
+    assert shared_ends(a, [a, area("b", 1.3, 2.7, t1=1.2)], 0.02, 0.15) == ([], [(0.0, pytest.approx(1.1))])
+    # the neighbour's window at the edge: not shared beside it
+    win = area("b", 1.3, 2.7, holes=[{"s": [0.0, 0.5], "t": [0.8, 1.5]}])
+    assert shared_ends(a, [a, win], 0.02, 0.15) == ([], [(0.0, pytest.approx(0.8)), (pytest.approx(1.5), 1.9)])

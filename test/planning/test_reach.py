@@ -96,6 +96,50 @@ def test_a_joint_too_close_to_a_sharp_corner_is_manual_and_a_horizontal_one_is_c
     assert plans[horizontal["id"]].manual[-1]["to"][0] == pytest.approx(3.0)
 
 
+@pytest.mark.parametrize("angle", [60, 90, 120])
+def test_a_horizontal_joint_is_taped_in_pieces_from_free_bases_up_to_the_corner(envelope, angle):
+    w1, r, scan = _reach(angle, envelope, "taping")
+    horizontal = next(j for j in scan["joints"] if j["kind"] == "horizontal")
+    plan = plan_joint(horizontal, w1, r, side=0.4, segment_length=1.2)
+    total = math.dist(horizontal["start"], horizontal["end"])
+    reachable = r.tool[0][1] - r.tool[0][0]
+    assert len(plan.pieces) == math.ceil(reachable / 1.2)  # no piece longer than the arm tapes from one pose
+    for piece in plan.pieces:
+        a, b = piece["along"]
+        assert 0.0 <= a < b <= total + 1e-9 and b - a <= 1.2 + 1e-9
+        s0 = piece["from"][0]                              # wall_1 runs along x from 0
+        s1 = piece["to"][0]
+        # taped from a free base centre that reaches both ends from one pose
+        assert any(p - 1e-9 <= piece["base"] <= q + 1e-9 for p, q in r.base)
+        assert abs(piece["base"] - (s0 + s1) / 2.0) <= (b - a) / 2.0 + 1e-6
+        assert r.tool[0][0] - 1e-9 <= min(s0, s1) and max(s0, s1) <= r.tool[0][1] + 1e-9
+    # the pieces and the manual parts tile the joint, the manual part at the corner end with its reason
+    parts = sorted([tuple(p["along"]) for p in plan.pieces] + [tuple(m["along"]) for m in plan.manual])
+    assert parts[0][0] == pytest.approx(0.0) and parts[-1][1] == pytest.approx(total)
+    assert all(x[1] == pytest.approx(y[0]) for x, y in zip(parts, parts[1:]))
+    corner = [m for m in plan.manual if m["along"][1] == pytest.approx(total)]
+    assert len(corner) == 1 and corner[0]["reason"] and corner[0]["to"][0] == pytest.approx(3.0)
+    # the sharper the corner, the longer the manual end
+    assert corner[0]["along"][1] - corner[0]["along"][0] == pytest.approx(3.0 - r.tool[0][1], abs=1e-6)
+
+
+def test_a_vertical_joint_is_clipped_to_the_band_and_left_whole_when_no_base_is_free_near_it(envelope):
+    w1, r, scan = _reach(60, envelope, "taping")
+    first = min((j for j in scan["joints"] if j["kind"] == "vertical"), key=lambda j: j["start"][0])
+    tall = dict(first, start=[first["start"][0], first["start"][1], 0.0], end=[first["end"][0], first["end"][1], 2.5])
+    plan = plan_joint(tall, w1, r, side=0.4)
+    (piece,) = plan.pieces
+    assert piece["from"][2] == pytest.approx(r.t[0]) and piece["to"][2] == pytest.approx(r.t[1])
+    assert [m["reason"] for m in plan.manual] == ["below the tool's reach", "above the tool's reach"]
+    # a joint in the corner: its tool point reachable from a base up to 0.4 m beside it, but not with side=0.05
+    last = max((j for j in scan["joints"] if j["kind"] == "vertical"), key=lambda j: j["start"][0])
+    w90, r90, _ = _reach(90, envelope, "taping")
+    s = last["start"][0]
+    if any(p <= s <= q for p, q in r90.tool) and not any(p <= s <= q for p, q in r90.base):
+        narrow = plan_joint(last, w90, r90, side=0.05)
+        assert narrow.pieces == [] and "no free base pose" in narrow.manual[0]["reason"]
+
+
 def test_planning_takes_milliseconds_per_wall(envelope):
     scan = Site(copy.deepcopy(corner_site(90))).to_contract()
     plan = plan_site(scan, envelope)

@@ -17,6 +17,8 @@
 - :mod:`.sim_hands` -- the simulated operator's hands: simulator operations an answer implies (mount the tool,
   tape a joint by hand) in the simulated worksite.
 - :mod:`.executive_backend` -- :class:`ExecutiveBackend`: the backend over a HICEM executive in the same process.
+- :mod:`.manual_work` -- :class:`ManualWorkLog`: the planned manual work (parts of areas and joints left for a
+  person) named in HICEM's task reports, collected for the page's Manual work panel.
 - :mod:`.errors` -- :class:`HmiError` and its subclasses.
 
 JSON API
@@ -27,8 +29,9 @@ All JSON bodies are UTF-8 objects. POSTs need ``Content-Type: application/json``
 ``GET  /``                                  the operator page
 ``GET  /api``                               list of endpoints
 ``GET  /api/state``                         ``{"version": n, "server_id": str, "snapshot": S, "prompts": [P],
-                                            "processes": [R], "walls": [W], "kpis": K, "events": [E],
-                                            "backend_error": str}`` (version grows on every change)
+                                            "processes": [R], "walls": [W], "kpis": K, "manual": [MW],
+                                            "events": [E], "backend_error": str}`` (version grows on every
+                                            change)
 ``GET  /api/events``                        ``text/event-stream``; an ``event: state`` whose ``data`` is the
                                             /api/state document, sent at connect and on every change; ``: ping``
                                             comments keep the stream alive; the stream ends after 5 min (the
@@ -43,6 +46,8 @@ All JSON bodies are UTF-8 objects. POSTs need ``Content-Type: application/json``
 ``GET  /api/kpis``                          ``{"kpis": K}``
 ``GET  /api/walls``                         ``{"walls": [W]}``
 ``GET  /api/walls/<wall_id>.png``           ``image/png``, the wall's current picture
+``GET  /api/manual``                        ``{"manual": [MW]}``: the planned manual work reported so far in this
+                                            job (the backend's optional ``manual_work``; ``[]`` without it)
 ``GET  /api/match?process=<iri>``           ``{"match": M}``: PEMKRE's skill matching of an offered process
                                             (the backend's optional ``match_process``)
 ``POST /api/skill/<method>``                ``{"cause": str}`` (optional, or no body) -> ``{"ok": true,
@@ -58,6 +63,9 @@ Shapes: S = ``{"process", "phase", "action", "skill", "tree", "node", "detail", 
 P = ``{"id", "kind", "text": str, "choices": [str], "context": {...}}``; R = ``{"iri", "name", "description"}``;
 W = ``{"id": wall_id, "version": token, "url": "/api/walls/<id>.png?v=<token>" | ""}`` (empty url: the picture
 is not written yet); K = ``{table_name: [flat row objects]}``; E = ``{"time", "level", "text"}``;
+MW = ``{"kind": "area" | "joint", "work": "spray" | "sand" | "tape", "feature": id, "part": int, "along": [a, b]
+(m), "height": [c, d] (m) | null, "reason": str, "text": str, "task": IRI, "process": IRI}`` (see
+:mod:`.manual_work`);
 M = ``{"process", "robot", "robot_name", "ok", "tasks": [{"node", "task", "action_type", "task_type",
 "capability", "ok", "chosen": {"kind": basic | composite | template, "name", "steps": [{"index", "name", "kind",
 "capability", "arguments"}], "operator"} | null, "rejected": [{"name", "kind", "reason"}], "problem"}]}``.
@@ -87,12 +95,13 @@ from .errors import (AutoOperatorConfigError, BackendRefused, BackendUnavailable
 from .executive_backend import ExecutiveBackend  # noqa: F401
 from .health import DiagnosticsHealth, health_summary  # noqa: F401
 from .hicem_view import snapshot_from_hicem, wall_pictures_in  # noqa: F401
+from .manual_work import ManualWorkLog  # noqa: F401
 from .pictures import SimPictures  # noqa: F401
 from .hub import StateHub  # noqa: F401
 from .server import HmiServer  # noqa: F401
 
 __all__ = ["AutoOperator", "AutoOperatorConfig", "AutoOperatorConfigError", "AutoOperatorPolicy",
            "BackendRefused", "BackendUnavailable", "DEFAULT_CONFIG", "DiagnosticsHealth",
-           "ExecutiveBackend", "HmiBackend", "HmiError", "HmiServer", "PromptRule", "RequestError",
+           "ExecutiveBackend", "HmiBackend", "HmiError", "HmiServer", "ManualWorkLog", "PromptRule", "RequestError",
            "ServerStartError", "SimPictures", "StateHub", "health_summary", "normalize_prompt",
            "normalize_snapshot", "snapshot_from_hicem", "wall_pictures_in"]

@@ -34,6 +34,10 @@ should return quickly, reading cached state where they can):
 - optional ``match_process(iri)`` -> PEMKRE's skill matching of an abstract process (``ProcessMatch.to_dict()``,
   JSON text or decoded; :func:`locem_bridge.hmi.pemkre_view.match_view` reads it); raise :class:`BackendRefused`
   when PEMKRE refuses (no resource model, unknown process). A backend without it: the page says so (404).
+- optional ``manual_work()`` -> the planned manual work HICEM's task reports named so far in this job (parts of
+  areas and joints left for a person; :meth:`locem_bridge.hmi.manual_work.ManualWorkLog.items`, fed every HICEM
+  state so no report is missed between two polls). A backend without it: the page's Manual work panel stays
+  empty.
 
 Any other exception from a backend is reported to the operator as a backend failure (HTTP 502) and logged.
 """

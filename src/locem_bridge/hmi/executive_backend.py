@@ -2,8 +2,9 @@
 
 For ROS-free runs (a main job without a ROS master, tests of the HMI with the real executive) this adapter
 hands the HMI HICEM's own objects: the high-level controller (start, stop, state, operator replies, the running
-action's skill methods), its
-operator desk (prompts) and its health monitor. What HICEM does not know -- the processes to offer, KPIs, wall
+action's skill methods), its operator desk (prompts) and its health monitor; the planned manual work its tasks
+report is collected from the controller's state listener (:class:`~locem_bridge.hmi.manual_work.ManualWorkLog`:
+every state, not only the polled ones). What HICEM does not know -- the processes to offer, KPIs, wall
 pictures, progress -- comes from injected callables. Lifecycle: construct with the executive's parts; nothing
 to close (it owns nothing).
 """
@@ -12,6 +13,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 from ..hicem.errors import HicemError
 from .errors import BackendRefused
 from .hicem_view import snapshot_from_hicem
+from .manual_work import ManualWorkLog
 
 KpiSource = Callable[[], Dict[str, List[Dict[str, Any]]]]
 PictureSource = Callable[[], Dict[str, Any]]
@@ -39,6 +41,11 @@ class ExecutiveBackend:
         # the page offers skill matching only when something can answer it (None: the server answers 404)
         self.match_process: Optional[MatchSource] = (
             (lambda iri: self._refused(match, iri)) if match is not None else None)
+        self.manual = ManualWorkLog()
+        listen = getattr(controller, "add_state_listener", None)
+        self._manual_listening = listen is not None
+        if listen is not None:
+            listen(self.manual.update)
 
     @classmethod
     def for_executive(cls, executive: Any, **kw: Any) -> "ExecutiveBackend":
@@ -61,7 +68,14 @@ class ExecutiveBackend:
     def snapshot(self) -> Dict[str, Any]:
         modules = self.health.snapshot() if self.health is not None else None
         progress = self._progress() if self._progress is not None else None
-        return snapshot_from_hicem(self.controller.state(), modules, progress)
+        state = self.controller.state()
+        if not self._manual_listening:          # a controller without state listeners: the polled states
+            self.manual.update(state)
+        return snapshot_from_hicem(state, modules, progress)
+
+    def manual_work(self) -> List[Dict[str, Any]]:
+        """The planned manual work HICEM's tasks reported so far (:meth:`ManualWorkLog.items`)."""
+        return self.manual.items()
 
     def skill_method(self, method: str, cause: str = "") -> Dict[str, Any]:
         """Suspend / Resume / Halt / Reset on the controller's running action; BackendRefused with its refusal."""

@@ -2,12 +2,13 @@
 
 Lifecycle: ``StateHub(backend, ...)`` -> :meth:`start` (one synchronous poll, then a daemon thread) ->
 :meth:`close`. The hub calls ``snapshot()`` and ``prompts()`` every ``poll_period_s``, ``wall_pictures()`` every
-``picture_period_s``, ``kpis()`` every ``kpi_period_s`` and ``list_processes()`` every ``process_period_s``, each
-guarded on its own (a failing call leaves the last good value and sets ``backend_error``). Whenever the document
-changes its ``version`` grows by one and :meth:`wait_for_change` waiters wake up, so the Server-Sent-Events
-streams push only changes; nothing is pushed while nothing changes. After a start, stop or reply the server
-calls :meth:`refresh_now` (snapshot and prompts read at once in the request's thread, never waiting behind a
-slow poll; the rest follows from the hub thread).
+``picture_period_s``, ``kpis()`` every ``kpi_period_s`` and ``list_processes()`` every ``process_period_s``, and
+the backend's optional ``manual_work()`` (the planned manual work reported so far, cached by the backend) with
+the snapshot, each guarded on its own (a failing call leaves the last good value and sets ``backend_error``).
+Whenever the document changes its ``version`` grows by one and :meth:`wait_for_change` waiters wake up, so the
+Server-Sent-Events streams push only changes; nothing is pushed while nothing changes. After a start, stop or
+reply the server calls :meth:`refresh_now` (snapshot and prompts read at once in the request's thread, never
+waiting behind a slow poll; the rest follows from the hub thread).
 
 Pictures are cached: bytes as given, paths by (mtime, size) and read when served. Each wall gets a short
 ``version`` token that changes with the picture, so the page reloads an image only when it changed.
@@ -58,6 +59,7 @@ class StateHub:
         self._prompts: List[Dict[str, Any]] = []
         self._kpis: Dict[str, Any] = {}
         self._processes: List[Dict[str, Any]] = []
+        self._manual: List[Dict[str, Any]] = []           # the backend's manual_work(), when it has one
         self._pictures: Dict[str, Tuple[str, Any]] = {}   # wall id -> (version token, bytes | path)
         self._errors: Dict[str, str] = {}                  # backend call -> last error text
         self._events: List[Dict[str, Any]] = []
@@ -153,6 +155,7 @@ class StateHub:
                 except ValueError as err:
                     self._errors["prompts"] = "malformed prompt skipped: %s" % err
             self._prompts = good
+        self._refresh_manual()
         if quick:
             self._publish()
             return
@@ -176,6 +179,14 @@ class StateHub:
                                 "description": str(p.get("description", "") or "")}
                                for p in (procs or []) if isinstance(p, dict) and p.get("iri")]
         return list(self._processes)
+
+    def _refresh_manual(self) -> None:
+        fn = getattr(self.backend, "manual_work", None)
+        if fn is None:
+            return
+        ok, manual = self._call("manual_work", fn)
+        if ok:
+            self._manual = [dict(m) for m in (manual or []) if isinstance(m, dict)]
 
     def _refresh_pictures(self) -> None:
         ok, pics = self._call("wall_pictures", self.backend.wall_pictures)
@@ -207,7 +218,7 @@ class StateHub:
                  for wid, (token, _src) in sorted(self._pictures.items())]
         with self._cond:                  # an RLock: note() holds it while appending an event
             body = {"snapshot": self._snapshot, "prompts": self._prompts, "kpis": self._kpis, "walls": walls,
-                    "processes": self._processes,
+                    "processes": self._processes, "manual": self._manual,
                     "backend_error": "; ".join("%s(): %s" % kv for kv in sorted(dict(self._errors).items())),
                     "events": list(self._events)}
             text = json.dumps(body, sort_keys=True, default=str)

@@ -54,7 +54,7 @@ SKILL_BUTTONS = {"Suspend": "Pause", "Resume": "Resume", "Halt": "Abort", "Reset
 ENDPOINTS = [
     ("GET", "/", "the operator page"),
     ("GET", "/api", "this list"),
-    ("GET", "/api/state", "everything the page shows: snapshot, prompts, kpis, walls, processes, events"),
+    ("GET", "/api/state", "everything the page shows: snapshot, prompts, kpis, walls, processes, manual, events"),
     ("GET", "/api/events", "Server-Sent Events: 'state' events carrying /api/state on every change"),
     ("GET", "/api/processes", "processes that can be started"),
     ("POST", "/api/processes/start", "start a process: {\"iri\": str}"),
@@ -64,6 +64,8 @@ ENDPOINTS = [
     ("GET", "/api/kpis", "KPI tables"),
     ("GET", "/api/walls", "walls with a picture"),
     ("GET", "/api/walls/<wall_id>.png", "the current picture of one wall"),
+    ("GET", "/api/manual", "the planned manual work reported so far in this job: parts of areas (spray, sand) "
+     "and joints (tape) left for a person, with their extent"),
     ("GET", "/api/match?process=<iri>", "how each task of a process is matched to this robot's skills: the chosen "
      "skill and the rejected candidates with reasons"),
     ("POST", "/api/skill/<method>", "suspend, resume, halt or reset HICEM's running action (Pause, Resume, Abort, "
@@ -381,6 +383,8 @@ class HmiServer:
                 return h._json(200, {"kpis": self.hub.state().get("kpis", {})})
             if path == "/api/walls":
                 return h._json(200, {"walls": self.hub.state().get("walls", [])})
+            if path == "/api/manual":
+                return h._json(200, {"manual": self.hub.state().get("manual", [])})
             if path == "/api/match":
                 return self._match(h)
             m = WALL_PNG.match(path)

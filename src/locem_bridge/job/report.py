@@ -12,6 +12,17 @@ covered fractions of all wall area. ``outcome.areas_manual`` lists the parts of 
 (a section the arm could not reach: ``{work, area, section, along, height}``, metres along the area and above the
 floor); the processes still succeed. ``results/latest`` is a relative symlink to the newest run.
 
+The robot is judged on the parts it was to work: ``outcome.joints_planned_manual`` lists the parts of joints HICEM
+left for taping by hand (``{joint, part, along, reason}``, metres from the joint's start), and the worksite measured
+the job knowing both lists (each joint's ``manual_m`` and ``coverage_reachable``, each wall's ``*_reachable`` and
+``*_manual_m2``). ``outcome.reachable`` holds ``tape_coverage_min`` and ``tape_coverage`` (lowest and mean
+``coverage_reachable`` over the robot's joints: not sent to manual taping and with a part outside the planned manual
+parts; None when each of them is wholly manual), ``spray_coverage``, ``sand_coverage`` (over the work area outside the planned
+manual parts) and ``spray_thickness_cv`` (the largest of the walls' on those cells); without planned manual parts
+they equal ``tape_coverage``, ``spray_coverage``, ``sand_coverage`` and ``spray_thickness_cv``.
+``outcome.manual_touched`` (``tape_m``, ``spray_m2``, ``sand_m2``) is work the worksite found deep inside the
+planned manual parts, where the robot cannot reach: it should be 0.
+
 ``ended`` says how the job ended: ``{"reason", "early", "detail", "not_run", "unread"}`` where ``reason`` is one
 of :data:`ENDED_REASONS`, ``early`` is true when the job did not run to its end (a reason of
 :data:`EARLY_REASONS`, or steps that never ran), ``not_run`` names those steps and
@@ -71,6 +82,7 @@ class RunRecord:
     started: Optional[datetime.datetime] = None
     manual_areas: List[Dict[str, Any]] = field(default_factory=list)
     ended: Optional["JobEnd"] = None
+    manual_joints: List[Dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -106,6 +118,18 @@ def build_report(record: RunRecord, run: str) -> Dict[str, Any]:
                      if robot_joints else 0.0)
     walls = record.outcome.get("walls", {})
     cvs = [float(w["thickness_cv"]) for w in walls.values() if "thickness_cv" in w]
+    # on the parts the robot was to work (a joint wholly manual is no robot joint here)
+    reach_cov = [float(j.get("coverage_reachable", j["coverage"])) for j in robot_joints.values()
+                 if j.get("coverage_reachable", j["coverage"]) is not None]
+    reach_cvs = [float(w.get("thickness_cv_reachable", w.get("thickness_cv"))) for w in walls.values()
+                 if w.get("thickness_cv_reachable", w.get("thickness_cv")) is not None]
+    sim_reach = record.outcome.get("reachable") or {}
+
+    def fraction(key: str) -> Optional[float]:
+        value = sim_reach.get(key, record.outcome.get(key, 0.0))
+        return None if value is None else round(float(value), 6)
+    no_joint = None if robot_joints else 0.0     # robot joints, each wholly manual: nothing measured on them
+    touched = record.outcome.get("manual_touched") or {}
     outcome = {
         "joints_total": len(joints),
         "joints_taped": sum(1 for j in robot_joints.values() if j.get("taped")),
@@ -117,6 +141,12 @@ def build_report(record: RunRecord, run: str) -> Dict[str, Any]:
         "operator_interventions": int(record.operator_interventions),
         "collisions": int(record.collisions),
         "areas_manual": [dict(m) for m in record.manual_areas],
+        "joints_planned_manual": [dict(m) for m in record.manual_joints],
+        "reachable": {"tape_coverage_min": round(min(reach_cov), 6) if reach_cov else no_joint,
+                      "tape_coverage": round(sum(reach_cov) / len(reach_cov), 6) if reach_cov else no_joint,
+                      "spray_coverage": fraction("spray_coverage"), "sand_coverage": fraction("sand_coverage"),
+                      "spray_thickness_cv": round(max(reach_cvs), 6) if reach_cvs else 0.0},
+        "manual_touched": {k: round(float(touched.get(k) or 0.0), 6) for k in ("tape_m", "spray_m2", "sand_m2")},
         "joints": joints,
         "walls": walls,
         "spray_seams": [dict(x) for x in record.outcome.get("spray_seams", [])] if measured else [],
@@ -125,6 +155,9 @@ def build_report(record: RunRecord, run: str) -> Dict[str, Any]:
     for key in ("tape_coverage", "spray_coverage", "sand_coverage"):
         if not 0.0 <= outcome[key] <= 1.0:
             raise ReportError("outcome.%s = %r is not a fraction in 0..1" % (key, outcome[key]))
+        value = outcome["reachable"][key]
+        if value is not None and not 0.0 <= value <= 1.0:
+            raise ReportError("outcome.reachable.%s = %r is not a fraction in 0..1" % (key, value))
     started = record.started.isoformat(timespec="seconds") if record.started else None
     return {
         "run": run,
@@ -161,12 +194,28 @@ def render_markdown(report: Dict[str, Any]) -> str:
                                                                       o["joints_manual"], o["joints_manual"]),
               "| tape coverage | %.1f %% |" % (100 * o["tape_coverage"]),
               "| spray coverage | %.1f %% (thickness CV %.3f) |" % (100 * o["spray_coverage"], o["spray_thickness_cv"]),
-              "| sand coverage | %.1f %% |" % (100 * o["sand_coverage"]),
-              "| area sections left for manual work | %s |" % (
+              "| sand coverage | %.1f %% |" % (100 * o["sand_coverage"])]
+    reach = o.get("reachable")
+    if reach:
+        lines += ["| tape coverage of the reachable parts | %s (lowest joint %s) |" % (
+                      _percent(reach["tape_coverage"]), _percent(reach["tape_coverage_min"])),
+                  "| spray coverage of the reachable parts | %s (thickness CV %.3f) |" % (
+                      _percent(reach["spray_coverage"]), reach["spray_thickness_cv"]),
+                  "| sand coverage of the reachable parts | %s |" % _percent(reach["sand_coverage"])]
+    lines += ["| area sections left for manual work | %s |" % (
                   "; ".join("%s %s section %d (along %g..%g m, height %g..%g m)" % (
                       m["work"], m["area"], m["section"], m["along"][0], m["along"][1], m["height"][0],
                       m["height"][1]) for m in o.get("areas_manual", [])) or "none"),
-              "| operator interventions | %d |" % o["operator_interventions"],
+              "| joint parts left for manual work | %s |" % (
+                  "; ".join("%s part %d (along %g..%g m%s)" % (
+                      m["joint"], m["part"], m["along"][0], m["along"][1],
+                      ("; " + m["reason"]) if m.get("reason") else "")
+                      for m in o.get("joints_planned_manual", [])) or "none")]
+    touched = o.get("manual_touched")
+    if touched:
+        lines += ["| work done inside the planned manual parts | tape %.2f m, spray %.3f m2, sand %.3f m2 |" % (
+            touched["tape_m"], touched["spray_m2"], touched["sand_m2"])]
+    lines += ["| operator interventions | %d |" % o["operator_interventions"],
               "| collisions | %d |" % o["collisions"]]
     if not o.get("measured", True):
         lines += ["", "The worksite's outcome could not be measured: the numbers above are not measurements."]
@@ -180,6 +229,11 @@ def render_markdown(report: Dict[str, Any]) -> str:
     if report.get("pictures"):
         lines += ["", "## Walls", ""] + ["![%s](%s)" % (p[:-4], p) for p in report["pictures"]]
     return "\n".join(lines) + "\n"
+
+
+def _percent(value: Optional[float]) -> str:
+    """A fraction as a percentage, or ``n/a`` (None: nothing the robot was to work)."""
+    return "n/a" if value is None else "%.1f %%" % (100 * value)
 
 
 def write_report(record: RunRecord, results_dir: str, run: Optional[str] = None) -> str:

@@ -2,15 +2,16 @@
 
 ROS-free: the job node feeds it the fields of ``/hicem/state`` and ``/hicem/prompts`` messages as dicts. It
 turns them into one-line progress messages ("[2/3 spraying] SPRAY_AREA, area 2 of 4"), per-process records
-for the report, the count of operator interventions (answered prompts, by kind), and the parts of areas HICEM
-left for manual work (named in a spray or sand task's detail when it is reported).
+for the report, the count of operator interventions (answered prompts, by kind), and the parts of areas and
+joints HICEM left for manual work (named in a spray, sand or taping task's detail when it is reported), which
+:meth:`JobTracker.manual_plan` hands to the worksite's measurement.
 """
 
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Mapping, Optional
+from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
-from locem_bridge.hicem.nodes.area_work import parse_manual_work
+from locem_bridge.hicem.nodes.area_work import parse_manual_joints, parse_manual_work
 
 from .report import ProcessRecord
 
@@ -18,6 +19,19 @@ TERMINAL_PHASES = ("ended", "failed", "stopped")
 LINE_ACTIONS = ("VALIDATE_TAPE_LINE", "TAPE_LINE", "MANUAL_TAPING")
 AREA_ACTIONS = ("SPRAY_AREA", "SAND_AREA")
 AREA_WORK = {"SPRAY_AREA": "spray", "SAND_AREA": "sand"}
+
+
+def with_manual_plan(call: Callable[..., Dict[str, Any]], name: str, manual: Mapping[str, Any],
+                     **args: Any) -> Tuple[Dict[str, Any], str]:
+    """``call(name, manual=manual, **args)`` (a worksite measurement: ``sim/outcome``, ``sim/save_outcome``); when
+    the worksite refuses the plan (``call`` raises a RuntimeError naming ``manual``) ``call(name, **args)`` again,
+    so the job keeps its measurement: (the result, the refusal or '')."""
+    try:
+        return call(name, manual=manual, **args), ""
+    except RuntimeError as exc:
+        if "manual" not in str(exc):
+            raise
+        return call(name, **args), str(exc)
 
 
 @dataclass(frozen=True)
@@ -41,6 +55,7 @@ class JobTracker:
         self.records: List[ProcessRecord] = []
         self.interventions: Dict[str, int] = {}
         self.manual_areas: List[Dict[str, Any]] = []
+        self.manual_joints: List[Dict[str, Any]] = []
         self.current: Optional[int] = None
         self._started = 0.0
         self._tasks: Dict[str, List[str]] = {}
@@ -96,6 +111,10 @@ class JobTracker:
                 part = dict(part, work=AREA_WORK[action])
                 if part not in self.manual_areas:
                     self.manual_areas.append(part)
+        if state.get("phase") == "reporting" and action == "TAPE_LINE":
+            for part in parse_manual_joints(str(state.get("detail", ""))):
+                if part not in self.manual_joints:
+                    self.manual_joints.append(part)
         if state.get("phase") in TERMINAL_PHASES and self._done is None:
             self._done = dict(state)
 
@@ -127,6 +146,13 @@ class JobTracker:
                                           else ""))
         self.current = None
         return record
+
+    def manual_plan(self) -> Dict[str, List[Dict[str, Any]]]:
+        """The parts left for manual work so far, as the worksite's measurement takes them (``manual`` of
+        ``sim/outcome``): ``{"areas": [{work, area, along, height}], "joints": [{joint, along}]}``."""
+        return {"areas": [{"work": m["work"], "area": m["area"], "along": list(m["along"]),
+                           "height": list(m["height"])} for m in list(self.manual_areas)],
+                "joints": [{"joint": m["joint"], "along": list(m["along"])} for m in list(self.manual_joints)]}
 
     @property
     def total_interventions(self) -> int:

@@ -13,17 +13,28 @@ knows how to make evenly:
 A side or bottom that would be partly one and partly the other is split, so every piece has one kind of seam on
 each side. An area without holes is one piece with open sides: exactly the raster used before holes existed.
 
-The cut: the area is gridded at every hole edge; each grid row's free cells form runs (whose sides are then all
-open: within a row every hole spans the row's full height); a run is split where what lies below it changes
+An area's own end (``s = 0`` or ``s = width``) may also be *shared*: where another area of the same wall adjoins
+it (``shared_left`` / ``shared_right``: the heights along that end the neighbour covers), the two areas meet
+like two pieces of one area -- the lanes stop at the end, no run-in onto the neighbour, whose own lanes lay the
+coat on its side. An end shared over part of its height is split at the neighbour's top and bottom like a side
+beside a hole.
+
+The cut: the area is gridded at every hole edge (and every end of a shared stretch of the area's ends); each grid
+row's free cells form runs (whose sides are then all open -- within a row every hole spans the row's full height --
+but an area's end shared in that row); a run is split where what lies below it changes
 (free, hole or the area's bottom), and a split point is a shared side; a run whose interval and side kinds
 equal those of the piece right below it, and which sits on it, is merged into that piece (a full-height column
 beside a window stays one piece). A strip on top of a piece no taller than ``gap`` is merged into the piece
-below it, whatever its sides (it would get no lane of its own: above a door's columns, under the ceiling).
+below it, whatever its sides (it would get no lane of its own: above a door's columns, under the ceiling), and so
+is a strip on top of pieces side by side, into each of them.
 """
 from dataclasses import dataclass
-from typing import List, Sequence, Tuple
+from typing import Any, Dict, List, Sequence, Tuple
+
+from .reach import interval_minus
 
 Hole = Tuple[float, float, float, float]        # s0, s1, t0, t1 in area coordinates
+Stretch = Tuple[float, float]                   # t0, t1 along one of the area's ends
 
 _EPS = 1e-9
 
@@ -56,20 +67,29 @@ def _edges(lo: float, hi: float, cuts: Sequence[float]) -> List[float]:
     return [x for i, x in enumerate(out) if i == 0 or x - out[i - 1] > _EPS]
 
 
-def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float = 0.0) -> List[Piece]:
+def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float = 0.0,
+                shared_left: Sequence[Stretch] = (), shared_right: Sequence[Stretch] = ()) -> List[Piece]:
     """The pieces of the area ``width x height`` minus ``holes`` (see the module docstring), bottom row first
     and left to right within a row. ``gap``: lane spacing between a piece and the piece it sits on (a piece's
-    ``t0`` already includes it). A piece left with no height after the gap is dropped."""
+    ``t0`` already includes it). A piece left with no height after the gap is dropped. ``shared_left`` /
+    ``shared_right``: the stretches ``(t0, t1)`` of the area's end at ``s = 0`` / ``s = width`` where another
+    area adjoins it (a piece's side there is shared, not open)."""
     if width <= 0 or height <= 0:
         raise ValueError("area must have a positive size, got %g x %g m" % (width, height))
     hs = [(max(0.0, a), min(width, b), max(0.0, c), min(height, d)) for a, b, c, d in holes]
     hs = [h for h in hs if h[1] - h[0] > _EPS and h[3] - h[2] > _EPS]
+    ends = [[(max(0.0, c), min(height, d)) for c, d in side] for side in (shared_left, shared_right)]
+    ends = [[e for e in side if e[1] - e[0] > _EPS] for side in ends]
     S = _edges(0.0, width, [x for h in hs for x in h[:2]])
-    T = _edges(0.0, height, [x for h in hs for x in h[2:]])
+    T = _edges(0.0, height, [x for h in hs for x in h[2:]] + [x for side in ends for e in side for x in e])
 
     def free(i: int, j: int) -> bool:
         sm, tm = (S[i] + S[i + 1]) / 2.0, (T[j] + T[j + 1]) / 2.0
         return not any(a < sm < b and c < tm < d for a, b, c, d in hs)
+
+    def shared(side: int, j: int) -> bool:
+        tm = (T[j] + T[j + 1]) / 2.0
+        return any(c < tm < d for c, d in ends[side])
 
     ncol = len(S) - 1
     done: List[Piece] = []
@@ -94,7 +114,8 @@ def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float =
                     b += 1
                 sits = under(a) == 1
                 t0 = T[j] + (gap if sits else 0.0)
-                piece = Piece(S[a], S[b + 1], t0, T[j + 1], open_left=(a == i), open_right=(b == k), on_piece=sits)
+                piece = Piece(S[a], S[b + 1], t0, T[j + 1], open_left=(a == i and not (i == 0 and shared(0, j))),
+                              open_right=(b == k and not (k == ncol - 1 and shared(1, j))), on_piece=sits)
                 merged = False
                 if sits:
                     for c0, c1, p in below:
@@ -107,6 +128,16 @@ def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float =
                             row.append((c0, c1, p) if thin and not same else (a, b, p))
                             merged = True
                             break
+                    # a thin strip on top of several pieces side by side (whose sides differ where a shared end
+                    # begins below it): each of them runs on up to its top
+                    parts = [(c0, c1, p) for c0, c1, p in below if c0 <= b and a <= c1]
+                    if (not merged and T[j + 1] - T[j] <= gap + _EPS and parts
+                            and all(a <= c0 and c1 <= b for c0, c1, _p in parts)
+                            and sum(c1 - c0 + 1 for c0, c1, _p in parts) == b - a + 1):
+                        for c0, c1, p in parts:
+                            p.t1 = T[j + 1]
+                            row.append((c0, c1, p))
+                        merged = True
                 if not merged and piece.height > _EPS:
                     done.append(piece)
                     row.append((a, b, piece))
@@ -115,3 +146,59 @@ def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float =
         below = row
     done.sort(key=lambda p: (p.s0, p.t0))
     return done
+
+
+def shared_ends(area: Dict[str, Any], others: Sequence[Dict[str, Any]], tolerance: float,
+                shortest: float = 0.0) -> Tuple[List[Stretch], List[Stretch]]:
+    """The stretches ``(t0, t1)`` (area coordinates) of ``area``'s ends at ``s = 0`` and ``s = width`` where
+    another area of the same wall adjoins it: the arguments of :func:`area_pieces` ``shared_left`` and
+    ``shared_right``. Areas are SCAN contract objects (``id, wall, origin, u, width, height``, optional
+    ``holes``; docs/contracts.md); ``others`` may hold ``area`` itself.
+
+    An end is shared over the heights where a neighbour's surface goes on just beyond it: the neighbour begins
+    within ``tolerance`` of the end (a gap or an overlap of a scan's few millimetres) or anywhere before it (the
+    two areas overlap: the overlap is worked by both, as each area is worked whole, but no lane runs on past
+    the end onto the neighbour) and reaches more than ``tolerance`` past it -- minus the neighbour's holes
+    there (an opening at the edge: nothing of the neighbour's lanes meets this end there, it stays open). A
+    stretch no longer than ``shortest`` is left open; an end of a stretch within ``shortest`` of the area's
+    bottom or top is moved there (no piece thinner than a lane spacing of its own: ``shortest`` is the lane
+    spacing or ``tolerance``, the larger)."""
+    o, u = [float(x) for x in area["origin"]], [float(x) for x in area["u"]]
+    width, height = float(area["width"]), float(area["height"])
+    snap = max(shortest, tolerance)
+    ends: Tuple[List[Stretch], List[Stretch]] = ([], [])
+    for b in others:
+        if b.get("id") == area.get("id") or b.get("wall") != area.get("wall"):
+            continue
+        e = sum(float(x) * y for x, y in zip(b["u"], u))
+        if abs(e) < 0.99:                              # not along this area's line: not a neighbour on its ends
+            continue
+        p = sum((float(x) - y) * z for x, y, z in zip(b["origin"], o, u))
+        n0, n1 = sorted((p, p + e * float(b["width"])))
+        c0 = float(b["origin"][2]) - o[2]
+        lo, hi = max(0.0, c0), min(height, c0 + float(b["height"]))
+        if hi - lo <= tolerance:
+            continue
+        for side, probe in ((0, -tolerance), (1, width + tolerance)):
+            # the neighbour holds the point just past this end and goes on further away from the area
+            if not (n0 < probe <= n1 if side == 0 else n0 <= probe < n1):
+                continue
+            holes = []
+            for h in b.get("holes", []):
+                h0, h1 = sorted((p + e * float(h["s"][0]), p + e * float(h["s"][1])))
+                if h0 <= probe <= h1:
+                    holes.append((c0 + float(h["t"][0]), c0 + float(h["t"][1])))
+            ends[side].extend(interval_minus(lo, hi, holes))
+    out: Tuple[List[Stretch], List[Stretch]] = ([], [])
+    for side in (0, 1):
+        merged: List[List[float]] = []
+        for c, d in sorted(ends[side]):
+            if merged and c <= merged[-1][1] + _EPS:
+                merged[-1][1] = max(merged[-1][1], d)
+            else:
+                merged.append([c, d])
+        for c, d in merged:
+            if d - c <= snap:
+                continue
+            out[side].append((0.0 if c <= snap else c, height if d >= height - snap else d))
+    return out

@@ -33,6 +33,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 STEP = 0.02                       # m, sampling step along the wall
+SHORTEST_PIECE = 0.10            # m, a horizontal joint's piece is not split shorter for a free base
 OUTLINE_STEP = 0.10               # m, spacing of the sample points on the chassis outline
 Interval = Tuple[float, float]
 
@@ -355,53 +356,96 @@ def plan_area(area: Mapping[str, Any], wall: Wall2D, reach: WallReach, min_manua
 
 @dataclass
 class JointPlan:
-    """A joint for taping: ``piece`` the robot tapes (``[start, end]`` map points, None: none of it) and
-    ``manual`` pieces, each ``{"from": [x, y, z], "to": [x, y, z], "reason": text}``."""
+    """A joint for taping: ``pieces`` the robot tapes one after the other, each ``{"from": [x, y, z], "to": [x, y,
+    z], "along": [a, b], "base": s_b}`` (map points; ``along`` m from the joint's start; ``base`` the free base
+    centre along the wall it is taped from), and ``manual`` pieces, each ``{"from", "to", "along", "reason"}``.
+    ``piece``: from the first taped point to the last (None: none of it is taped)."""
     joint: str
-    piece: Optional[List[List[float]]]
+    pieces: List[Dict[str, Any]]
     manual: List[Dict[str, Any]]
 
+    @property
+    def piece(self) -> Optional[List[List[float]]]:
+        return [self.pieces[0]["from"], self.pieces[-1]["to"]] if self.pieces else None
 
-def plan_joint(joint: Mapping[str, Any], wall: Wall2D, reach: WallReach) -> JointPlan:
-    """The part of a joint (SCAN shape) ``reach`` can tape in one piece, the rest manual."""
+
+def plan_joint(joint: Mapping[str, Any], wall: Wall2D, reach: WallReach, side: Optional[float] = None,
+               segment_length: float = 0.0, min_manual: float = 0.0) -> JointPlan:
+    """The parts of a joint (SCAN shape, or ``start``/``end`` straightened) ``reach`` can tape, the rest manual.
+
+    A vertical joint is taped in one piece, clipped to the height band, from the free base centre nearest it
+    within ``side`` m along the wall (the arm's lateral reach; None: any base the plan allows). A horizontal joint
+    is taped on every stretch the tool reaches, each cut into pieces no longer than ``segment_length`` (0: one
+    piece per stretch) taped from the free base centre nearest each piece's middle that reaches both its ends
+    (within half a piece length plus nothing more: a piece is as long as the arm lays tape from one pose). What
+    is left -- out of the band, near a corner, no free base -- is manual, with its reason. A vertical joint
+    reaching less than ``min_manual`` past the band is taped to its end (the band is measured with margin; a
+    scanned end a few millimetres below it is no manual work); a horizontal manual part shorter than
+    ``min_manual`` is not listed."""
     a, b = np.array(joint["start"], dtype=float), np.array(joint["end"], dtype=float)
+    total = float(np.linalg.norm(b - a))
 
     def s_of(p: np.ndarray) -> float:
         return float((p[:2] - wall.p0) @ wall.u)
 
     def at(f: float) -> List[float]:
         return [float(x) for x in a + (b - a) * f]
-    manual: List[Dict[str, Any]] = []
+
+    def part(f0: float, f1: float, **extra: Any) -> Dict[str, Any]:
+        return dict({"from": at(f0), "to": at(f1), "along": [total * f0, total * f1]}, **extra)
+
+    def why(s: float) -> str:
+        return next((r for (p, q), r in reach.why if p - 1e-9 <= s <= q + 1e-9), "out of reach")
+
+    jid = str(joint["id"])
+    if total < 1e-9:
+        return JointPlan(jid, [], [])
     if joint["kind"] == "vertical":
         s = (s_of(a) + s_of(b)) / 2.0
         if not any(p - 1e-9 <= s <= q + 1e-9 for p, q in reach.tool):
-            reason = next((r for (p, q), r in reach.why if p - 1e-9 <= s <= q + 1e-9), "out of reach")
-            return JointPlan(str(joint["id"]), None, [{"from": at(0.0), "to": at(1.0), "reason": reason}])
+            return JointPlan(jid, [], [part(0.0, 1.0, reason=why(s))])
+        base = reach.base_for(s, s, side if side is not None else 1e9)
+        if base is None:
+            return JointPlan(jid, [], [part(0.0, 1.0, reason="no free base pose within %.2f m of it" % side)])
         z0, z1 = sorted((float(a[2]), float(b[2])))
-        lo, hi = max(z0, reach.t[0]), min(z1, reach.t[1])
+        lo = z0 if reach.t[0] - z0 < min_manual else max(z0, reach.t[0])
+        hi = z1 if z1 - reach.t[1] < min_manual else min(z1, reach.t[1])
         if hi - lo < 1e-3:
-            return JointPlan(str(joint["id"]), None, [{"from": at(0.0), "to": at(1.0),
-                                                      "reason": "outside the tool's height band"}])
+            return JointPlan(jid, [], [part(0.0, 1.0, reason="outside the tool's height band")])
         span = float(b[2] - a[2])
+        if abs(span) < 1e-9:
+            return JointPlan(jid, [part(0.0, 1.0, base=base)], [])
         fa, fb = sorted(((lo - a[2]) / span, (hi - a[2]) / span))
-        for f0, f1, why in ((0.0, fa, "below the tool's reach"), (fb, 1.0, "above the tool's reach")):
-            if f1 - f0 > 1e-6:
-                manual.append({"from": at(f0), "to": at(f1), "reason": why})
-        return JointPlan(str(joint["id"]), [at(fa), at(fb)], manual)
+        manual = [part(f0, f1, reason=r) for f0, f1, r in
+                  ((0.0, fa, "below the tool's reach" if span > 0 else "above the tool's reach"),
+                   (fb, 1.0, "above the tool's reach" if span > 0 else "below the tool's reach")) if f1 - f0 > 1e-6]
+        return JointPlan(jid, [part(fa, fb, base=base)], manual)
     sa, sb = s_of(a), s_of(b)
     length = sb - sa
-    along = _clip(min(sa, sb), max(sa, sb), reach.tool)
     z = float((a[2] + b[2]) / 2.0)
-    if not reach.t[0] - 1e-9 <= z <= reach.t[1] + 1e-9 or not along:
-        return JointPlan(str(joint["id"]), None, [{"from": at(0.0), "to": at(1.0), "reason": "out of reach"}])
-    p, q = max(along, key=lambda iv: iv[1] - iv[0])      # the longest reachable stretch, taped in one go
-    fp, fq = sorted(((p - sa) / length, (q - sa) / length))
-    for f0, f1 in ((0.0, fp), (fq, 1.0)):
-        if f1 - f0 > 1e-6:
-            mid = sa + length * (f0 + f1) / 2.0
-            reason = next((r for (u, v), r in reach.why if u - 1e-9 <= mid <= v + 1e-9), "out of reach")
-            manual.append({"from": at(f0), "to": at(f1), "reason": reason})
-    return JointPlan(str(joint["id"]), [at(fp), at(fq)], manual)
+    if not reach.t[0] - 1e-9 <= z <= reach.t[1] + 1e-9:
+        return JointPlan(jid, [], [part(0.0, 1.0, reason="outside the tool's height band")])
+    if abs(length) < 1e-9:
+        return JointPlan(jid, [], [part(0.0, 1.0, reason="not along the wall")])
+    pieces: List[Dict[str, Any]] = []
+    for p, q in _clip(min(sa, sb), max(sa, sb), reach.tool):
+        n = max(1, int(math.ceil((q - p) / segment_length - 1e-9))) if segment_length > 0 else 1
+        todo = [(p + (q - p) * i / n, p + (q - p) * (i + 1) / n) for i in range(n)]
+        while todo:
+            u, v = todo.pop()
+            half = (v - u) / 2.0 if segment_length > 0 else 1e9
+            base = reach.base_for(u, v, half + 1e-6)
+            if base is not None:
+                f0, f1 = sorted(((u - sa) / length, (v - sa) / length))
+                pieces.append(part(f0, f1, base=base))
+            elif v - u > 2 * SHORTEST_PIECE:       # no free base in front of its middle: two shorter pieces
+                todo += [(u, (u + v) / 2.0), ((u + v) / 2.0, v)]
+    pieces.sort(key=lambda x: x["along"][0])
+    manual = []
+    for lo_, hi_ in interval_minus(0.0, total, [tuple(x["along"]) for x in pieces], max(min_manual, 1e-6)):
+        mid = sa + length * (lo_ + hi_) / 2.0 / total
+        manual.append(part(lo_ / total, hi_ / total, reason=why(mid)))
+    return JointPlan(jid, pieces, manual)
 
 
 @dataclass

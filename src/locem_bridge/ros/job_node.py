@@ -10,6 +10,10 @@ job goes on with the next process only when a process failed by itself). Service
 ``sim/outcome``, ``sim/scan``, ``sim/save_outcome``, and ``pemkre/query`` for the KPI table when present. Exits when the job is
 done (0 when every process ended, 1 otherwise), so a launch file can mark it ``required``.
 
+Every ``sim/outcome`` and ``sim/save_outcome`` call carries the parts HICEM left for manual work so far
+(``manual``: :meth:`JobTracker.manual_plan`), so the worksite measures the parts the robot was to work and draws
+the manual ones; should the worksite refuse that plan, the outcome is read without it and the report says so.
+
 A report is always written, also when the job ends early (the launch shuts down, a process times out, HICEM or
 PEMKRE cannot be reached): ``ended`` in report.json says why (see :mod:`locem_bridge.job.report`). The node
 does not need the other nodes alive for it: the worksite's outcome is read at every process boundary and every
@@ -24,13 +28,13 @@ import signal
 import tempfile
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import rospy
 
 from locem_bridge.job.report import JobEnd, RunRecord, write_report
 from locem_bridge.job.steps import load_steps
-from locem_bridge.job.tracker import TERMINAL_PHASES, JobStep, JobTracker
+from locem_bridge.job.tracker import TERMINAL_PHASES, JobStep, JobTracker, with_manual_plan
 from locem_bridge.msg import HicemPrompt, HicemState
 from locem_bridge.srv import HicemStartProcess, JsonCall, PemkreQuery
 from locem_bridge.ros.calls import CallFailed, timed
@@ -170,6 +174,12 @@ def _json_call(name: str, **args: Any) -> Dict[str, Any]:
     return json.loads(reply.result)
 
 
+def _outcome_call(name: str, manual: Dict[str, Any], **args: Any) -> Tuple[Dict[str, Any], str]:
+    """``name`` (sim/outcome, sim/save_outcome) called with the planned manual parts ``manual``, without them when
+    the worksite refuses them: (the result, the refusal or ''); see :func:`with_manual_plan`."""
+    return with_manual_plan(_json_call, name, manual, **args)
+
+
 OUTCOME_PERIOD_S = 10.0     # the worksite's outcome is read this often while a process runs
 END_CALL_TIMEOUT_S = 2.0    # each call made to write the report (the launch may be shutting down)
 
@@ -180,6 +190,9 @@ class OutcomeCache:
     def __init__(self) -> None:
         self.outcome: Dict[str, Any] = {}
         self.at = 0.0
+        #: the planned manual parts every read carries (the job's tracker sets it)
+        self.manual: Callable[[], Dict[str, Any]] = lambda: {"areas": [], "joints": []}
+        self.refused = ""                     # the worksite's refusal of the manual parts at the last read
         self._busy = threading.Lock()
 
     def refresh_every(self, period_s: float) -> Callable[[], None]:
@@ -202,9 +215,10 @@ class OutcomeCache:
 
     def _read(self) -> None:
         try:
-            outcome = timed(lambda: _json_call("sim/outcome"), END_CALL_TIMEOUT_S * 2, "sim/outcome")
+            outcome, refused = timed(lambda: _outcome_call("sim/outcome", self.manual()), END_CALL_TIMEOUT_S * 2,
+                                     "sim/outcome")
             if isinstance(outcome.get("joints"), dict):
-                self.outcome, self.at = outcome, time.monotonic()
+                self.outcome, self.at, self.refused = outcome, time.monotonic(), refused
         except CallFailed:
             pass
         finally:
@@ -243,7 +257,7 @@ def main() -> None:
         service = "sim/scan"
         scan = _json_call(service)
         service = "sim/outcome"
-        outcomes.outcome, outcomes.at = _json_call(service), time.monotonic()
+        outcomes.outcome, outcomes.at = _outcome_call(service, outcomes.manual())[0], time.monotonic()
     except (rospy.ROSException, rospy.ServiceException, RuntimeError) as exc:
         not_started = (JobEnd("shutdown", "the launch shut down (%s) before the job started" % shutdown.get(
             "reason", "ROS shutdown")) if rospy.is_shutdown() else
@@ -251,6 +265,7 @@ def main() -> None:
                    "%s: %s" % (service, exc)))
     totals = {"joints": len(outcomes.outcome.get("joints", {})), "areas": len(scan.get("areas", []))}
     tracker = JobTracker(steps, totals, say=lambda line: print(line, flush=True))
+    outcomes.manual = tracker.manual_plan
     sequencer = ProcessSequencer(tracker, timeout, param("peer_wait", 120.0),
                                  while_waiting=outcomes.refresh_every(OUTCOME_PERIOD_S),
                                  shutdown_reason=lambda: shutdown.get("reason", "ROS shutdown"))
@@ -285,16 +300,20 @@ def main() -> None:
         except CallFailed:
             ended.reason = "pemkre_unreachable"
     pictures_dir = tempfile.mkdtemp(prefix="locem_job_")
+    refused = ""
     try:
-        outcome = timed(lambda: _json_call("sim/save_outcome", folder=pictures_dir), END_CALL_TIMEOUT_S,
-                        "sim/save_outcome")
+        outcome, refused = timed(lambda: _outcome_call("sim/save_outcome", tracker.manual_plan(), folder=pictures_dir),
+                                 END_CALL_TIMEOUT_S, "sim/save_outcome")
     except CallFailed as exc:   # the launch is shutting down: use what was collected
-        outcome = outcomes.outcome
+        outcome, refused = outcomes.outcome, outcomes.refused
         age = time.monotonic() - outcomes.at
         ended.unread.append("final outcome and wall pictures (%s); the outcome shown was read %.0f s before the "
                             "end" % (exc, age) if outcome else "the worksite's outcome (%s)" % exc)
         print("[job] no final outcome from the simulation (%s): report with the outcome read %.0f s earlier, no "
               "pictures" % (exc, age), flush=True)
+    if refused:
+        ended.unread.append("the parts planned for manual work, in the outcome (%s): its figures count the whole "
+                            "work as the robot's" % refused)
     kpis: List[Dict[str, Any]] = []
     try:
         kpis = kpi_rows(timed(lambda: rospy.ServiceProxy("pemkre/query", PemkreQuery)("kpi_by_task_type", [], []),
@@ -306,7 +325,7 @@ def main() -> None:
                        collisions=int(outcome.get("collisions", 0)), settings=settings, kpis=kpis,
                        timing={"wall_clock_s": time.time() - started},
                        pictures=[os.path.join(pictures_dir, p) for p in outcome.get("pictures", [])],
-                       manual_areas=tracker.manual_areas, ended=ended)
+                       manual_areas=tracker.manual_areas, manual_joints=tracker.manual_joints, ended=ended)
     folder = write_report(record, results_dir, run=param("run", "") or None)
     print("[job] ended: %s%s%s" % (ended.reason, " (early)" if ended.as_dict()["early"] else "",
                                    (": " + ended.detail) if ended.detail else ""), flush=True)

@@ -4,6 +4,8 @@
 interfaces (names relative to the node's namespace unless absolute):
 
 - ``<hicem>/state`` (``HicemState``, latched) -> snapshot, and the open prompts (its ``prompts`` JSON field);
+  every message also feeds the planned manual work its task reports name (the page's Manual work panel,
+  ``/api/manual``; :class:`locem_bridge.hmi.manual_work.ManualWorkLog`);
 - ``<hicem>/start_process`` (``HicemStartProcess``, with ``~process_options`` as JSON), ``<hicem>/stop``
   (``HicemStop``), ``<hicem>/operator_reply`` (``HicemOperatorReply``), and the page's Pause, Resume, Abort and
   Reset buttons: ``<hicem>/suspend``, ``<hicem>/resume``, ``<hicem>/halt``, ``<hicem>/reset`` (``SkillControl``);
@@ -59,6 +61,7 @@ from locem_bridge.common.program_state import ProgramState
 from locem_bridge.hicem.skill_control import operator_methods
 from locem_bridge.hmi.backend import SKILL_METHODS
 from locem_bridge.hmi.hicem_view import WorkFollower
+from locem_bridge.hmi.manual_work import ManualWorkLog
 from locem_bridge.hmi.pemkre_view import KPI_QUERIES, processes_from_ontologies, rows_from_result, work_progress
 from locem_bridge.hmi.sim_hands import HandsError, hand_actions
 from locem_bridge.msg import HicemState, SkillTransition
@@ -104,6 +107,7 @@ class RosHmiBackend:
         self._progress: Optional[Dict[str, Any]] = None
         self._progress_at = 0.0
         self._follower = WorkFollower()             # which work the running process does (fed every state)
+        self._manual = ManualWorkLog()              # the planned manual work task reports named (every state)
         self._query = rospy.ServiceProxy(self.pemkre + "/query", PemkreQuery)
         self._match = rospy.ServiceProxy(self.pemkre + "/match", PemkreMatchProcess)
         self.sim = rospy.resolve_name(sim_ns).rstrip("/")
@@ -146,6 +150,7 @@ class RosHmiBackend:
             self._state = state
             self._prompts = [p for p in prompts if isinstance(p, dict)]
             self._follower.update(state)
+        self._manual.update(state)
 
     def _on_skill(self, msg: Any) -> None:
         try:
@@ -302,6 +307,10 @@ class RosHmiBackend:
                            self.hicem + "/operator_reply")
         if not resp.success:
             raise BackendRefused(resp.message or "HICEM refused the answer")
+
+    def manual_work(self) -> List[Dict[str, Any]]:
+        """The planned manual work HICEM's task reports named so far (parts of areas and joints left for a person)."""
+        return self._manual.items()
 
     def match_process(self, iri: str) -> Any:
         """PEMKRE's skill matching of the abstract process ``iri`` (JSON text, read by the page's ``match_view``)."""

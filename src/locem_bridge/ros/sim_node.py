@@ -13,8 +13,8 @@ service             args (JSON object)                                     resul
 ``~manual_taping``  ``{"joint": "wall_1_joint_2"}`` (taped by hand)        ``{}``
 ``~inject_fault``   ``{"kind": ..., ...}`` (see Worksite.inject_fault)     ``{}``
 ``~clear_fault``    ``{"kind": ..., ...}``                                 ``{}``
-``~outcome``        ``{}``                                                 outcome numbers (+ collisions)
-``~save_outcome``   ``{"folder": "/abs/path"}``                            numbers + picture file names
+``~outcome``        ``{}``, or ``{"manual": plan}`` (see below)            outcome numbers (+ collisions)
+``~save_outcome``   ``{"folder": "/abs/path"}``, optional ``"manual"``     numbers + picture file names
 ``~compressor``     ``{}``                                                 the compressor as the device knows
                                                                            it: state, watchdog, valve / motor
                                                                            history (Worksite.compressor_state)
@@ -23,6 +23,13 @@ service             args (JSON object)                                     resul
                                                                            history (a robot file with a
                                                                            ``tool_changer``; else an error)
 ==================  =====================================================  ======================================
+
+``manual`` (optional): the parts HICEM planned for the hand, ``{"areas": [{"work": "spray"|"sand", "area": id,
+"along": [a, b], "height": [c, d]}], "joints": [{"joint": id, "along": [a, b]}]}`` (along: m from the area's
+origin or the joint's start; height: m above the floor): the numbers add the figures on the parts the robot was
+to work and the work done deep inside the manual parts (``reachable``, ``manual_touched``, see
+:meth:`locem_bridge.sim.outcome.OutcomeRecorder.summary`), the pictures draw the manual parts. A plan that does not
+fit the site is refused, naming what is wrong.
 
 Topic ``~localisation`` (``geometry_msgs/PoseWithCovarianceStamped``, map frame, 5 Hz): the localisation a real
 robot gets from AMCL or similar, here the true pose with ``~localisation_noise`` (default 0.002 m / rad) of
@@ -64,8 +71,8 @@ class SimNode:
             "manual_taping": lambda a: (site.mark_manual_taping(_need(a, "joint")), {})[1],
             "inject_fault": lambda a: (site.inject_fault(_need(a, "kind"), **_rest(a, "kind")), {})[1],
             "clear_fault": lambda a: (site.clear_fault(_need(a, "kind"), **_rest(a, "kind")), {})[1],
-            "outcome": lambda a: site.outcome(),
-            "save_outcome": lambda a: site.save_outcome(_need(a, "folder")),
+            "outcome": lambda a: site.outcome(a.get("manual")),
+            "save_outcome": lambda a: site.save_outcome(_need(a, "folder"), a.get("manual")),
             "compressor": lambda a: site.compressor_state(),
             "tool_changer": lambda a: site.tool_changer_state(),
         }

@@ -24,6 +24,11 @@ crossed twice (``double_m``) along the pass's direction that reaches the point w
 ``SEAM_SPAN`` either side), and when it ended (``sim_time``, from the world's clock: match it with the valve's
 closing to find a suspension's seam; where the sections of a raster meet, their designed overlap is a seam too).
 Operator actions: :meth:`mark_manual_taping` records a joint taped by hand (reported separately).
+Planned manual work: HICEM leaves the parts of areas and joints the robot cannot reach to the hand; given them
+(``manual`` of :meth:`summary` and :meth:`save_pictures`, checked by :meth:`manual_plan`) the numbers add the
+figures on the parts the robot was to work (``*_reachable``, ``reachable``) and the work found deep inside the
+manual parts (``manual_touched``: what the robot cannot reach it must not have touched), and the pictures show
+the manual parts (violet: joint stretches, hatching over area parts).
 Numbers: :meth:`summary`; pictures: :meth:`save_pictures` (one PNG per wall: joints, thickness, sanded; the
 openings drawn on all three, a title line and a legend row readable at any wall width: :func:`picture_layout`).
 """
@@ -49,6 +54,22 @@ SEAM_TOLERANCE = 0.01    # m, how far outside an area's edges a point still coun
                          # hole: a hole's edges are the area's edges too)
 TRACE = 0.1              # fraction of the target thickness from which a cell counts as sprayed into an opening or
                          # on a frame
+MANUAL_TAPE_EDGE = 0.02  # m, tape laid into a planned manual part of a joint up to this far from the robot's part is
+                         # the end of the robot's stretch; farther in, it is work inside the manual part
+MANUAL_EDGE = 0.05       # m, how far past the robot's part the edge of its work may reach into a planned manual part
+                         # of an area: a spray coat's soft edge (with the shipped lanes the target thickness ends
+                         # about 0.05 m past the outermost lane); the sander adds its pad's radius (its centre may
+                         # run along the edge of the part it works)
+MANUAL_WORKS = ("spray", "sand")
+
+
+@dataclass
+class ManualPlan:
+    """The parts of the work planned for the hand (checked by :meth:`OutcomeRecorder.manual_plan`): ``areas``
+    ``(work, area id, along0, along1, height0, height1)`` (along from the area's origin, height above the floor,
+    m) and ``joints`` ``(joint id, along0, along1)`` (from the joint's start, m)."""
+    areas: List[Tuple[str, str, float, float, float, float]]
+    joints: List[Tuple[str, float, float]]
 
 
 class _WallMaps:
@@ -70,12 +91,14 @@ class _WallMaps:
         # the cells to be finished: centres inside one of the wall's areas (what SCAN reports as work), outside
         # its holes (the openings and their frames)
         self.work = np.zeros((self.nt, self.ns), dtype=bool)
+        self.area_cells: Dict[str, np.ndarray] = {}       # per area its own work cells
         for a in wall.areas:
             ins = (self.sc >= a.s0) & (self.sc <= a.s0 + a.width)
             int_ = (self.tc >= a.t0) & (self.tc <= a.t0 + a.height)
             cells = int_[:, None] & ins[None, :]
             if a.holes:
                 cells &= ~a.in_hole(self.sc[None, :] - a.s0, self.tc[:, None] - a.t0)
+            self.area_cells[a.id] = cells
             self.work |= cells
         # openings: cells in a clear opening (no wall: nothing lands there) and on a frame (around it, in the
         # wall plane: takes a deposit, but a tool there is a fault); what the spray put into openings, apart
@@ -299,33 +322,132 @@ class OutcomeRecorder:
             raise KeyError("unknown joint %r, known: %s" % (joint_id, ", ".join(sorted(self.tape))))
         self.manual.add(joint_id)
 
+    # -- planned manual work -----------------------------------------------------------------------------------
+    def manual_plan(self, manual: Optional[Dict[str, Any]] = None) -> ManualPlan:
+        """Check the planned manual parts ``{"areas": [{"work": "spray"|"sand", "area": id, "along": [a, b],
+        "height": [c, d]}], "joints": [{"joint": id, "along": [a, b]}]}`` (both lists optional, other keys of an
+        entry ignored; None: none) against the site; a ValueError says what is wrong and what is allowed."""
+        if manual is None:
+            return ManualPlan([], [])
+        if not isinstance(manual, dict):
+            raise ValueError('manual must be an object {"areas": [...], "joints": [...]}, got %s'
+                             % type(manual).__name__)
+        extra = sorted(set(manual) - {"areas", "joints"})
+        if extra:
+            raise ValueError("manual: unknown key(s) %s; allowed: areas, joints" % ", ".join(map(repr, extra)))
+        areas = {a.id: a for m in self.maps.values() for a in m.wall.areas}
+        joints = {j.id: j for j in self.site.joints if j.id in self.tape}
+        plan = ManualPlan([], [])
+        for key, shape in (("areas", "{work, area, along, height}"), ("joints", "{joint, along}")):
+            items = manual.get(key) or []
+            if not isinstance(items, list):
+                raise ValueError("manual.%s must be a list of %s, got %s" % (key, shape, type(items).__name__))
+            for i, item in enumerate(items):
+                where = "manual.%s[%d]" % (key, i)
+                if not isinstance(item, dict):
+                    raise ValueError("%s must be an object %s, got %r" % (where, shape, item))
+                missing = [k for k in shape.strip("{}").split(", ") if k not in item]
+                if missing:
+                    raise ValueError("%s misses %s (an entry is %s)" % (where, ", ".join(missing), shape))
+                if key == "areas":
+                    if item["work"] not in MANUAL_WORKS:
+                        raise ValueError("%s.work %r is not one of %s" % (where, item["work"], ", ".join(MANUAL_WORKS)))
+                    if item["area"] not in areas:
+                        raise ValueError("%s.area %r is not an area of this site; known: %s"
+                                         % (where, item["area"], ", ".join(sorted(areas))))
+                    a0, a1 = _span(where + ".along", item["along"], "metres along the area from its origin")
+                    h0, h1 = _span(where + ".height", item["height"], "metres above the floor")
+                    plan.areas.append((str(item["work"]), str(item["area"]), a0, a1, h0, h1))
+                else:
+                    if item["joint"] not in joints:
+                        raise ValueError("%s.joint %r is not a joint of this site; known: %s"
+                                         % (where, item["joint"], ", ".join(sorted(joints))))
+                    a0, a1 = _span(where + ".along", item["along"], "metres from the joint's start")
+                    plan.joints.append((str(item["joint"]), a0, a1))
+        return plan
+
+    def _manual_bins(self, joint_id: str, plan: ManualPlan) -> np.ndarray:
+        """Per TAPE_BIN of the joint: whether its centre lies in a planned manual part."""
+        n = len(self.tape[joint_id])
+        centres = (np.arange(n) + 0.5) * TAPE_BIN
+        out = np.zeros(n, dtype=bool)
+        for jid, a0, a1 in plan.joints:
+            if jid == joint_id:
+                out |= (centres >= a0) & (centres <= a1)
+        return out
+
+    def _manual_cells(self, m: _WallMaps, work: str, plan: ManualPlan) -> np.ndarray:
+        """The work cells of wall map ``m`` inside a planned manual part of ``work``."""
+        out = np.zeros((m.nt, m.ns), dtype=bool)
+        for w, area_id, a0, a1, h0, h1 in plan.areas:
+            if w != work or area_id not in m.area_cells:
+                continue
+            area = next(a for a in m.wall.areas if a.id == area_id)
+            ins = (m.sc >= area.s0 + a0) & (m.sc <= area.s0 + a1)
+            int_ = (m.tc >= h0) & (m.tc <= h1)
+            out |= int_[:, None] & ins[None, :] & m.area_cells[area_id]
+        return out
+
+    def _manual_edge(self, work: str) -> float:
+        """How far into a planned manual part of ``work`` the robot's work on its part may reach (m)."""
+        if work == "sand":
+            return MANUAL_EDGE + float(self.tools["sander"]["pad_radius"])
+        return MANUAL_EDGE
+
     # -- numbers -----------------------------------------------------------------------------------------------
     def joint_coverage(self, joint_id: str) -> float:
         bins = self.tape[joint_id]
         return float(bins.mean())
 
-    def summary(self) -> Dict[str, Any]:
+    def summary(self, manual: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
         """Numbers of the run: per joint, per wall and totals (fractions 0..1, thickness in m); per wall and in
         total the faults at openings (m2): ``sprayed_into_openings_m2``, ``sprayed_on_frames_m2``,
-        ``sanded_on_frames_m2`` (0.0 on a wall without openings)."""
+        ``sanded_on_frames_m2`` (0.0 on a wall without openings).
+
+        ``manual``: the parts planned for the hand (:meth:`manual_plan`). The figures on the parts the robot was
+        to work: per joint ``manual_m`` (m left manual) and ``coverage_reachable`` (over the TAPE_BINs outside
+        its manual parts; None when the whole joint is manual); per wall ``spray_coverage_reachable``,
+        ``sand_coverage_reachable``, ``thickness_cv_reachable`` (over the work cells outside that work's manual
+        parts; None when the wall has work cells but all of them are manual), ``spray_manual_m2`` and
+        ``sand_manual_m2``; in total ``reachable`` (``tape_coverage_min`` and ``tape_coverage``: min and mean
+        over the joints with a part for the robot and not taped by hand, None when there is none;
+        ``spray_coverage``, ``sand_coverage``; ``spray_thickness_cv``: the largest of the walls') and
+        ``manual_touched``: work done deep inside the manual parts, where the robot cannot reach -- ``tape_m``
+        laid more than MANUAL_TAPE_EDGE from the robot's part of the joint, ``spray_m2`` (at least the target
+        thickness) and ``sand_m2`` more than the tool's edge (:data:`MANUAL_EDGE`, the sander plus its pad's
+        radius) from the robot's part of the work. Without manual parts each reachable figure equals the plain
+        one (the tape figures leave out the joints taped by hand)."""
+        plan = self.manual_plan(manual)
         joints = {}
+        touched_tape = 0
         for jid, bins in self.tape.items():
             cov = float(bins.mean())
             taped = np.flatnonzero(bins)
             inner = bins[taped[0]:taped[-1] + 1] if taped.size else bins[:0]
+            planned = self._manual_bins(jid, plan)
+            robot = ~planned
+            deep = planned & ~_dilate(robot[None, :], MANUAL_TAPE_EDGE / TAPE_BIN)[0]
+            touched_tape += int((bins & deep).sum())
+            length = self.site.joint(jid).length
             joints[jid] = {"coverage": cov, "taped": cov >= TAPED_FRACTION, "manual": jid in self.manual,
                            "double_m": round(_longest_run(self.tape_passes[jid] >= 2) * TAPE_BIN, 4),
-                           "gap_m": round(_longest_run(~inner) * TAPE_BIN, 4)}
+                           "gap_m": round(_longest_run(~inner) * TAPE_BIN, 4),
+                           "manual_m": round(_union_length([(a, b) for j, a, b in plan.joints if j == jid],
+                                                           0.0, length), 4),
+                           "coverage_reachable": float(bins[robot].mean()) if robot.any() else None}
         seams = [x for x in (self._seam(*e) for e in self.spray_pass_ends) if x is not None]
         walls = {}
         total_cells = covered_cells = sanded_cells = 0
+        reach_cells = {"spray": 0, "sand": 0}
+        reach_done = {"spray": 0, "sand": 0}
+        touched = {"spray": 0.0, "sand": 0.0}
         fault_totals = {"sprayed_into_openings_m2": 0.0, "sprayed_on_frames_m2": 0.0, "sanded_on_frames_m2": 0.0}
         for wid, m in self.maps.items():
             # coverage and uniformity over the wall's work areas (cells outside them are overspray)
             cells = int(m.work.sum())
             covered = (m.thickness >= self.target) & m.work
             vals = m.thickness[covered]
-            cv = float(vals.std() / vals.mean()) if vals.size > 1 and vals.mean() > 0 else 0.0
+            cv = _cv(vals)
             sanded = m.sanded & m.work
             cell_m2 = m.grid * m.grid
             trace = TRACE * self.target
@@ -338,6 +460,21 @@ class OutcomeRecorder:
                           "sand_coverage": float(sanded.sum()) / cells if cells else 0.0,
                           "work_area_m2": cells * cell_m2}
             walls[wid].update(faults)
+            # the same on the cells the robot was to work (outside the work's planned manual parts)
+            for work, done in (("spray", covered), ("sand", sanded)):
+                planned = self._manual_cells(m, work, plan)
+                robot = m.work & ~planned
+                n_robot = int(robot.sum())
+                walls[wid]["%s_coverage_reachable" % work] = (float((done & robot).sum()) / n_robot if n_robot else
+                                                              None if cells else 0.0)
+                walls[wid]["%s_manual_m2" % work] = round(int(planned.sum()) * cell_m2, 6)
+                if work == "spray":
+                    walls[wid]["thickness_cv_reachable"] = (_cv(m.thickness[covered & robot]) if n_robot else
+                                                            None if cells else 0.0)
+                deep = planned & ~_dilate(robot, self._manual_edge(work) / m.grid)
+                touched[work] += int((done & deep).sum()) * cell_m2
+                reach_cells[work] += n_robot
+                reach_done[work] += int((done & robot).sum())
             for k, v in faults.items():
                 fault_totals[k] += v
             total_cells += cells
@@ -345,6 +482,14 @@ class OutcomeRecorder:
             sanded_cells += int(sanded.sum())
         n = len(joints)
         taped = sum(1 for j in joints.values() if j["taped"])
+        robot_cov = [j["coverage_reachable"] for j in joints.values()
+                     if j["coverage_reachable"] is not None and not j["manual"]]
+        cvs = [w["thickness_cv_reachable"] for w in walls.values() if w["thickness_cv_reachable"] is not None]
+
+        def reach_fraction(work: str) -> Optional[float]:
+            if reach_cells[work]:
+                return reach_done[work] / reach_cells[work]
+            return None if total_cells else 0.0
         return {
             "joints_total": n,
             "joints_taped": taped,
@@ -359,41 +504,71 @@ class OutcomeRecorder:
             "joints": joints,
             "walls": walls,
             "spray_seams": seams,
+            "reachable": {"tape_coverage_min": min(robot_cov) if robot_cov else (None if n else 0.0),
+                          "tape_coverage": float(np.mean(robot_cov)) if robot_cov else (None if n else 0.0),
+                          "spray_coverage": reach_fraction("spray"), "sand_coverage": reach_fraction("sand"),
+                          "spray_thickness_cv": max(cvs) if cvs else 0.0},
+            "manual_touched": {"tape_m": round(touched_tape * TAPE_BIN, 4), "spray_m2": round(touched["spray"], 6),
+                               "sand_m2": round(touched["sand"], 6)},
         }
 
     # -- pictures ----------------------------------------------------------------------------------------------
-    def picture_layout(self, wall_id: str, px_per_m: float = 100.0) -> "PictureLayout":
-        """Where :meth:`save_pictures` puts the panels, texts and legend of wall ``wall_id``'s picture."""
+    def picture_layout(self, wall_id: str, px_per_m: float = 100.0,
+                       manual: Optional[Dict[str, Any]] = None) -> "PictureLayout":
+        """Where :meth:`save_pictures` puts the panels, texts and legend of wall ``wall_id``'s picture (with the
+        planned manual parts ``manual``, see :meth:`manual_plan`)."""
         wall = self.maps[wall_id].wall
-        return picture_layout(_title(wall), PANEL_LABELS, self._legend(wall), *_wall_px(wall, px_per_m))
+        return picture_layout(_title(wall), PANEL_LABELS, self._legend(wall, self.manual_plan(manual)),
+                              *_wall_px(wall, px_per_m))
 
-    def _legend(self, wall: Wall) -> List[Tuple[str, str]]:
+    def _legend(self, wall: Wall, plan: ManualPlan) -> List[Tuple[str, str]]:
         """The legend items (key, text) of ``wall``'s picture: the joint states shown on it, the scales, the
-        outlines, the openings if it has any."""
-        bins = [(self.tape[j.id], j.id in self.manual) for j in wall.joints]
+        outlines, the planned manual parts and the openings if it has any."""
+        bins = [(self.tape[j.id], j.id in self.manual, self._manual_bins(j.id, plan)) for j in wall.joints]
         items = [(key, text) for key, text, shown in (
-            ("taped", "taped", any(b.any() for b, _ in bins)),
-            ("manual", "taped by hand", any(manual and not b.all() for b, manual in bins)),
-            ("open", "open joint", any(not manual and not b.all() for b, manual in bins))) if shown]
+            ("taped", "taped", any(b.any() for b, _, _ in bins)),
+            ("manual", "taped by hand", any(manual and not b.all() for b, manual, _ in bins)),
+            ("open", "open joint", any(not manual and (~b & ~planned).any() for b, manual, planned in bins))) if shown]
         items += [("thickness", "spray 0 .. %.1f mm" % (2000.0 * self.target)), ("sanded", "sanded"),
                   ("area", "work area and its holes")]
+        if any(p.any() for _, _, p in bins) or any(self._planned_rects(wall, work, plan) for work in MANUAL_WORKS):
+            items += [("planned", "manual (planned)")]
         if wall.openings:
             items += [("opening", "opening (door: leaf arc, window: cross)"), ("frame", "frame")]
         return items
 
-    def save_pictures(self, folder: str, px_per_m: float = 100.0) -> List[str]:
+    def _planned_rects(self, wall: Wall, work: str, plan: ManualPlan) -> List[Tuple[float, float, float, float]]:
+        """The planned manual parts of ``work`` on ``wall`` as wall rectangles (s0, s1, t0, t1), cut to their
+        area."""
+        out = []
+        areas = {a.id: a for a in wall.areas}
+        for w, area_id, a0, a1, h0, h1 in plan.areas:
+            a = areas.get(area_id)
+            if w != work or a is None:
+                continue
+            s0, s1 = max(a.s0, a.s0 + a0), min(a.s0 + a.width, a.s0 + a1)
+            t0, t1 = max(a.t0, h0), min(a.t0 + a.height, h1)
+            if s1 > s0 and t1 > t0:
+                out.append((s0, s1, t0, t1))
+        return out
+
+    def save_pictures(self, folder: str, px_per_m: float = 100.0,
+                      manual: Optional[Dict[str, Any]] = None) -> List[str]:
         """Write ``<wall>.png`` per plasterboard wall: a title line (wall, size, openings), three panels -- joints
-        (green taped, blue manual, red open), spray thickness (white 0 -> dark blue at 2x target), sanded area
-        (brown) -- with the openings (dark grey, frame outlined brown) on each and the work areas with their
-        holes outlined on the last two, and a legend row below (:meth:`picture_layout`); returns the file paths."""
+        (green taped, blue manual, red open, violet planned manual and not taped), spray thickness (white 0 ->
+        dark blue at 2x target), sanded area (brown) -- with the openings (dark grey, frame outlined brown) on
+        each, the work areas with their holes outlined and the planned manual parts of that work (``manual``, see
+        :meth:`manual_plan`) hatched violet on the last two, and a legend row below (:meth:`picture_layout`);
+        returns the file paths."""
         from PIL import Image, ImageDraw
 
         os.makedirs(folder, exist_ok=True)
         font = _default_font()
+        plan = self.manual_plan(manual)
         out = []
         for wid, m in self.maps.items():
             wall = m.wall
-            lay = self.picture_layout(wid, px_per_m)
+            lay = self.picture_layout(wid, px_per_m, manual)
             w_px, h_px = _wall_px(wall, px_per_m)
             img = Image.new("RGB", lay.size, WHITE)
             dr = ImageDraw.Draw(img)
@@ -407,11 +582,12 @@ class OutcomeRecorder:
             jw = max(2, int(0.05 * px_per_m))
             for j in wall.joints:
                 bins = self.tape[j.id]
+                planned = self._manual_bins(j.id, plan)
                 s0 = wall.to_wall_coords(j.start)[0]
                 t0 = float(j.start[2])
                 for b, done in enumerate(bins):
                     a, e = b * TAPE_BIN, min(j.length, (b + 1) * TAPE_BIN)
-                    color = TAPED if done else (MANUAL if j.id in self.manual else OPEN)
+                    color = TAPED if done else (MANUAL if j.id in self.manual else PLANNED if planned[b] else OPEN)
                     if j.kind == "vertical":
                         p, q = to_px(s0, t0 + a, xs[0]), to_px(s0, t0 + e, xs[0])
                     else:
@@ -427,6 +603,9 @@ class OutcomeRecorder:
                 pic = Image.fromarray(rgb[::-1]).resize((full_w, full_h), Image.NEAREST)
                 img.paste(pic.crop((0, full_h - h_px, w_px, full_h)), (xs[k], y0))
                 dr.rectangle([xs[k], y0, xs[k] + w_px, y0 + h_px], outline=BLACK)
+                for r0, r1, u0, u1 in self._planned_rects(wall, MANUAL_WORKS[k - 1], plan):
+                    (hx0, hy0), (hx1, hy1) = to_px(r0, u1, xs[k]), to_px(r1, u0, xs[k])
+                    _hatch(dr, int(round(hx0)), int(round(hy0)), int(round(hx1)), int(round(hy1)), PLANNED)
             for k in range(3):   # the openings on every panel
                 for o in wall.openings:
                     a0, a1, b0, b1 = o.outer
@@ -459,6 +638,8 @@ class OutcomeRecorder:
 
 WHITE, BLACK, BOARD = (255, 255, 255), (0, 0, 0), (235, 235, 225)
 TAPED, MANUAL, OPEN = (30, 160, 60), (40, 90, 220), (210, 40, 40)
+PLANNED = (160, 40, 190)  # planned manual work: joint stretches, hatching over area parts
+HATCH_PX = 7              # px, spacing of the hatching
 SANDED, AREA = (150, 100, 50), (200, 120, 0)
 OPENING, OPENING_MARK, FRAME = (70, 70, 70), (150, 150, 150), (110, 60, 15)
 PANEL_LABELS = ("joints", "spray thickness", "sanded")
@@ -619,6 +800,19 @@ def _swatch(dr: Any, key: str, x0: int, y0: int, x1: int, y1: int) -> None:
         dr.rectangle([x0, y0, x1, y1], outline=AREA)
     elif key == "frame":
         dr.rectangle([x0, y0, x1, y1], outline=FRAME, width=2)
+    elif key == "planned":
+        _hatch(dr, x0, y0, x1, y1, PLANNED, step=5)
+
+
+def _hatch(dr: Any, x0: int, y0: int, x1: int, y1: int, color: Tuple[int, int, int], step: int = HATCH_PX) -> None:
+    """The box (x0, y0, x1, y1) outlined and hatched with diagonal lines in ``color`` (what is under the hatching
+    shows between its lines)."""
+    w, h = x1 - x0, y1 - y0
+    for d in range(-h, w + 1, step):          # lines rising to the right from (x0 + d, y1)
+        t0, t1 = max(0, -d), min(h, w - d)
+        if t1 > t0:
+            dr.line([(x0 + d + t0, y1 - t0), (x0 + d + t1, y1 - t1)], fill=color)
+    dr.rectangle([x0, y0, x1, y1], outline=color)
 
 
 def _on_area(a: Area, ps: np.ndarray, pt: np.ndarray) -> np.ndarray:
@@ -653,3 +847,41 @@ def _longest_run(flags: Any) -> int:
         n = n + 1 if f else 0
         best = max(best, n)
     return best
+
+
+def _cv(vals: np.ndarray) -> float:
+    """Coefficient of variation of the thickness values (0.0 for fewer than two or a zero mean)."""
+    return float(vals.std() / vals.mean()) if vals.size > 1 and vals.mean() > 0 else 0.0
+
+
+def _span(where: str, value: Any, meaning: str) -> Tuple[float, float]:
+    """``value`` as ``(a, b)``: two finite numbers with a <= b, else a ValueError naming ``where``."""
+    ok = isinstance(value, (list, tuple)) and len(value) == 2 and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    if not ok or value[0] > value[1]:
+        raise ValueError("%s must be [a, b], two numbers with a <= b (%s), got %r" % (where, meaning, value))
+    return float(value[0]), float(value[1])
+
+
+def _dilate(mask: np.ndarray, radius: float) -> np.ndarray:
+    """The cells of a 2D ``mask`` and every cell whose centre lies within ``radius`` cells of one of them."""
+    out = mask.copy()
+    r = int(math.floor(radius + 1e-9))
+    nk, ni = mask.shape
+    for dk in range(-r, r + 1):
+        for di in range(-r, r + 1):
+            if (dk, di) == (0, 0) or dk * dk + di * di > radius * radius + 1e-9 or abs(dk) >= nk or abs(di) >= ni:
+                continue
+            out[max(0, dk):nk + min(0, dk), max(0, di):ni + min(0, di)] |= \
+                mask[max(0, -dk):nk + min(0, -dk), max(0, -di):ni + min(0, -di)]
+    return out
+
+
+def _union_length(spans: Sequence[Tuple[float, float]], lo: float, hi: float) -> float:
+    """Length of the union of ``spans`` clipped to [lo, hi]."""
+    total, end = 0.0, lo
+    for a, b in sorted((max(lo, a), min(hi, b)) for a, b in spans):
+        if b > max(a, end):
+            total += b - max(a, end)
+            end = b
+    return total

@@ -13,7 +13,7 @@ A robot file with a ``tool_changer`` section gets the tool changer stand-in too 
 Modbus TCP server on ``robot.tool_changer.port``): it mounts and parks tools in the world as its lock couples and
 releases them at the rack slots (:meth:`tool_changer_state`). Operator calls (tools are changed by a person on the
 real site): :meth:`mount_tool`, :meth:`remove_tool`, :meth:`mark_manual_taping`. Perception: :meth:`scan`. Results: :meth:`outcome` (numbers) and
-:meth:`save_outcome` (``outcome.json`` + one PNG per wall).
+:meth:`save_outcome` (``outcome.json`` + one PNG per wall), both given the parts planned for manual work if any.
 """
 from __future__ import annotations
 
@@ -306,21 +306,24 @@ class Worksite:
                                 % kind)
 
     # -- results -----------------------------------------------------------------------------------------------
-    def outcome(self) -> Dict[str, Any]:
-        """Outcome numbers (see :meth:`OutcomeRecorder.summary`) plus ``collisions``."""
+    def outcome(self, manual: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+        """Outcome numbers (see :meth:`OutcomeRecorder.summary`) plus ``collisions``; ``manual``: the parts planned
+        for the hand (``{"areas": [{work, area, along, height}], "joints": [{joint, along}]}``, see
+        :meth:`OutcomeRecorder.manual_plan`; a ValueError when it does not fit the site)."""
         w = self._need_world()
         with w._lock:
-            out = w.outcome.summary()
+            out = w.outcome.summary(manual)
             out["collisions"] = w.collisions
         return out
 
-    def save_outcome(self, folder: str) -> Dict[str, Any]:
-        """Write ``outcome.json`` and one PNG per wall into ``folder``; returns the numbers and file names."""
+    def save_outcome(self, folder: str, manual: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+        """Write ``outcome.json`` and one PNG per wall into ``folder`` (the planned manual parts ``manual`` drawn,
+        see :meth:`outcome`); returns the numbers and file names."""
         w = self._need_world()
+        out = self.outcome(manual)
         os.makedirs(folder, exist_ok=True)
-        out = self.outcome()
         with w._lock:
-            out["pictures"] = [os.path.basename(p) for p in w.outcome.save_pictures(folder)]
+            out["pictures"] = [os.path.basename(p) for p in w.outcome.save_pictures(folder, manual=manual)]
             out["collision_log"] = list(w.collision_log)
         with open(os.path.join(folder, "outcome.json"), "w") as fh:
             json.dump(out, fh, indent=2, sort_keys=True)

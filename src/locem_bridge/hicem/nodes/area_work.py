@@ -99,6 +99,28 @@ def parse_manual_work(detail: str) -> List[Dict[str, Any]]:
              "height": [float(s.group(4)), float(s.group(5))]} for s in _SECTION.finditer(m.group(2))]
 
 
+_JOINT_PART = re.compile(r"part (\d+) \(along (-?[0-9.]+)\.\.(-?[0-9.]+) m(?:; ([^)]*))?\)")
+
+
+def manual_joint_text(joint_id: str, parts: List[Dict[str, Any]]) -> str:
+    """``manual work on <joint>: part 1 (along 0..0.42 m; near a corner), part 2 (...)``: the stretches of a joint
+    left for taping by hand, along = distance from the joint's start (m); a reason's parentheses are dropped."""
+    return "manual work on %s: %s" % (joint_id, ", ".join(
+        "part %d (along %s..%s m%s)" % (k + 1, _num(m["along"][0]), _num(m["along"][1]),
+                                        ("; " + re.sub(r"[()]", "", str(m["reason"]))) if m.get("reason") else "")
+        for k, m in enumerate(sorted(parts, key=lambda m: float(m["along"][0])))))
+
+
+def parse_manual_joints(detail: str) -> List[Dict[str, Any]]:
+    """The manual parts of a joint a task detail lists (see :func:`manual_joint_text`): ``[{joint, part, along,
+    reason}]`` with part numbered from 1; empty when the detail lists none."""
+    m = _MANUAL.search(detail or "")
+    if not m:
+        return []
+    return [{"joint": m.group(1), "part": int(p.group(1)), "along": [float(p.group(2)), float(p.group(3))],
+             "reason": p.group(4) or ""} for p in _JOINT_PART.finditer(m.group(2))]
+
+
 def _check_work(node: Leaf) -> str:
     work = node.get("work")
     if not work or "/" in work:

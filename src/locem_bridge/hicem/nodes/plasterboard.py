@@ -19,8 +19,8 @@ from typing import Any, Dict, List, Tuple
 from py_trees.common import Status
 
 from ...common.geometry import wrap_angle
-from ...planning.area_pieces import area_pieces
-from ...planning.reach import RobotEnvelope, ToolEnvelope, Wall2D, WallReach, plan_area, wall_reach
+from ...planning.area_pieces import area_pieces, shared_ends
+from ...planning.reach import RobotEnvelope, ToolEnvelope, Wall2D, WallReach, plan_area, plan_joint, wall_reach
 from ..errors import HicemError, PortError
 from ..interfaces import local_name
 from ..node_base import ConditionLeaf, Leaf
@@ -232,6 +232,90 @@ class GetTapeSegments(Leaf):
         return Status.SUCCESS
 
 
+def _reach_of(plan: Dict[str, Any]) -> WallReach:
+    """The :class:`WallReach` GetWallReach's ``plan`` output describes."""
+    return WallReach(plan["wall"], plan["work"], [tuple(iv) for iv in plan["tool"]], [tuple(iv) for iv in plan["base"]],
+                     tuple(plan["t"]), [(tuple(iv), why) for iv, why in plan.get("why", [])])
+
+
+class GetTapePlan(Leaf):
+    DESCRIPTION = ("Plans the taping of a joint line before the robot moves (locem_bridge.planning.reach."
+                   "plan_joint on GetWallReach's plan for taping): a vertical joint is one piece clipped to the "
+                   "height band, taped from the free base pose nearest it within side m along the wall; a "
+                   "horizontal joint is taped on every stretch the tool reaches, in pieces no longer than "
+                   "segment_length, each from the free base pose nearest its middle. Each piece: approach "
+                   "[x, y, theta] at standoff facing the wall (plus yaw_offset, lateral_offset), start and end "
+                   "(straightened within max_tilt, moved off the wall by surface_offset) and the inward normal. "
+                   "The rest (near a corner, out of the band, no free base) is manual work: listed with its "
+                   "extent along the joint and reason, named in the task detail; nothing of it is touched.")
+    PORTS = (
+        LINE_ID,
+        input_port("plan", JSON, None, "", "what taping reaches on the joint's wall (GetWallReach, work taping)"),
+        input_port("side", FLOAT, "{@robot.work.taping.lateral_reach}", "m",
+                   "how far along the wall from the base a vertical joint is taped"),
+        input_port("segment_length", FLOAT, "{@robot.work.taping.segment_length}", "m",
+                   "longest piece of a horizontal joint taped from one base pose (0: a reachable stretch whole)"),
+        input_port("min_manual", FLOAT, "{@cfg.plan.min_manual}", "m", "a vertical joint reaching less than this "
+                   "past the height band is taped to its end; a shorter manual part is not listed"),
+        STANDOFF, LATERAL_OFFSET, YAW_OFFSET, SURFACE_OFFSET, MAX_TILT,
+        input_port("done", STRING, "taped", "", "the task detail's first word when something is taped"),
+        output_port("segments", JSON, None, "", "list of {approach, start, end, normal, length, along: [a, b]}"),
+        output_port("count", INT, None, "", "number of pieces taped by the robot"),
+        output_port("manual", JSON, None, "", "[{along: [a, b], reason}] left to the hand (m from the joint's start)"),
+        output_port("status", STRING, None, "", "'taped' when a piece is taped, 'manual' when none is"),
+        output_port("detail", STRING, None, "", "task detail: 'taped', or followed by '; manual work on <joint>: "
+                    "part 1 (along a..b m; reason)'; 'manual work on ...' alone when nothing is taped"),
+    )
+
+    def on_tick(self) -> Status:
+        from .area_work import manual_joint_text
+        hdh = self.ctx.require("data_handler", self.name)
+        jid = self.get("line_id")
+        j = hdh.feature(jid, "joint")
+        plan = self.get("plan")
+        if not isinstance(plan, dict) or plan.get("work") != "taping" or plan.get("wall") != j["wall"]:
+            raise PortError("%s: plan must be GetWallReach's plan for taping on wall '%s', got %r"
+                            % (self.name, j["wall"], plan if not isinstance(plan, dict) else
+                               {k: plan.get(k) for k in ("wall", "work")}))
+        side, seg = self.get("side"), self.get("segment_length")
+        if side < 0 or seg < 0:
+            raise PortError("%s: side and segment_length must be >= 0 m, got %g, %g" % (self.name, side, seg))
+        _t, nrm = _wall_frame(hdh, j["wall"])
+        nxy = math.hypot(nrm[0], nrm[1])
+        if nxy < 1e-9:
+            return self.fail("wall '%s' normal has no horizontal part" % j["wall"])
+        wall = Wall2D.from_scan(hdh.feature(j["wall"], "wall"))
+        start, end = _joint_ends(j, self.get("max_tilt"))
+        planned = plan_joint(dict(j, start=start, end=end), wall, _reach_of(plan), side, seg,
+                             max(0.0, self.get("min_manual")))
+        nx, ny = nrm[0] / nxy, nrm[1] / nxy
+        d, lat, off = self.get("standoff"), self.get("lateral_offset"), self.get("surface_offset")
+        heading = _facing([nx, ny], self.get("yaw_offset"))
+        u = [float(wall.u[0]), float(wall.u[1])]
+        segments = []
+        for piece in planned.pieces:
+            a, b = piece["from"], piece["to"]
+            foot = a if j["kind"] == "vertical" else [(a[k] + b[k]) / 2.0 for k in range(3)]
+            shift = piece["base"] - float((foot[0] - wall.p0[0]) * u[0] + (foot[1] - wall.p0[1]) * u[1]) + lat
+            segments.append({"approach": [foot[0] + nx * d + u[0] * shift, foot[1] + ny * d + u[1] * shift, heading],
+                             "start": [a[k] + nrm[k] * off for k in range(3)],
+                             "end": [b[k] + nrm[k] * off for k in range(3)], "normal": list(nrm),
+                             "length": math.dist(a, b), "along": list(piece["along"])})
+        manual = [{"along": list(m["along"]), "reason": m["reason"]} for m in planned.manual]
+        detail = self.get("done") if segments else ""
+        if manual:
+            text = manual_joint_text(jid, manual)
+            detail = detail + "; " + text if detail else text
+        self.set("segments", segments)
+        self.set("count", len(segments))
+        self.set("manual", manual)
+        self.set("status", "taped" if segments else "manual")
+        self.set("detail", detail)
+        if manual:
+            self.ctx.log.warning("%s: %s", jid, detail)
+        return Status.SUCCESS
+
+
 class CheckLift(ConditionLeaf):
     DESCRIPTION = ("SUCCESS when the robot's arm rides on a lift (robot fact robot.lift.fitted), FAILURE otherwise: "
                    "trees work in height bands with LIFT on such a robot and skip LIFT (not registered) on others.")
@@ -356,7 +440,12 @@ class GetAreaRaster(Leaf):
                    "height, wall normal) in the map frame. An area with holes (door and window openings with "
                    "their frames, the scan's holes) is first cut into pieces around them "
                    "(locem_bridge.planning.area_pieces): no section covers a hole, the lanes run on past a hole's "
-                   "edge like past the area's ends, and a piece sitting on another starts one band_gap above it.")
+                   "edge like past the area's ends, and a piece sitting on another starts one band_gap above it. "
+                   "An end of the area another stored area of the same wall adjoins (neighbours) is shared: the "
+                   "lanes stop exactly at it, as two sections of one area meet, and run no edge_extension onto the "
+                   "neighbour, whose own lanes coat its side: the two areas lay one coat across their common "
+                   "edge (an end adjoined over part of its height is split there; "
+                   "locem_bridge.planning.area_pieces.shared_ends).")
     PORTS = (
         AREA_ID,
         input_port("section_width", FLOAT, None, "m", "widest strip covered from one base pose"),
@@ -365,6 +454,12 @@ class GetAreaRaster(Leaf):
         input_port("edge_extension", FLOAT, "0.0", "m", "the first and last section of a piece reach this far "
                    "beyond the area's ends and a hole's edges (spray run-in at the outer edges; sections meet "
                    "exactly in between)"),
+        input_port("neighbours", BOOL, "true", "", "true: an end of the area that another stored area of the same "
+                   "wall adjoins (within neighbour_tolerance, over part of the height or all of it) is shared: no "
+                   "edge_extension past it, the neighbour's lanes cover its side; overlapping areas are each "
+                   "worked whole; false: every end of the area is open (each area on its own)"),
+        input_port("neighbour_tolerance", FLOAT, "0.02", "m", "a neighbour whose end lies within this of the "
+                   "area's end (a gap or an overlap) adjoins it; wider apart, both ends are open"),
         input_port("band_height", FLOAT, "0.0", "m", "tallest section (e.g. {@robot.work.spray.band_height}: what "
                    "the arm covers from one lift height); a taller area is cut into bands of equal height, bottom "
                    "first in the first column, then alternating (the next column starts in the band the last one "
@@ -416,8 +511,12 @@ class GetAreaRaster(Leaf):
             holes += [(m["along"][0], m["along"][1], m["height"][0] - a["origin"][2], m["height"][1] - a["origin"][2])
                       for m in manual]
             along0 = float((a["origin"][0] - wall.p0[0]) * wall.u[0] + (a["origin"][1] - wall.p0[1]) * wall.u[1])
+        tol = self.get("neighbour_tolerance")
+        if tol < 0:
+            raise PortError("%s: neighbour_tolerance must be >= 0 m, got %g" % (self.name, tol))
+        shared: Any = shared_ends(a, hdh.features("area"), tol, gap) if self.get("neighbours") else ((), ())
         sections: List[Dict[str, Any]] = []
-        for piece in area_pieces(a["width"], a["height"], holes, gap):
+        for piece in area_pieces(a["width"], a["height"], holes, gap, *shared):
             count = max(1, int(math.ceil(piece.width / sw - 1e-9)))
             w = piece.width / count
             bands = 1
@@ -535,5 +634,5 @@ class CheckArmTransit(ConditionLeaf):
         return Status.FAILURE
 
 
-LIBRARY = (TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments, CheckLift, GetLiftHeight,
+LIBRARY = (TagIdNameToObjectId, GetTapingPosition, GetTapePath, GetTapeSegments, GetTapePlan, CheckLift, GetLiftHeight,
            GetWallReach, GetAreaRaster, PlanTransit, CheckArmTransit)

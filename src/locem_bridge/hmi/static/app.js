@@ -322,6 +322,41 @@
     });
   }
 
+  // ---------------------------------------------------------------- planned manual work (doc.manual)
+  function metres(v) { return typeof v === "number" ? String(Number(v.toFixed(2))) : "?"; }
+  function span(pair) { return pair && pair.length === 2 ? metres(pair[0]) + "–" + metres(pair[1]) + " m" : "–"; }
+  function renderManual(items) {
+    if (!changed("manual", items)) return;
+    var box = $("manual-list");
+    var count = $("manual-count");
+    count.textContent = String(items.length);
+    count.className = "count" + (items.length ? " has" : "");
+    box.textContent = "";
+    if (!items.length) { box.appendChild(el("p", {"class": "muted", "id": "no-manual"}, "no manual work")); return; }
+    var wrap = el("div", {"class": "manual-scroll"});
+    var t = el("table", {"class": "manual", "id": "manual-table"});
+    var hr = el("tr");
+    ["Work", "Area / joint", "Part", "Along", "Height", "Reason"].forEach(function (c) {
+      hr.appendChild(el("th", {}, c));
+    });
+    t.appendChild(hr);
+    items.forEach(function (m) {
+      var tr = el("tr", {"class": "manual-row", "data-kind": m.kind, "data-work": m.work, "data-feature": m.feature,
+                         "data-part": String(m.part), "title": m.text || ""});
+      var work = el("td", {"class": "manual-work"});
+      work.appendChild(el("span", {"class": "work work-" + m.work}, m.work));
+      tr.appendChild(work);
+      tr.appendChild(el("td", {"class": "manual-feature"}, m.feature));
+      tr.appendChild(el("td", {"class": "manual-part"}, (m.kind === "joint" ? "part " : "section ") + m.part));
+      tr.appendChild(el("td", {"class": "manual-along"}, span(m.along)));
+      tr.appendChild(el("td", {"class": "manual-height"}, m.height ? span(m.height) : "–"));
+      tr.appendChild(el("td", {"class": "manual-reason"}, m.reason || "–"));
+      t.appendChild(tr);
+    });
+    wrap.appendChild(t);
+    box.appendChild(wrap);
+  }
+
   function renderEvents(events) {
     if (!changed("events", events)) return;
     var log = $("event-log");
@@ -342,6 +377,7 @@
     renderProcesses(doc.processes || []);
     renderWalls(doc.walls || []);
     renderKpis(doc.kpis || {});
+    renderManual(doc.manual || []);
     renderEvents(doc.events || []);
     var be = $("backend-error");
     be.hidden = !doc.backend_error;
