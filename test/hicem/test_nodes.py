@@ -14,6 +14,7 @@ from locem_bridge.hicem.health import HealthMonitor, ModuleSpec
 from locem_bridge.hicem.interfaces import LocemReply
 from locem_bridge.hicem.node_base import NodeContext
 from locem_bridge.hicem.nodes.generic import format_number, render
+from locem_bridge.hicem.nodes.plasterboard import GetAreaRaster
 from locem_bridge.hicem.operator import OperatorDesk
 from locem_bridge.hicem.xml_loader import TreeLibrary
 
@@ -343,6 +344,8 @@ def test_get_area_raster_keeps_a_pad_its_radius_off_a_frame_and_runs_the_columns
         beside = [s for s in secs if s["origin"][2] == pytest.approx(0.1)]
         left = max(s["origin"][0] + s["width"] for s in beside if s["origin"][0] < 1.45)
         right = min(s["origin"][0] for s in beside if s["origin"][0] > 1.45)
+        # a margin reaches GetAreaRaster.FRAME_REACH (2 mm) over the frame's outer line: the wall up to it is sanded
+        margin = max(0.0, margin - GetAreaRaster.FRAME_REACH) if margin > 0 else 0.0
         assert left == pytest.approx(1.45 - margin) and right == pytest.approx(2.45 + margin)
         # the 0.15 m above the door's frame is no taller than a lane gap: the columns beside it run up to the top
         assert all(s["origin"][2] + s["height"] == pytest.approx(2.0) for s in beside)
