@@ -1,16 +1,44 @@
-"""Shared pytest setup: make ``src/`` importable when the catkin workspace is not sourced."""
+"""Shared pytest setup: make ``src/`` importable when the catkin workspace is not sourced; the ``--long`` option."""
 import os
 import sys
+
+import pytest
 
 _SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 if _SRC not in sys.path:
     sys.path.insert(0, _SRC)
 
 
+# -- --long: the tests marked long ----------------------------------------------------------------------------------
+# A test marked ``@pytest.mark.long`` (e.g. the whole job on more generated bays, test/ros/test_rostest_suites.py)
+# takes minutes and stays out of CI: it is skipped, with a reason starting with "long:", unless pytest is given
+# --long (``bash tools/test.sh --long`` runs everything).
+LONG_REASON = "long: takes minutes; run with --long (bash tools/test.sh --long)"
+
+
+def pytest_addoption(parser):
+    parser.addoption("--long", action="store_true", default=False,
+                     help="also run the tests marked long (minutes each; skipped otherwise)")
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "long: takes minutes; skipped unless pytest is given --long")
+
+
+def pytest_collection_modifyitems(config, items):
+    if config.getoption("--long"):
+        return
+    skip = pytest.mark.skip(reason=LONG_REASON)
+    for item in items:
+        if item.get_closest_marker("long") is not None:
+            item.add_marker(skip)
+
+
 # -- no silent skips under the README's test command ------------------------------------------------------------
 # tools/test.sh sets LOCEM_NO_SKIP=1: there everything is installed, so a skipped test (a client library that does
 # not import, a workspace that is not sourced) means the setup is broken, and the run must not look green. A skip
-# stays allowed only where the platform cannot provide the part (a skip reason starting with "platform:").
+# stays allowed only where the platform cannot provide the part (a skip reason starting with "platform:") and for
+# a test marked long without --long (a reason starting with "long:", above).
 _STRICT = os.environ.get("LOCEM_NO_SKIP") == "1"
 _refused_skips = []
 
@@ -25,7 +53,7 @@ def _skip_reason(report):
 def _note_skip(report):
     if _STRICT and report.skipped and not getattr(report, "wasxfail", None):
         reason = _skip_reason(report)
-        if not reason.replace("Skipped: ", "").startswith("platform:"):
+        if not reason.replace("Skipped: ", "").startswith(("platform:", "long:")):
             _refused_skips.append("%s: %s" % (report.nodeid or "<collection>", reason))
 
 

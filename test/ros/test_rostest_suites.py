@@ -2,6 +2,11 @@
 
 The suites need the catkin workspace built and sourced, which ``tools/test.sh`` does; run through plain pytest
 without it they are skipped with that reason.
+
+``job_bays.test`` needs a site and is not in the plain glob: :func:`test_job_bays` generates the bay of each of its
+seeds (:mod:`locem_bridge.sim.bays`) into the test's own folder and runs the suite on it with ``site:=FILE``. One
+seed runs everywhere (:data:`CI_BAY_SEED`, a small bay, the cheapest measured); the others are marked ``long``
+(``bash tools/test.sh --long``).
 """
 import glob
 import os
@@ -12,17 +17,40 @@ import subprocess
 import pytest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-SUITES = sorted(glob.glob(os.path.join(HERE, "*.test")))
+BAY_SUITE = "job_bays.test"                 # needs site:=, run by test_job_bays
+SUITES = sorted(s for s in glob.glob(os.path.join(HERE, "*.test")) if os.path.basename(s) != BAY_SUITE)
 READY = bool(os.environ.get("LOCEM_REPO")) and shutil.which("rostest") is not None
+
+# Seeds of locem_bridge.sim.bays for job_bays, with the generator's summary of each (python3 -m locem_bridge.sim.bays
+# --seed N). CI runs the cheapest small bay measured (the least work area, 4.5 m2, and joint length, 5.3 m; its job
+# ~3.5 min at time scale 5); the long ones are diverse: doors, windows, horizontal joints, corners under 90 and over
+# 120 degrees, adjacent areas (shared edges), 2-5 plasterboard walls, a room closed by plasterboard alone.
+#   21: 2 plasterboard walls 2.44/1.65 m, height 2.03 m, 2 windows, 4 joints (4 vertical), 5 areas, corner 93 deg
+CI_BAY_SEED = 21
+#   137: 2 walls 1.58/2.47 m, height 2.34 m, a door and a window, 6 joints (2 horizontal), 3 areas, corner 121 deg
+#   41: 2 walls 3.70/2.16 m, height 2.33 m, a door and a window, 9 joints (2 horizontal), 3 areas, corner 61 deg
+#   99: 3 walls 1.41/1.27/3.18 m, height 2.10 m, a door and a window, 8 joints (1 horizontal), 5 areas, 96/129 deg
+#   125: 4 walls 2.06/2.82/2.84/1.02 m, height 2.30 m, a door and a window, 12 joints (4 horizontal), 9 areas,
+#        corners 77/123/84 deg
+#   142: 5 walls 1.30/1.54/3.07/1.74/1.05 m, height 2.23 m, a door and a window, 13 joints (6 horizontal), 7 areas,
+#        corners 148/147/130/117 deg
+#   29: 4 walls 2.53/2.03/2.25/2.65 m closing the room (no concrete), height 2.49 m, a door and a window, 12 joints
+#       (4 horizontal), 8 areas, corners 74/124/68/94 deg
+LONG_BAY_SEEDS = (137, 41, 99, 125, 142, 29)
+# wall seconds rostest gives one bay's whole job and its checks (job_bays.test time_limit): the CI bay ends in ~4 min,
+# the largest long one is about four times its work
+BAY_TIME_LIMIT = {CI_BAY_SEED: 1200}
+BAY_TIME_LIMIT_LONG = 3000
 
 pytestmark = [pytest.mark.ros, pytest.mark.skipif(not READY, reason="needs the environment of tools/test.sh")]
 
 
-@pytest.mark.parametrize("suite", SUITES, ids=[os.path.basename(s)[:-5] for s in SUITES])
-def test_rostest_suite(suite, tmp_path):
+def run_rostest(suite, tmp_path, args=(), timeout=600):
+    """``rostest locem_bridge SUITE ARGS...`` with ROS_HOME and the logs in ``tmp_path``; fails with the output
+    unless rostest's summary says every test of the suite passed."""
     env = dict(os.environ, ROS_HOME=str(tmp_path / "ros_home"), ROS_LOG_DIR=str(tmp_path / "log"))
-    done = subprocess.run(["rostest", "locem_bridge", os.path.basename(suite)], cwd=HERE, env=env,
-                          capture_output=True, text=True, timeout=600)
+    done = subprocess.run(["rostest", "locem_bridge", suite] + list(args), cwd=HERE, env=env,
+                          capture_output=True, text=True, timeout=timeout)
     output = re.sub(r"\x1b\[[0-9;]*m", "", done.stdout + done.stderr)
     for report in sorted(glob.glob(str(tmp_path / "ros_home" / "test_results" / "**" / "*.xml"), recursive=True)):
         with open(report, encoding="utf-8", errors="replace") as handle:
@@ -34,3 +62,21 @@ def test_rostest_suite(suite, tmp_path):
         int(summary.group(4))
     assert tests > 0, "suite ran no test:\n" + output[-4000:]
     assert result == "SUCCESS" and errors == 0 and failures == 0 and done.returncode == 0, output[-8000:]
+
+
+@pytest.mark.parametrize("suite", SUITES, ids=[os.path.basename(s)[:-5] for s in SUITES])
+def test_rostest_suite(suite, tmp_path):
+    run_rostest(os.path.basename(suite), tmp_path)
+
+
+@pytest.mark.parametrize("seed", [CI_BAY_SEED] + [pytest.param(s, marks=pytest.mark.long) for s in LONG_BAY_SEEDS],
+                         ids=lambda seed: "seed_%d" % seed)
+def test_job_bays(seed, tmp_path):
+    """The whole job on the generated bay of ``seed`` (job_bays.test, job_bays_rostest.py)."""
+    from locem_bridge.sim import bays
+    doc = bays.generate_bay(seed)
+    site = bays.write_bay(doc, str(tmp_path))
+    print(bays.summary(doc))
+    limit = BAY_TIME_LIMIT.get(seed, BAY_TIME_LIMIT_LONG)
+    run_rostest(BAY_SUITE, tmp_path, ["site:=" + site, "time_limit:=%d" % limit, "job_timeout:=%d" % (limit - 200)],
+                timeout=limit + 300)

@@ -8,6 +8,7 @@ import random
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import yaml
 
@@ -147,19 +148,46 @@ def test_room_is_closed_and_no_two_walls_cross(generated):
     assert concrete_closed > 100 and plaster_closed > 0
 
 
-def test_robot_starts_inside_at_least_0p9_m_from_every_wall_facing_the_first_wall(generated):
+def _room_clearance(p, walls):
+    return min(_segment_distance(p, w["p0"], w["p1"]) for w in walls)
+
+
+def _farthest_on_grid(walls):
+    """The largest distance to the nearest wall over points inside the room (walls counter-clockwise, the room on
+    their left): a 5 cm grid over the room, then a 2 mm grid around its best point (inside a convex room the
+    distance has one summit)."""
+    p0 = np.array([w["p0"] for w in walls], dtype=float)
+    p1 = np.array([w["p1"] for w in walls], dtype=float)
+    d = (p1 - p0)[None]
+
+    def best(lo, hi, step):
+        gx, gy = np.meshgrid(np.arange(lo[0], hi[0] + step, step), np.arange(lo[1], hi[1] + step, step))
+        pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        rel = pts[:, None, :] - p0[None]
+        inside = np.all(d[..., 0] * rel[..., 1] - d[..., 1] * rel[..., 0] > 0.0, axis=1)
+        k = np.clip((rel * d).sum(axis=2) / (d * d).sum(axis=2), 0.0, 1.0)
+        dist = np.where(inside, np.linalg.norm(rel - k[..., None] * d, axis=2).min(axis=1), -1.0)
+        return pts[int(np.argmax(dist))], float(dist.max())
+
+    p, _ = best(np.minimum(p0, p1).min(axis=0), np.maximum(p0, p1).max(axis=0), 0.05)
+    return best(p - 0.06, p + 0.06, 0.002)[1]
+
+
+def test_robot_starts_at_home_the_rooms_point_farthest_from_every_wall_facing_the_first_wall(generated):
     for seed, doc, site in generated:
         walls = doc["site"]["walls"]
         x, y, yaw = doc["site"]["robot_start"]
+        assert (x, y) == bays.HOME_XY, seed
+        assert doc["site"]["room"]["inside"] == [x, y], seed
         assert _inside((x, y), walls), seed
-        assert min(_segment_distance((x, y), w["p0"], w["p1"]) for w in walls) >= 0.9, seed
+        clearance = _room_clearance((x, y), walls)
+        assert clearance >= bays.ROBOT_CLEARANCE, (seed, clearance)
+        # no point of the room is farther from its walls (a search over the room; vertices rounded to mm)
+        assert _farthest_on_grid(walls) <= clearance + 0.002, seed
         first = _plaster(doc)[0]
         mid = ((first["p0"][0] + first["p1"][0]) / 2.0, (first["p0"][1] + first["p1"][1]) / 2.0)
         err = math.atan2(mid[1] - y, mid[0] - x) - yaw
         assert abs(math.atan2(math.sin(err), math.cos(err))) < 1e-3, seed
-        inside = doc["site"]["room"]["inside"]
-        assert _inside(inside, walls)
-        assert min(_segment_distance(inside, w["p0"], w["p1"]) for w in walls) >= 1.0 - EPS, seed
         for wall in site.walls:                                     # every surface faces the robot
             assert float(wall.n[:2] @ ([x, y] - wall.p0)) > 0.0, (seed, wall.id)
         # the floor (centred on the mean wall midpoint, locem_bridge.sim.world) holds every corner
@@ -167,6 +195,109 @@ def test_robot_starts_inside_at_least_0p9_m_from_every_wall_facing_the_first_wal
         cy = sum((w["p0"][1] + w["p1"][1]) / 2.0 for w in walls) / len(walls)
         fx, fy = doc["site"]["room"]["floor_size"]
         assert all(abs(w["p0"][0] - cx) < fx / 2.0 and abs(w["p0"][1] - cy) < fy / 2.0 for w in walls), seed
+
+
+def test_home_is_where_the_job_changes_tools_and_turns():
+    """HOME_XY is the tool-change location and transit point of the shipped HICEM parameters and the base's named
+    pose home: the place where the robot makes its arm motions standing still."""
+    with open(os.path.join(os.path.dirname(SRC), "config", "hicem", "plasterboard.yaml")) as fh:
+        site_cfg = yaml.safe_load(fh)["site"]
+    assert site_cfg["tool_change_location"] == "home"
+    assert tuple(site_cfg["locations"]["home"][:2]) == bays.HOME_XY
+    with open(os.path.join(os.path.dirname(SRC), "launch", "locem_robot.launch")) as fh:
+        launch = fh.read()
+    assert 'default="{home: [%g, %g,' % bays.HOME_XY in launch
+
+
+# -- the room the robot needs for its arm motions at home, measured in the simulated world ------------------------
+ARM_MOVES = (("home", "wall_ready"), ("home", "tool_change"), ("wall_ready", "tool_change"))
+TOOLS = (None, "taping_tool", "spray_gun", "sander")
+
+
+def _joint_move(a, b, steps=20):
+    return [[qa + (qb - qa) * k / steps for qa, qb in zip(a, b)] for k in range(steps + 1)]
+
+
+def _stationary_motions(robot):
+    poses = robot["robot"]["arm"]["named_poses"]
+    return [q for a, b in ARM_MOVES for q in _joint_move(poses[a], poses[b])]
+
+
+@pytest.fixture(scope="module")
+def robot_cfg():
+    from locem_bridge.sim.config import load_robot
+    return load_robot()
+
+
+def _touches_at_any_heading(world, x, y, motions, clearance, headings=range(0, 360, 10)):
+    """``(tool, heading in degrees, [(part, wall), ...])`` of the first pose that comes within ``clearance`` of a
+    wall, or None."""
+    for tool in TOOLS:
+        if world.mounted_tool is not None:
+            world.remove_tool()
+        if tool is not None:
+            world.mount_tool(tool)
+        for deg in headings:
+            world.set_base_pose(x, y, math.radians(deg))
+            for q in motions:
+                hit = world.touching(q, clearance)
+                if hit:
+                    return tool, deg, hit
+    return None
+
+
+@pytest.mark.slow
+def test_stationary_radius_is_what_the_arm_sweeps_at_home_with_any_tool_at_any_heading(robot_cfg):
+    """A concrete wall 2 m in front of the base: at every heading, with no tool or any tool, the joint moves between
+    home, wall_ready and tool_change keep STATIONARY_RADIUS from the base's centre (nothing within 2 m -
+    STATIONARY_RADIUS of the wall), and the radius is not oversized (1.5 cm less and something touches)."""
+    from locem_bridge.sim.world import World
+    doc = validate_site({"site": {"name": "probe", "room": {"inside": [0.0, 0.0]}, "robot_start": [0.0, 0.0, 0.0],
+                                  "walls": [{"id": "far", "material": "concrete", "p0": [2.0, -6.0], "p1": [2.0, 6.0],
+                                             "height": 2.5, "thickness": 0.2}]}})
+    world = World(doc, robot_cfg, gui=False)
+    try:
+        motions = _stationary_motions(robot_cfg)
+        assert _touches_at_any_heading(world, 0.0, 0.0, motions, 2.0 - bays.STATIONARY_RADIUS) is None
+        assert _touches_at_any_heading(world, 0.0, 0.0, motions, 2.0 - bays.STATIONARY_RADIUS + 0.015) is not None
+    finally:
+        world.close()
+    assert bays.ROBOT_CLEARANCE == pytest.approx(bays.STATIONARY_RADIUS + bays.POSITION_MARGIN)
+    assert bays.POSITION_MARGIN >= 0.05
+
+
+# the bay of seed 4 as the generator drew it before the rule (issue 19): its largest free circle is ~1.0 m and the
+# robot's home (1.4, 1.4) was 0.64 m from wall_3; at the first GET_TOOL the arm's HOME met wall_3 (protective stop)
+OLD_BAY_4 = [([0.0, 0.0], [2.44, 0.0]), ([2.44, 0.0], [2.332, 1.275]), ([2.332, 1.275], [0.573, 3.418]),
+             ([0.573, 3.418], [0.0, 0.0])]
+
+
+@pytest.mark.slow
+def test_generated_bays_leave_the_arm_room_at_home_and_the_old_seed_4_did_not(generated, robot_cfg):
+    from locem_bridge.sim.world import World
+    motions = _stationary_motions(robot_cfg)[::3]
+    walls = [{"id": "wall_%d" % (k + 1), "material": "concrete", "p0": p0, "p1": p1, "height": 2.06, "thickness": 0.2}
+             for k, (p0, p1) in enumerate(OLD_BAY_4)]
+    old = validate_site({"site": {"name": "old_bay_4", "room": {"inside": [1.2, 1.0]}, "robot_start": [1.4, 1.4, 0.0],
+                                  "walls": walls}})
+    world = World(old, robot_cfg, gui=False)
+    try:
+        hit = _touches_at_any_heading(world, 1.4, 1.4, motions, 0.0, headings=(45,))
+        assert hit is not None and ("arm", "wall_3") in hit[2], hit
+    finally:
+        world.close()
+    # the rule: such a room is drawn again; the generated rooms with the least room at home still touch nothing
+    old_walls = [{"p0": p0, "p1": p1} for p0, p1 in OLD_BAY_4]
+    assert 0.95 < _farthest_on_grid(old_walls) < bays.ROBOT_CLEARANCE
+    tightest = sorted(generated, key=lambda g: _room_clearance(bays.HOME_XY, g[1]["site"]["walls"]))[:3]
+    for seed, doc, _site in tightest:
+        world = World(validate_site(copy.deepcopy(doc)), robot_cfg, gui=False)
+        try:
+            hit = _touches_at_any_heading(world, bays.HOME_XY[0], bays.HOME_XY[1], motions, 0.02,
+                                          headings=range(0, 360, 15))
+            assert hit is None, (seed, hit)
+        finally:
+            world.close()
 
 
 def test_openings_fit_with_frames_and_margins_and_both_kinds_occur(generated):

@@ -20,10 +20,32 @@ keyword argument of :func:`generate_bay`):
 * 1-3 work areas per plasterboard wall, side by side along ``s`` from the skirting to the top, each at least
   0.3 m wide: neighbours share an edge exactly or leave a 0.05-0.3 m gap; at about 70 % of the wall ends the
   ~0.3 m next to the (inside) corner is left out;
-* ``room.inside`` at the centre of the largest circle inside the room (at least 1.0 m from every wall),
-  ``room.floor_size`` covering the room with 1 m to spare, ``robot_start`` at least 0.9 m from every wall,
-  facing the middle of the first plasterboard wall;
+* a room the robot can work in (the rule below): the room is placed so that its point farthest from every wall
+  (the centre of the largest circle inside it) lies at :data:`HOME_XY`, ``robot_start`` and ``room.inside`` are
+  that point (the start facing the middle of the first plasterboard wall), and a draw whose farthest point is
+  nearer than ``robot_clearance`` to a wall is drawn again; ``room.floor_size`` covers the room with 1 m to spare;
 * a ``simulation`` section with the defaults of ``config/sites/default.yaml`` and ``seed`` = the bay's seed.
+
+The rule that makes every bay workable. The robot does some of its arm motions standing still at one place of
+the room: GET_TOOL drives to the tool-change location, turns there and brings the arm HOME for the operator to
+mount the next tool (``trees/GET_TOOL.xml``), and the first wall task after it starts there with WALL_READY (home
+to wall_ready); PlanTransit makes there the turns too large to make next to a wall (``trees/common.xml``); GO_HOME
+parks there. That place is not a key of
+the site file: it is ``cfg.site.locations.home`` of the HICEM parameters (``config/hicem/plasterboard.yaml``, the
+transit point and ``tool_change_location``) and the base's named pose ``home`` (``launch/locem_robot.launch``), the
+same (1.4, 1.4) for every site, which is :data:`HOME_XY`. Around it the robot sweeps, at any heading, the arm's
+joint moves between the named poses ``home``, ``wall_ready`` and ``tool_change`` of ``robot.arm.named_poses``
+with no tool or any of its tools on the flange. Measured in the simulated world (:class:`~locem_bridge.sim.world.
+World`, arm URDF, chassis, pedestal and tool bodies; every heading in 5 degree steps, each joint move in 30
+steps; ``test/sim/test_bays.py`` checks it again in 10 degree and 20 step samples), on the RB-KAIROS+ / UR10e of
+``config/robots/rbkairos_ur10e.yaml`` nothing comes farther than :data:`STATIONARY_RADIUS` (1.04 m: the sander on
+the way between ``home`` and ``wall_ready``; the arm at ``home`` alone 0.95 m, the chassis' corners 0.62 m) from the
+base's centre. The default ``robot_clearance`` is that plus :data:`POSITION_MARGIN` (the GOTO position tolerance,
+localisation and odometry error, the sampling of the measurement): 1.10 m. So every generated room holds a circle of
+``robot_clearance`` around :data:`HOME_XY` (and its start), and a draw whose largest circle is smaller is drawn
+again (from a seed derived from ``seed``, as for any draw that gives no room): the smallest rooms of the ranges are
+left out, none is shrunk into a room where the robot could not change tools. Another robot needs its own
+``robot_clearance`` (measured the same way).
 
 Command line: ``python3 -m locem_bridge.sim.bays --seed N [--count K] [--out DIR]`` writes ``bay_<seed>.yaml``
 for seeds N..N+K-1 and prints one line per bay (walls, openings, joints, areas, corner angles).
@@ -62,7 +84,18 @@ SIMULATION_DEFAULTS: Dict[str, Any] = {
 PLASTERBOARD_THICKNESS = 0.0125     # m
 CONCRETE_THICKNESS = 0.2            # m
 LINTEL = 0.05                       # m of wall kept above an opening's frame
-ROOM_MARGIN = 0.1                   # m, the room's largest circle is this much wider than the robot clearance
+#: (x, y) in map of the base's home: the tool-change location and transit point of the HICEM parameters
+#: (``cfg.site.locations.home`` of config/hicem/plasterboard.yaml) and the named base pose ``home`` of
+#: launch/locem_robot.launch; every generated room has its point farthest from the walls (and the start) here
+HOME_XY: Point = (1.4, 1.4)
+#: m, farthest any part of the robot (chassis, pedestal, arm, the mounted tool) comes from the base's centre while
+#: the arm moves between its named poses home, wall_ready and tool_change, at any heading (module docstring)
+STATIONARY_RADIUS = 1.04
+#: m added to STATIONARY_RADIUS for the default robot_clearance: GOTO's position tolerance (0.01 m), localisation and
+#: odometry error and the measurement's sampling, with room to spare
+POSITION_MARGIN = 0.06
+#: m, the default robot_clearance of generate_bay: every wall at least this far from HOME_XY
+ROBOT_CLEARANCE = round(STATIONARY_RADIUS + POSITION_MARGIN, 3)
 MAX_ATTEMPTS = 500                  # candidates (derived seeds) before giving up on a parameter set
 
 
@@ -226,12 +259,25 @@ def _chain(rng: random.Random, prm: _Params, n: int, heading: float, turn_budget
 
 
 def _settle(poly: Sequence[Point], plaster_edges: int, closed: bool, prm: _Params) -> Optional[List[Point]]:
-    """The polygon moved so its bounding box starts at the origin, vertices rounded to mm, if it is a room: every
-    corner a left turn within its range (plasterboard-plasterboard corners: ``corner_angle``, any other:
-    ``concrete_corner_angle``), wall lengths within their ranges, turning once around, no walls crossing, and
-    space for the robot; else ``None``. Edges ``0 .. plaster_edges-1`` are plasterboard (all when ``closed``)."""
-    x0, y0 = min(p[0] for p in poly), min(p[1] for p in poly)
-    pts = [(round(p[0] - x0, 3) + 0.0, round(p[1] - y0, 3) + 0.0) for p in poly]
+    """The polygon moved so the centre of its largest inside circle lies at :data:`HOME_XY`, vertices rounded to mm,
+    if it is a room: every corner a left turn within its range (plasterboard-plasterboard corners:
+    ``corner_angle``, any other: ``concrete_corner_angle``), wall lengths within their ranges, turning once around,
+    no walls crossing, and every wall at least ``robot_clearance`` from :data:`HOME_XY` (the robot's start and
+    home); else ``None``. Edges ``0 .. plaster_edges-1`` are plasterboard (all when ``closed``)."""
+    if not _is_room(poly, plaster_edges, closed, prm):
+        return None                                     # checked before the move: the circle needs a convex room
+    (cx, cy), _ = _largest_circle(poly)
+    dx, dy = HOME_XY[0] - cx, HOME_XY[1] - cy
+    pts = [(round(p[0] + dx, 3) + 0.0, round(p[1] + dy, 3) + 0.0) for p in poly]
+    if not _is_room(pts, plaster_edges, closed, prm):  # again after rounding to mm
+        return None
+    if _clearance(HOME_XY, _inward_normals(pts)) < prm.robot_clearance:
+        return None
+    return pts
+
+
+def _is_room(pts: Sequence[Point], plaster_edges: int, closed: bool, prm: _Params) -> bool:
+    """The corner, length, turn and crossing conditions of :func:`_settle` on ``pts`` as they are."""
     m = len(pts)
     plaster = [i < plaster_edges for i in range(m)]
     total = 0.0
@@ -240,19 +286,15 @@ def _settle(poly: Sequence[Point], plaster_edges: int, closed: bool, prm: _Param
         length = math.hypot(*_sub(b, a))
         lo, hi = prm.wall_length if plaster[i] else prm.concrete_length
         if not lo <= length <= hi:
-            return None
+            return False
         prev = _sub(a, pts[i - 1])
         turn = _turn(prev, _sub(b, a))
         corner_plaster = plaster[i] and plaster[i - 1] and (i > 0 or closed)
         lo, hi = prm.turn_range(corner_plaster)
         if not lo <= turn <= hi:
-            return None
+            return False
         total += turn
-    if abs(total - 360.0) > 1e-6 or walls_cross([(pts[i], pts[(i + 1) % m]) for i in range(m)]):
-        return None
-    if _largest_circle(pts)[1] < prm.robot_clearance + ROOM_MARGIN:
-        return None
-    return pts
+    return abs(total - 360.0) <= 1e-6 and not walls_cross([(pts[i], pts[(i + 1) % m]) for i in range(m)])
 
 
 def _room(rng: random.Random, prm: _Params, n: int, closed: bool) -> Optional[Tuple[List[Point], int]]:
@@ -422,16 +464,10 @@ def _attempt(rng: random.Random, prm: _Params, seed: int, n: int, closed: bool) 
         if openings:
             wall["openings"] = openings
         walls.append(wall)
-    centre, _ = _largest_circle(pts)
-    edges = _inward_normals(pts)
-    need = prm.robot_clearance + 0.02                   # mm rounding of the pose keeps it at least the clearance
+    # the start is the room's point farthest from its walls, where _settle put it: the home of the robot
+    x, y = HOME_XY
     first_mid = ((pts[0][0] + pts[1][0]) / 2.0, (pts[0][1] + pts[1][1]) / 2.0)
     xs, ys = [p[0] for p in pts], [p[1] for p in pts]
-    spots = [(rng.uniform(min(xs), max(xs)), rng.uniform(min(ys), max(ys))) for _ in range(300)]
-    spots = [p for p in spots if _clearance(p, edges) >= need] or [centre]
-    nearest = min(math.hypot(*_sub(p, first_mid)) for p in spots)
-    near = [p for p in spots if math.hypot(*_sub(p, first_mid)) <= nearest + 0.5]
-    x, y = near[rng.randrange(len(near))]
     yaw = math.atan2(first_mid[1] - y, first_mid[0] - x)
     # the floor is centred on the mean of the wall midpoints (locem_bridge.sim.world)
     mids = [((pts[i][0] + pts[(i + 1) % m][0]) / 2.0, (pts[i][1] + pts[(i + 1) % m][1]) / 2.0) for i in range(m)]
@@ -443,7 +479,7 @@ def _attempt(rng: random.Random, prm: _Params, seed: int, n: int, closed: bool) 
     return {
         "site": {
             "name": "bay_%d" % seed,
-            "room": {"inside": [round(centre[0], 3), round(centre[1], 3)], "floor_size": floor},
+            "room": {"inside": [round(x, 3), round(y, 3)], "floor_size": floor},
             "walls": walls,
             "robot_start": [round(x, 3), round(y, 3), round(yaw, 4)],
         },
@@ -459,7 +495,7 @@ def generate_bay(seed: int, *, walls: Tuple[int, int] = (2, 5), wall_length: Ran
                  opening_margin: float = 0.15, panel_widths: Sequence[float] = (0.6, 0.9, 1.2),
                  joint_width: float = 0.05, horizontal_joint: float = 1.2, areas_per_wall: Tuple[int, int] = (1, 3),
                  min_area_width: float = 0.3, corner_margin: float = 0.3, corner_margin_probability: float = 0.7,
-                 robot_clearance: float = 0.9, closed_probability: float = 0.2,
+                 robot_clearance: float = ROBOT_CLEARANCE, closed_probability: float = 0.2,
                  concrete_length: Range = (0.5, 6.0),
                  concrete_corner_angle: Range = (45.0, 170.0)) -> Dict[str, Any]:
     """A site document (the dictionary a site YAML file parses to) of a random plasterboard bay, the same for the
@@ -472,10 +508,12 @@ def generate_bay(seed: int, *, walls: Tuple[int, int] = (2, 5), wall_length: Ran
     with a ``frame``, ``opening_margin`` of wall around their frames; vertical joints every one of
     ``panel_widths`` (``joint_width`` wide), sometimes a horizontal joint at ``horizontal_joint`` or under a
     window; ``areas_per_wall`` areas at least ``min_area_width`` wide, leaving ~``corner_margin`` at a corner
-    with probability ``corner_margin_probability``; the robot ``robot_clearance`` from every wall; with
+    with probability ``corner_margin_probability``; the room's farthest point from its walls (moved to
+    :data:`HOME_XY`, the robot's start and home) ``robot_clearance`` from every wall (the module docstring: the
+    default is what the RB-KAIROS+ / UR10e needs for its arm motions there); with
     probability ``closed_probability`` (4 or more walls) the plasterboard walls alone close the room, else
     concrete walls ``concrete_length`` long at ``concrete_corner_angle`` corners do. A draw that gives no valid
-    room (walls crossing, corners or lengths out of range after rounding, too small for the robot) is
+    room (walls crossing, corners or lengths out of range after rounding, too small for the robot's home) is
     replaced by a draw from a seed derived from ``seed``; ``ValueError`` if none of ``MAX_ATTEMPTS`` is one.
     """
     prm = _Params(walls=walls, wall_length=wall_length, corner_angle=corner_angle, wall_height=wall_height,
