@@ -39,7 +39,7 @@ def test_the_shipped_robot_gives_the_numbers_the_trees_used_before():
     assert work["spray"]["section_width"] == work["sand"]["section_width"] == 0.60
     assert (work["spray"]["lane_spacing"], work["sand"]["lane_spacing"]) == (0.15, 0.18)
     assert work["spray"]["tool_standoff"] == 0.30 and work["sand"]["tool_standoff"] == 0.0
-    assert work["taping"]["z_range"] == [0.10, 2.15] and work["taping"]["segment_length"] == 1.20
+    assert work["taping"]["z_range"] == [0.10, 2.00] and work["taping"]["segment_length"] == 1.20
     assert "lane_spacing" not in work["taping"]           # no tuning for it: no lanes
     assert facts.reach == 1.30 and facts.tcp_bound == 1.52
 

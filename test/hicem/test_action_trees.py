@@ -141,7 +141,7 @@ def test_validate_tape_line_answer_becomes_the_detail():
     st, locem, bb, *_ = run("VALIDATE_TAPE_LINE", answers={"validate_line": "invalid"}, line="wall_1_joint_1")
     assert st == Status.SUCCESS and bb.get("task_detail") == "invalid"
     assert locem.sent == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854", "GOTO 1.4 1.4 1.570796",
-                          "GOTO 1.2 1.95 1.570796", "APPLY_TAPE_START 1.2 3 0.1 1.2 3 2.15 0 -1 0"]
+                          "GOTO 1.2 1.95 1.570796", "APPLY_TAPE_START 1.2 3 0.1 1.2 3 2 0 -1 0"]
 
 
 def test_go_home_to_a_named_location_and_unknown_location():

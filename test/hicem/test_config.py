@@ -21,7 +21,7 @@ def test_shipped_parameters_and_blackboard_entries():
     assert bb["robot.work.spray.section_width"] == bb["robot.work.sand.section_width"] == 0.60
     assert (bb["robot.work.spray.lane_spacing"], bb["robot.work.sand.lane_spacing"]) == (0.15, 0.18)
     assert bb["robot.work.spray.tool_standoff"] == 0.30
-    assert bb["robot.work.taping.z_range"] == [0.10, 2.15] and bb["robot.work.taping.segment_length"] == 1.20
+    assert bb["robot.work.taping.z_range"] == [0.10, 2.00] and bb["robot.work.taping.segment_length"] == 1.20
     assert bb["robot.work.spray"]["tool"] == "spray_gun"
     assert bb["cfg.site.locations"]["home"] == bb["cfg.site.locations.home"]
     assert flatten({"a": {"b": 1}}) == {"cfg.a": {"b": 1}, "cfg.a.b": 1}

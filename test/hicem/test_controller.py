@@ -32,7 +32,7 @@ def system(tmp_path):
 
 def test_taping_process_runs_to_the_end_with_numbers_from_the_scan(system):
     assert system.ctrl.run_process(P) == "ended"
-    # the test site's vertical joints run 0..2.5 m, the arm's band is 0.10..2.15 m: their ends are planned manual
+    # the test site's vertical joints run 0..2.5 m, the taping band is 0.10..2.00 m: their ends are planned manual
     # work, named in the detail after "taped"
     done = [(a, st, d.split(";")[0]) for a, _t, st, d, _p in system.pemkre.executed()]
     assert done == [("SCAN", "succeeded", ""), ("GET_TOOL", "succeeded", "taping_tool")] + [
@@ -41,7 +41,7 @@ def test_taping_process_runs_to_the_end_with_numbers_from_the_scan(system):
     sent = system.locem.sent
     assert sent[:6] == ["SCAN", "WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0.7854", "HOME", "MOUNT_TOOL taping_tool"]
     assert "GOTO 1.2 1.95 1.570796" in sent  # 1.05 m in front of wall_1_joint_1, facing the wall
-    assert "APPLY_TAPE 1.2 3 0.1 1.2 3 2.15 0 -1 0 speed=0.15" in sent     # clipped to the arm's band
+    assert "APPLY_TAPE 1.2 3 0.1 1.2 3 2 0 -1 0 speed=0.15" in sent     # clipped to the taping band
     # home is reached by driving out keeping the heading and turning there, not next to the last wall
     assert sent[-5:] == ["WALL_READY", "GET_POSE", "GOTO 1.4 1.4 0", "GOTO 1.4 1.4 0.7854", "HOME"]
     assert system.locem.running() == []

@@ -48,7 +48,7 @@ def test_kill_9_mid_tape_line_then_resume(tmp_path):
     tasks = [s[1] for s in executed]
     assert len(tasks) == len(set(tasks)), "a task was reported twice"
     tape = [(s[4]["line"], s[2], s[3]) for s in executed if s[0] == "TAPE_LINE"]
-    # the test site's joints run 0..2.5 m, the arm's band is 0.10..2.15 m: the ends are planned manual work
+    # the test site's joints run 0..2.5 m, the taping band is 0.10..2.00 m: the ends are planned manual work
     assert tape[0][:2] == ("wall_1_joint_1", "succeeded") and tape[0][2].startswith("taped; manual work on")
     assert tape[1] == ("wall_1_joint_2", "succeeded", "")  # finished by hand via RESUME_TAPE_LINE
     assert tape[2] == ("wall_2_joint_1", "succeeded", "taped")

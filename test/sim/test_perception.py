@@ -15,7 +15,7 @@ def test_scan_facing_wall_1_returns_its_joints_exactly_without_noise(site_cfg, r
     sc = WallScanner(site, robot_cfg["robot"]["scanner"], position_noise=0.0)
     out = sc.scan([2.4, 1.6, math.pi / 2], stamp=3.0)
     assert out["stamp"] == 3.0
-    assert set(out) == {"stamp", "walls", "joints", "areas"}
+    assert set(out) == {"stamp", "walls", "joints", "areas", "obstacles"}
     ids = {j["id"] for j in out["joints"]}
     assert {"wall_1_joint_1", "wall_1_joint_2", "wall_1_joint_3", "wall_1_joint_4"} <= ids
     truth = {j.id: j for j in site.joints}
@@ -134,3 +134,46 @@ def test_sanded_bare_board_is_not_reported_sanded(site_cfg, robot_cfg):
     assert spray_cov == 0.0 and sand_cov >= FINISHED_FRACTION
     out = WallScanner(site, robot_cfg["robot"]["scanner"], outcome=rec).scan([2.4, 1.6, math.pi / 2])
     assert next(a for a in out["areas"] if a["id"] == "wall_1_area_1")["finish"] == "bare"
+
+
+def test_scan_reports_the_concrete_walls_as_obstacles_exact_without_noise(site_cfg, robot_cfg):
+    site = Site(site_cfg)
+    sc = WallScanner(site, robot_cfg["robot"]["scanner"], position_noise=0.0)
+    out = sc.scan([2.4, 1.6, math.pi / 2])
+    # the scanner sees all round (fov 2 pi): the concrete wall_3 behind the robot and wall_4 beside it
+    assert out["obstacles"] == [{"id": "wall_3", "p0": [4.8, 0.0], "p1": [0.0, 0.0], "height": 2.5},
+                                {"id": "wall_4", "p0": [0.0, 0.0], "p1": [0.0, 3.6], "height": 2.5}]
+    assert {w["id"] for w in out["walls"]} == {"wall_1", "wall_2"}       # no work surface: not among the walls
+    # the ground truth says the same
+    assert site.to_contract()["obstacles"] == out["obstacles"]
+    # visibility like a plasterboard wall: in range and field of view, facing the sensor
+    cfg = copy.deepcopy(robot_cfg["robot"]["scanner"])
+    cfg["fov"] = math.radians(60)
+    cfg["range"] = 2.5
+    narrow = WallScanner(site, cfg).scan([2.4, 1.6, math.pi / 2])           # looking at wall_1: nothing concrete
+    assert "obstacles" not in narrow                                         # the contract's default: none
+    back = WallScanner(site, cfg).scan([2.4, 1.6, -math.pi / 2])
+    assert [o["id"] for o in back["obstacles"]] == ["wall_3"]
+
+
+def test_obstacles_carry_the_position_noise_and_leave_the_features_noise_as_it_was(site_cfg, robot_cfg):
+    site = Site(site_cfg)
+    sigma = 0.005
+    cfg = robot_cfg["robot"]["scanner"]
+    errs = []
+    sc = WallScanner(site, cfg, position_noise=sigma, seed=7)
+    for _ in range(50):
+        for o in sc.scan([2.4, 1.6, math.pi / 2])["obstacles"]:
+            w = site.wall(o["id"])
+            errs += [np.subtract(o["p0"], w.p0), np.subtract(o["p1"], w.p1)]
+    errs = np.array(errs)
+    assert np.abs(errs).max() < 5 * sigma and 0.5 * sigma < errs.std() < 1.5 * sigma
+    # the obstacles' noise is drawn from a generator of its own: the walls, joints and areas are as noisy as
+    # from a scanner that reports no obstacles, with the same seed
+    class Blind(WallScanner):
+        def _obstacles(self, sensor, heading):
+            return []
+    blind = Blind(site, cfg, position_noise=sigma, seed=7).scan([2.4, 1.6, math.pi / 2])
+    seeing = WallScanner(site, cfg, position_noise=sigma, seed=7).scan([2.4, 1.6, math.pi / 2])
+    assert "obstacles" not in blind and [o["id"] for o in seeing["obstacles"]] == ["wall_3", "wall_4"]
+    assert {k: blind[k] for k in ("walls", "joints", "areas")} == {k: seeing[k] for k in ("walls", "joints", "areas")}

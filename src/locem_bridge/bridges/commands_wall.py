@@ -74,7 +74,9 @@ SCAN = CommandSpec(
     "SCAN", "Detect the wall joints and areas visible from the current base pose (docs/contracts.md shape).",
     resources=frozenset({"scanner"}), category=CATEGORY, timeout=10.0,
     result=(("stamp", "time of the scan"), ("walls", "walls seen"), ("joints", "joint lines: start, end, kind"),
-            ("areas", "wall areas: origin, u, width, height")), capability="sk:cap_DetectWallFeatures")
+            ("areas", "wall areas: origin, u, width, height"),
+            ("obstacles", "walls not worked (concrete): id, p0, p1, height; absent when none")),
+    capability="sk:cap_DetectWallFeatures")
 
 
 def mount_tool_spec(tools: Tuple[str, ...]) -> CommandSpec:

@@ -11,6 +11,9 @@ into PEMKRE updates.
   (``bare`` / ``sprayed`` / ``sanded``: what the perception sees on the surface) is stored and forwarded with its
   geometry; a finish different from the stored one makes a known area *changed* (PEMKRE then upgrades its
   spraying/sanding status, never downgrades it). An area reported without ``finish`` keeps the stored one.
+  The scan's ``obstacles`` (walls that are no work surface: floor-plan segments the planner keeps the robot off)
+  are no features: the latest scan's list is stored as one entry (``scan/obstacles``, read by :meth:`obstacles`)
+  and never forwarded to PEMKRE.
 - :meth:`ingest_status` / :meth:`ingest_diagnostics` / :meth:`heartbeat`: module health into the HEM.
 - :meth:`feature` / :meth:`mark_feature`: what trees read and write about features.
 """
@@ -96,14 +99,26 @@ def _hole(h: Any, hw: str) -> Dict[str, Any]:
     return {"s": _interval(h.get("s"), hw + ".s"), "t": _interval(h.get("t"), hw + ".t")}
 
 
+def _obstacle(fid: Callable[[Any, str], str]) -> Callable[[Any, str], Dict[str, Any]]:
+    def parse(o: Any, ow: str) -> Dict[str, Any]:
+        i = fid(o, ow)
+        p0, p1 = _vec(o.get("p0"), 2, ow + ".p0"), _vec(o.get("p1"), 2, ow + ".p1")
+        if math.dist(p0, p1) < 1e-6:
+            raise ScanFormatError("%s: p0 and p1 are the same point" % ow)
+        return {"id": i, "p0": p0, "p1": p1, "height": _pos(o.get("height"), ow + ".height")}
+    return parse
+
+
 def validate_scan(scan: Any, known_walls: Sequence[str] = ()) -> Dict[str, List[Dict[str, Any]]]:
-    """Normalised copy of a SCAN result, or ScanFormatError naming the first bad field."""
+    """Normalised copy of a SCAN result, or ScanFormatError naming the first bad field. ``obstacles`` is always
+    in the copy (default: none)."""
     if not isinstance(scan, dict):
         raise ScanFormatError("SCAN result must be a JSON object, got %s" % type(scan).__name__)
-    bad = set(scan) - {"stamp", "walls", "joints", "areas"}
+    bad = set(scan) - {"stamp", "walls", "joints", "areas", "obstacles"}
     if bad:
-        raise ScanFormatError("SCAN result has unknown keys %s; allowed: stamp, walls, joints, areas" % sorted(bad))
-    out: Dict[str, List[Dict[str, Any]]] = {"walls": [], "joints": [], "areas": []}
+        raise ScanFormatError("SCAN result has unknown keys %s; allowed: stamp, walls, joints, areas, obstacles"
+                              % sorted(bad))
+    out: Dict[str, List[Dict[str, Any]]] = {"walls": [], "joints": [], "areas": [], "obstacles": []}
     ids = set()
 
     def fid(item: Any, where: str) -> str:
@@ -164,6 +179,7 @@ def validate_scan(scan: Any, known_walls: Sequence[str] = ()) -> Dict[str, List[
                                       % (where, ", ".join(AREA_FINISHES), finish))
             area["finish"] = finish
         out["areas"].append(area)
+    out["obstacles"] = _items(scan, "obstacles", "SCAN", _obstacle(fid))
     return out
 
 
@@ -211,6 +227,7 @@ class DataHandler:
                     self.store.put(FEATURES, item["id"], value, source="HDH")
                     update[kind + "s"].append(geometry)
             self.store.put("scan", "latest_seq", seq, source="HDH")
+            self.store.put("scan", "obstacles", data["obstacles"], source="HDH")   # the latest scan's; no feature
             self.store.put("scan", "latest_stamp", scan.get("stamp", self.clock())
                            if isinstance(scan.get("stamp", 0), (int, float)) else self.clock(), source="HDH")
             removed = self.store.prune().get(FEATURES, [])
@@ -241,6 +258,11 @@ class DataHandler:
             raise DataStoreError("no stored %s with id '%s' (scan first?); stored: %s" % (
                 kind or "feature", fid, ", ".join(known[:20]) or "none"))
         return v
+
+    def obstacles(self) -> List[Dict[str, Any]]:
+        """The latest scan's obstacles (SCAN ``obstacles``: ``{id, p0, p1, height}``, walls that are no work
+        surface); none before the first scan."""
+        return [dict(o) for o in self.store.value("scan", "obstacles", None) or []]
 
     def features(self, kind: str) -> List[Dict[str, Any]]:
         """Every stored feature of ``kind`` (wall, joint, area), with its id."""

@@ -7,9 +7,10 @@ protective stop: what it cannot work without touching something else is reported
 
 The model, in one wall's frame (``s`` along the wall from ``p0``, ``t`` up, ``d`` out of the face into the room):
 
-- **Obstacles** are 2D segments on the floor plan: every other wall of the scan, and at each end of the wall
-  where another wall meets it at an inside corner (``corners[].angle`` below pi) the neighbour's face, a ray from
-  the corner at that angle (a concrete wall the scan does not report still has a face the robot must not touch).
+- **Obstacles** are 2D segments on the floor plan: every other wall of the scan, the scan's ``obstacles`` (walls
+  that are no work surface, e.g. concrete: :meth:`Wall2D.from_obstacle`), and at each end of the wall where
+  another wall meets it at an inside corner (``corners[].angle`` below pi) the neighbour's face, a ray from the
+  corner at that angle (a concrete wall the scan does not report still has a face the robot must not touch).
 - **The tool** working at ``s`` (and up to ``run_on`` either side of it: a raster lane runs on past its
   section's end) stands perpendicular to the wall: its working end (the pad or roller on the wall,
   the nozzle ``tool_standoff`` off it) with its radius (a sander's pad, the tool body), its body up to the flange,
@@ -153,6 +154,14 @@ class Wall2D:
         return cls(str(w["id"]), np.array(w["p0"], dtype=float), np.array(w["p1"], dtype=float),
                    n / np.linalg.norm(n), float(w["height"]), list(w.get("corners", [])),
                    float(ceiling) if ceiling is not None else None)
+
+    @classmethod
+    def from_obstacle(cls, o: Mapping[str, Any]) -> "Wall2D":
+        """An item of the scan's ``obstacles`` (``id``, ``p0``, ``p1``, ``height``): a segment other walls'
+        plans keep off (never planned itself: its normal is only one of the two)."""
+        p0, p1 = np.array(o["p0"], dtype=float), np.array(o["p1"], dtype=float)
+        d = (p1 - p0) / np.linalg.norm(p1 - p0)
+        return cls(str(o["id"]), p0, p1, np.array([-d[1], d[0]]), float(o["height"]), [])
 
     def point(self, s: Any, d: Any) -> np.ndarray:
         """Map points of wall coordinates ``(s, d)`` (arrays broadcast), shape (..., 2)."""
@@ -465,10 +474,12 @@ class SitePlan:
 
 def plan_site(scan: Mapping[str, Any], robot: RobotEnvelope, works: Sequence[str] = ("taping", "spray", "sand"),
               clock: Any = None) -> SitePlan:
-    """Plan every joint (taping) and area (``works`` other than taping) of a SCAN result."""
+    """Plan every joint (taping) and area (``works`` other than taping) of a SCAN result (its ``obstacles`` kept
+    off like the other walls)."""
     import time
     clock = clock or time.perf_counter
     walls = [Wall2D.from_scan(w) for w in scan.get("walls", [])]
+    others = walls + [Wall2D.from_obstacle(o) for o in scan.get("obstacles", [])]
     reach: Dict[Tuple[str, str], WallReach] = {}
     areas: Dict[Tuple[str, str], AreaPlan] = {}
     joints: Dict[str, JointPlan] = {}
@@ -477,7 +488,7 @@ def plan_site(scan: Mapping[str, Any], robot: RobotEnvelope, works: Sequence[str
         t0 = clock()
         for work in works:
             if work in robot.tools:
-                reach[(w.id, work)] = wall_reach(w, walls, robot, work)
+                reach[(w.id, work)] = wall_reach(w, others, robot, work)
         for j in scan.get("joints", []):
             if j["wall"] == w.id and (w.id, "taping") in reach:
                 joints[j["id"]] = plan_joint(j, w, reach[(w.id, "taping")])

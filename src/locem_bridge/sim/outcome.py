@@ -59,7 +59,8 @@ MANUAL_TAPE_EDGE = 0.02  # m, tape laid into a planned manual part of a joint up
 MANUAL_EDGE = 0.05       # m, how far past the robot's part the edge of its work may reach into a planned manual part
                          # of an area: a spray coat's soft edge (with the shipped lanes the target thickness ends
                          # about 0.05 m past the outermost lane); the sander adds its pad's radius (its centre may
-                         # run along the edge of the part it works)
+                         # run along the edge of the part it works), the spray gun half its fan's width (the
+                         # nozzle stays over the robot's part, the fan's edge reaches past it)
 MANUAL_WORKS = ("spray", "sand")
 
 
@@ -392,7 +393,9 @@ class OutcomeRecorder:
         """How far into a planned manual part of ``work`` the robot's work on its part may reach (m)."""
         if work == "sand":
             return MANUAL_EDGE + float(self.tools["sander"]["pad_radius"])
-        return MANUAL_EDGE
+        gun = self.tools.get("spray_gun", {})
+        # the nozzle stays over the robot's part, but its fan reaches half its width past the lanes' ends
+        return MANUAL_EDGE + float(gun.get("standoff", 0.0)) * math.tan(float(gun.get("spray_half_angle", 0.0)))
 
     # -- numbers -----------------------------------------------------------------------------------------------
     def joint_coverage(self, joint_id: str) -> float:

@@ -9,6 +9,13 @@ for every visible wall. Positions get zero-mean Gaussian noise of standard devia
 ground-truth ids, stable across scans. A wall carries its openings (doors, windows: exact, no noise) and the
 angles of its corners with the walls meeting it; an area the parts of openings inside it as ``holes``. Output is the SCAN JSON shape of ``docs/contracts.md``.
 
+Every other wall (concrete, any material but plasterboard: nothing to work on it, but the chassis, the arm and the
+tool must keep off it) is reported under ``obstacles`` as its floor-plan segment ``p0``/``p1`` and ``height``, seen
+like a plasterboard wall (facing the sensor, some part in range and field of view) and with the same position
+noise on its ends (along and across the face). That noise comes from a generator of its own (seeded from
+``seed``), so the walls', joints' and areas' numbers are the same as without obstacles. The key is left out when
+no obstacle is seen (the contract's default: none).
+
 With an :class:`~locem_bridge.sim.outcome.OutcomeRecorder` attached (constructor argument or the ``outcome``
 attribute) every reported area carries ``finish``, what a camera would see on the surface: ``sanded`` when at
 least :data:`FINISHED_FRACTION` of its cells are sprayed to the target thickness *and* sanded, ``sprayed`` when at
@@ -79,6 +86,7 @@ class WallScanner:
         self.fov = float(scanner_cfg["fov"])
         self.noise = float(position_noise)
         self._rng = np.random.default_rng(seed)
+        self._obstacle_rng = np.random.default_rng([seed, 1])     # its own stream: the features' noise unchanged
 
     def sensor_pose(self, base_pose: Sequence[float]) -> Tuple[np.ndarray, float]:
         """Return the sensor position (x, y) in map and its heading for a base pose ``(x, y, yaw)``."""
@@ -151,4 +159,24 @@ class WallScanner:
                 if self.outcome is not None:
                     ac["finish"] = area_finish(self.outcome, a)
                 areas.append(ac)
-        return {"stamp": float(stamp), "walls": walls, "joints": joints, "areas": areas}
+        out: Dict[str, Any] = {"stamp": float(stamp), "walls": walls, "joints": joints, "areas": areas}
+        obstacles = self._obstacles(sensor, heading)
+        if obstacles:
+            out["obstacles"] = obstacles
+        return out
+
+    def _obstacles(self, sensor: np.ndarray, heading: float) -> List[Dict[str, Any]]:
+        """The walls that are no work surface seen from ``sensor``: SCAN ``obstacles`` (see the module docstring)."""
+        out: List[Dict[str, Any]] = []
+        for wall in self.site.walls:
+            if wall.material == "plasterboard":
+                continue
+            if self._visible_s_interval(wall, 0.0, wall.length, sensor, heading) is None:
+                continue
+            p0, p1 = wall.p0, wall.p1
+            if self.noise > 0.0:
+                e = self._obstacle_rng.normal(0.0, self.noise, size=4)
+                p0 = p0 + e[0] * wall.u[:2] + e[1] * wall.n[:2]
+                p1 = p1 + e[2] * wall.u[:2] + e[3] * wall.n[:2]
+            out.append({"id": wall.id, "p0": [_r(x) for x in p0], "p1": [_r(x) for x in p1], "height": wall.height})
+        return out

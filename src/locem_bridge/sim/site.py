@@ -285,6 +285,13 @@ class Site:
         return out
 
     def to_contract(self, stamp: float = 0.0) -> Dict[str, Any]:
-        """The complete ground truth in the SCAN JSON shape (all plasterboard walls, no noise)."""
-        return {"stamp": stamp, "walls": [self.wall_contract(w) for w in self.work_walls],
-                "joints": [j.to_contract() for j in self.joints], "areas": [a.to_contract() for a in self.areas]}
+        """The complete ground truth in the SCAN JSON shape (all plasterboard walls, no noise; every other wall
+        under ``obstacles``, left out when there is none)."""
+        out: Dict[str, Any] = {"stamp": stamp, "walls": [self.wall_contract(w) for w in self.work_walls],
+                               "joints": [j.to_contract() for j in self.joints],
+                               "areas": [a.to_contract() for a in self.areas]}
+        obstacles = [{"id": w.id, "p0": [_r(x) for x in w.p0], "p1": [_r(x) for x in w.p1], "height": w.height}
+                     for w in self.walls if w.material != "plasterboard"]
+        if obstacles:
+            out["obstacles"] = obstacles
+        return out

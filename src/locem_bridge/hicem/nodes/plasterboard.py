@@ -371,7 +371,8 @@ _REACH_CACHE: Dict[str, WallReach] = {}
 
 class GetWallReach(Leaf):
     DESCRIPTION = ("Plans, before the robot moves, what one wall work can reach on the wall of a joint or area "
-                   "(locem_bridge.planning.reach): from the scanned walls, their corners (any angle) and the robot's "
+                   "(locem_bridge.planning.reach): from the scanned walls, their corners (any angle), the scan's "
+                   "obstacles (walls that are no work surface, e.g. concrete) and the robot's "
                    "outline -- chassis, the tool's working end, body and the wrist beside it, each keeping clearance "
                    "from every wall -- the stretches along the wall the tool can work from a free base pose, the "
                    "free base centres and the height band. GetAreaRaster cuts an area to it; the rest is manual "
@@ -409,6 +410,7 @@ class GetWallReach(Leaf):
         wall = next((w for w in walls if w.id == feature["wall"]), None)
         if wall is None:
             return self.fail("wall '%s' of %s is not stored" % (feature["wall"], fid))
+        obstacles = sorted(hdh.obstacles(), key=lambda o: o["id"])      # the latest scan's non-work walls
         fp = list(self.get("footprint"))
         if len(fp) != 2 or min(fp) <= 0:
             raise PortError("%s: footprint must be length;width > 0, got %s" % (self.name, fp))
@@ -421,10 +423,10 @@ class GetWallReach(Leaf):
         env = RobotEnvelope(fp[0], fp[1], self.get("shoulder_x"), {work: tool}, self.get("clearance"),
                             self.get("arm_radius"), self.get("wrist_length"), self.get("wrist_offset"),
                             self.get("shoulder_radius"))
-        key = json.dumps([stored, wall.id, asdict(env)], sort_keys=True)
+        key = json.dumps([stored, obstacles, wall.id, asdict(env)], sort_keys=True)
         r = _REACH_CACHE.get(key)
         if r is None:            # the areas of one wall share its plan: planned once per scan and robot
-            r = wall_reach(wall, walls, env, work)
+            r = wall_reach(wall, walls + [Wall2D.from_obstacle(o) for o in obstacles], env, work)
             if len(_REACH_CACHE) > 64:
                 _REACH_CACHE.clear()
             _REACH_CACHE[key] = r
@@ -526,7 +528,18 @@ class GetAreaRaster(Leaf):
             raise PortError("%s: neighbour_tolerance must be >= 0 m, got %g" % (self.name, tol))
         shared: Any = shared_ends(a, hdh.features("area"), tol, gap) if self.get("neighbours") else ((), ())
         sections: List[Dict[str, Any]] = []
+        smallest = max(0.0, self.get("min_manual")) if reach is not None else 0.0
         for piece in area_pieces(a["width"], a["height"], holes, gap, *shared):
+            if reach is not None:
+                # a sliver the plan's cuts leave (scan noise between a manual part and a hole) or a piece outside
+                # the tool's band is never sent to the arm: manual work if it is worth listing
+                z0, z1 = a["origin"][2] + piece.t0, a["origin"][2] + piece.t1
+                inside = min(z1, reach.t[1]) - max(z0, reach.t[0])
+                if piece.width < smallest or piece.height < smallest or inside < min(smallest, piece.height) - 1e-9:
+                    if piece.width >= smallest and piece.height >= smallest:
+                        manual.append({"along": [piece.s0, piece.s1], "height": [z0, z1],
+                                       "reason": "outside the tool's height band"})
+                    continue
             count = max(1, int(math.ceil(piece.width / sw - 1e-9)))
             w = piece.width / count
             bands = 1
