@@ -431,13 +431,16 @@ class OutcomeRecorder:
             robot = ~planned
             deep = planned & ~_dilate(robot[None, :], MANUAL_TAPE_EDGE / TAPE_BIN)[0]
             touched_tape += int((bins & deep).sum())
+            # the planned ends come from the scan (mm of noise): the bins within MANUAL_TAPE_EDGE of a manual part
+            # count neither way
+            counted = robot & ~_dilate(planned[None, :], MANUAL_TAPE_EDGE / TAPE_BIN)[0] if planned.any() else robot
             length = self.site.joint(jid).length
             joints[jid] = {"coverage": cov, "taped": cov >= TAPED_FRACTION, "manual": jid in self.manual,
                            "double_m": round(_longest_run(self.tape_passes[jid] >= 2) * TAPE_BIN, 4),
                            "gap_m": round(_longest_run(~inner) * TAPE_BIN, 4),
                            "manual_m": round(_union_length([(a, b) for j, a, b in plan.joints if j == jid],
                                                            0.0, length), 4),
-                           "coverage_reachable": float(bins[robot].mean()) if robot.any() else None}
+                           "coverage_reachable": float(bins[counted].mean()) if counted.any() else None}
         seams = [x for x in (self._seam(*e) for e in self.spray_pass_ends) if x is not None]
         walls = {}
         total_cells = covered_cells = sanded_cells = 0

@@ -487,6 +487,7 @@ class GetAreaRaster(Leaf):
         output_port("manual", JSON, None, "", "the parts of the area the plan leaves to the hand: "
                     "[{along: [a, b], height: [c, d], reason}] (along from the area's origin, height above the floor)"),
     )
+    MORE_COLUMNS = 3      # a piece is cut into up to this many more sections for each to have a free base pose
 
     def on_tick(self) -> Status:
         hdh = self.ctx.require("data_handler", self.name)
@@ -541,6 +542,15 @@ class GetAreaRaster(Leaf):
                                        "reason": "outside the tool's height band"})
                     continue
             count = max(1, int(math.ceil(piece.width / sw - 1e-9)))
+            if reach is not None:
+                # near the end of what the bases reach each point may be reachable from some base but a whole
+                # section from none: narrower sections (up to MORE_COLUMNS more) before a section is left manual
+                for extra in range(self.MORE_COLUMNS + 1):
+                    ww = piece.width / (count + extra)
+                    if all(reach.base_for(along0 + piece.s0 + ww * i, along0 + piece.s0 + ww * (i + 1),
+                                          float(plan["reach"])) is not None for i in range(count + extra)):
+                        count += extra
+                        break
             w = piece.width / count
             bands = 1
             if band_h > 0 and piece.height > band_h + 1e-9:
@@ -561,8 +571,10 @@ class GetAreaRaster(Leaf):
                     sa, sb = along0 + along, along0 + along + w      # the section without its run-in
                     at = reach.base_for(sa, sb, float(plan["reach"]))
                     if at is None:
-                        return self.fail("no free base pose reaches section along %.2f..%.2f m of %s"
-                                         % (sa, sb, a["id"]))
+                        manual.append({"along": [along, along + w], "height": [a["origin"][2] + piece.t0,
+                                                                             a["origin"][2] + piece.t1],
+                                       "reason": "no free base pose reaches all of it"})
+                        continue
                     mx, my = wall.p0[0] + wall.u[0] * at, wall.p0[1] + wall.u[1] * at
                 for b in (range(bands) if i % 2 == 0 else reversed(range(bands))):
                     ob = list(o)
