@@ -230,6 +230,27 @@ def test_get_area_raster_sections_cover_the_area():
     assert secs[0]["approach"] == pytest.approx([0.6, 2.1, math.pi / 2])
 
 
+def test_get_area_raster_cuts_narrower_sections_where_the_bases_end_and_leaves_the_rest_manual():
+    # wall_1 (4.8 m, area 0..4.8 x 0..2.5): the tool reaches 0.3..3.3 m along it, free bases only 0.6..2.9 m,
+    # 0.3 m to either side: up to 3.2 m every point is reachable from some base, but the last of five 0.6 m
+    # sections (2.7..3.3) has no base for both its ends; of 5..8 sections, 8 (0.375 m) leave the least unreached
+    plan = {"wall": "wall_1", "work": "spray", "tool": [[0.3, 3.3]], "base": [[0.6, 2.9]], "t": [0.0, 2.5],
+            "reach": 0.3, "why": []}
+    rig = Rig('<GetAreaRaster area_id="wall_1_area_1" section_width="0.6" base_standoff="0.9" yaw_offset="0" '
+              'min_manual="0.03" plan="{p}" sections="{s}" count="{c}" manual="{m}"/>', cfg={"p": plan})
+    assert rig.tree.tick() == S
+    secs, manual = rig.bb.get("s"), rig.bb.get("m")
+    assert secs and all(s["width"] <= 0.6 + 1e-9 for s in secs)
+    for sec in secs:               # every section sent has a free base that reaches both its ends
+        a0, a1 = sec["origin"][0], sec["origin"][0] + sec["width"]
+        base = sec["approach"][0]
+        assert 0.6 - 1e-6 <= base <= 2.9 + 1e-6 and a1 - 0.3 - 1e-6 <= base <= a0 + 0.3 + 1e-6
+    assert len(secs) == 7 and sum(s["width"] for s in secs) == pytest.approx(3.0 - 0.375)
+    beyond = sorted(m["along"] for m in manual if m["along"][0] > 1.0)
+    assert beyond == [pytest.approx([2.925, 3.3], abs=1e-6), pytest.approx([3.3, 4.8], abs=1e-6)]
+    assert any("no free base pose" in m["reason"] for m in manual)
+
+
 def test_node_needing_a_missing_handle_fails_clearly():
     lib = TreeLibrary()
     lib.load_string('<root BTCPP_format="4"><BehaviorTree ID="T"><CheckHealth/></BehaviorTree></root>')

@@ -148,6 +148,8 @@ class JobBaysTest(unittest.TestCase):
         self.assertEqual(self.report["ended"]["reason"], "completed", self.report["ended"])
 
     def test_2_reachable_parts_meet_the_goals(self):
+        if str(setting("quality_goals")).lower() not in ("true", "1"):
+            self.skipTest("quality_goals:=false (CI's bay checks the planning goals; --long checks these)")
         reach = need(self.outcome, "reachable", "outcome")
         failures = []
         for jid, joint in sorted(self.outcome["joints"].items()):

@@ -544,13 +544,13 @@ class GetAreaRaster(Leaf):
             count = max(1, int(math.ceil(piece.width / sw - 1e-9)))
             if reach is not None:
                 # near the end of what the bases reach each point may be reachable from some base but a whole
-                # section from none: narrower sections (up to MORE_COLUMNS more) before a section is left manual
-                for extra in range(self.MORE_COLUMNS + 1):
-                    ww = piece.width / (count + extra)
-                    if all(reach.base_for(along0 + piece.s0 + ww * i, along0 + piece.s0 + ww * (i + 1),
-                                          float(plan["reach"])) is not None for i in range(count + extra)):
-                        count += extra
-                        break
+                # section from none: of up to MORE_COLUMNS more (narrower) sections, the count that leaves the
+                # least width without a free base pose (manual), the fewest sections among equals
+                def unreached(c: int) -> float:
+                    ww = piece.width / c
+                    return sum(ww for i in range(c) if reach.base_for(along0 + piece.s0 + ww * i, along0 + piece.s0
+                                                                      + ww * (i + 1), float(plan["reach"])) is None)
+                count = min(range(count, count + self.MORE_COLUMNS + 1), key=lambda c: (round(unreached(c), 6), c))
             w = piece.width / count
             bands = 1
             if band_h > 0 and piece.height > band_h + 1e-9:
