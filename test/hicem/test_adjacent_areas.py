@@ -12,7 +12,7 @@ import faulthandler
 import os
 import sys
 import time
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Sequence
 
 import numpy as np
 import pytest
@@ -206,9 +206,14 @@ def edge_ratio(maps: Any, edge: float = EDGE, half: float = 0.05) -> float:
 
 
 def work_adjacent_areas(work: str, time_scale: float) -> Dict[str, Any]:
-    """``work`` (spray or sand: the shipped SPRAY_AREA or SAND_AREA tree) on both areas of
-    config/sites/adjacent.yaml, one after the other, on fresh worksite stand-ins running at ``time_scale``: the
-    trees' details, the commands sent, the world's summary of wall_1 and its maps, the wall-clock seconds."""
+    """``work`` on both areas of config/sites/adjacent.yaml (see :func:`work_areas_on_site`)."""
+    return work_areas_on_site(ADJACENT, work, ("wall_1_area_1", "wall_1_area_2"), time_scale)
+
+
+def work_areas_on_site(site: str, work: str, areas: Sequence[str], time_scale: float) -> Dict[str, Any]:
+    """``work`` (spray or sand: the shipped SPRAY_AREA or SAND_AREA tree) on ``areas`` of ``site`` (all on one
+    wall), one after the other, on fresh worksite stand-ins running at ``time_scale``: the trees' details, the
+    commands sent, the world's summary of the areas' wall and its maps, the wall-clock seconds."""
     bridges = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "bridges")
     if bridges not in sys.path:
         sys.path.insert(0, bridges)
@@ -217,7 +222,7 @@ def work_adjacent_areas(work: str, time_scale: float) -> Dict[str, Any]:
     from locem_bridge.bridges.robot import build_robot
     from locem_bridge.locem.core import LocemCore
     tree_id, tool = {"spray": ("SPRAY_AREA", "spray_gun"), "sand": ("SAND_AREA", "sander")}[work]
-    rig = WorksiteRig(load_robot_config(ROBOT_YAML), site_path=ADJACENT, time_scale=time_scale)
+    rig = WorksiteRig(load_robot_config(ROBOT_YAML), site_path=site, time_scale=time_scale)
     built = core = None
     try:
         built = build_robot(rig.robot, site=rig.site_path, initial_pose=tuple(rig.world.base_pose()))
@@ -237,14 +242,15 @@ def work_adjacent_areas(work: str, time_scale: float) -> Dict[str, Any]:
         assert r.success, r.message
         out: Dict[str, Any] = {"details": [], "sent": client.sent}
         t0 = time.monotonic()
-        for area in ("wall_1_area_1", "wall_1_area_2"):
+        for area in areas:
             st, bb, ctx = run_area_tree(tree_id, area, client, hdh)
             assert st == Status.SUCCESS, (tree_id, area, ctx.failures)
             out["details"].append((area, bb.get("task_detail")))
         out["seconds"] = time.monotonic() - t0
         time.sleep(0.2)
-        out["wall"] = rig.world.outcome.summary()["walls"]["wall_1"]
-        out["maps"] = rig.world.outcome.maps["wall_1"]
+        wall = hdh.feature(areas[0], "area")["wall"]
+        out["wall"] = rig.world.outcome.summary()["walls"][wall]
+        out["maps"] = rig.world.outcome.maps[wall]
         out["collisions"] = rig.world.collisions
         return out
     finally:

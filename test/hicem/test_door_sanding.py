@@ -9,67 +9,14 @@ PyBullet world), measured on the world's ground truth: the sanded share of the w
 sanded frame."""
 import faulthandler
 import os
-import sys
-import time
 from typing import Any, Dict
 
-import numpy as np
 import pytest
-from py_trees.common import Status
 
-from locem_bridge.hicem.datahandler import DataHandler
-from locem_bridge.hicem.datastore import DataManager
-from test_adjacent_areas import CoreClient, run_area_tree
+from test_adjacent_areas import work_areas_on_site
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 DOOR = os.path.join(REPO, "config", "sites", "door.yaml")
-
-
-def sand_area_on_site(site: str, area: str, time_scale: float) -> Dict[str, Any]:
-    """The shipped SAND_AREA tree for ``area`` of ``site`` on fresh worksite stand-ins running at
-    ``time_scale``: the tree's detail, the commands sent, the world's summary of the area's wall and its maps."""
-    bridges = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "bridges")
-    if bridges not in sys.path:
-        sys.path.insert(0, bridges)
-    from bridge_rigs import ROBOT_YAML, WorksiteRig
-    from locem_bridge.bridges.config import load_robot_config
-    from locem_bridge.bridges.robot import build_robot
-    from locem_bridge.locem.core import LocemCore
-    rig = WorksiteRig(load_robot_config(ROBOT_YAML), site_path=site, time_scale=time_scale)
-    built = core = None
-    try:
-        built = build_robot(rig.robot, site=rig.site_path, initial_pose=tuple(rig.world.base_pose()))
-        built.start()
-        core = LocemCore(grace=0.5, stop_timeout=2.0)
-        for command_set in built.command_sets:
-            core.install(command_set)
-        for kind in ("arm", "compressor", "base"):
-            assert built.get(kind).wait_ready(20.0), (kind, built.get(kind).health())
-        client = CoreClient(core, rig)
-        hdh = DataHandler(DataManager())
-        scan = core.dispatcher.execute("SCAN")
-        assert scan.success, scan.message
-        hdh.ingest_scan(scan.result)
-        rig.world.mount_tool("sander")
-        r = core.dispatcher.execute("MOUNT_TOOL sander")
-        assert r.success, r.message
-        t0 = time.monotonic()
-        st, bb, ctx = run_area_tree("SAND_AREA", area, client, hdh)
-        assert st == Status.SUCCESS, (area, ctx.failures)
-        out: Dict[str, Any] = {"detail": bb.get("task_detail"), "sent": client.sent,
-                               "seconds": time.monotonic() - t0}
-        time.sleep(0.2)
-        wall = hdh.feature(area, "area")["wall"]
-        out["wall"] = rig.world.outcome.summary()["walls"][wall]
-        out["maps"] = rig.world.outcome.maps[wall]
-        out["collisions"] = rig.world.collisions
-        return out
-    finally:
-        if built is not None:
-            built.close()
-        if core is not None:
-            core.close()
-        rig.close()
 
 
 def bare_cells(maps: Any) -> Dict[str, int]:
@@ -94,14 +41,14 @@ def test_the_door_area_is_sanded_up_to_the_frame_all_round_without_touching_it()
     pytest.importorskip("rtde_control")
     faulthandler.dump_traceback_later(240, exit=True)    # ur_rtde may hold the GIL while it blocks
     try:
-        out = sand_area_on_site(DOOR, "wall_1_area_1", time_scale=10.0)
+        out = work_areas_on_site(DOOR, "sand", ["wall_1_area_1"], time_scale=10.0)
     finally:
         faulthandler.cancel_dump_traceback_later()
     wall, cells = out["wall"], bare_cells(out["maps"])
     print("wall_1 sanded: coverage %.4f, on frames %.4f m2, bare cells %r; %.0f s; %s"
           % (wall["sand_coverage"], wall["sanded_on_frames_m2"], cells, out["seconds"],
              [c for c in out["sent"] if c.startswith("SAND_AREA")]))
-    assert out["detail"].startswith("sanded"), out["detail"]
+    assert out["details"][0][1].startswith("sanded"), out["details"]
     assert wall["sand_coverage"] >= 0.97, (wall, cells)     # goal 0.98: the scallops beside the frame remain
     assert wall["sanded_on_frames_m2"] == 0.0, wall
     assert cells["above"] == 0, cells

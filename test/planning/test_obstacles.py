@@ -6,25 +6,11 @@ import copy
 import numpy as np
 import pytest
 
-from locem_bridge.planning.reach import RobotEnvelope, Wall2D, plan_site, wall_reach
-from locem_bridge.robot_facts import derive
+from locem_bridge.planning.reach import Wall2D, plan_site, wall_reach
 from locem_bridge.sim.bays import generate_bay
-from locem_bridge.sim.config import load_robot, validate_site
+from locem_bridge.sim.config import validate_site
 from locem_bridge.sim.perception import WallScanner
 from locem_bridge.sim.site import Site
-
-TUNING = {"spray": {"lane_overrun": 0.1, "lane_ratio": 0.52}, "sand": {"lane_overrun": 0.1, "lane_ratio": 0.8}}
-
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot()
-
-
-@pytest.fixture(scope="module")
-def envelope(robot):
-    return RobotEnvelope.from_robot(robot["robot"], derive(robot["robot"], TUNING), overrun={"spray": 0.1, "sand": 0.1})
-
 
 def chassis(wall, s_b, standoff, envelope):
     """Corners (4, 2) of the chassis with its centre ``standoff`` in front of ``wall`` at ``s_b``, facing it."""

@@ -7,23 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from locem_bridge.planning.reach import RobotEnvelope, Wall2D, plan_area, plan_joint, plan_site, wall_reach
-from locem_bridge.robot_facts import derive
-from locem_bridge.sim.config import load_robot, validate_site
+from locem_bridge.planning.reach import Wall2D, plan_area, plan_joint, plan_site, wall_reach
+from locem_bridge.sim.config import validate_site
 from locem_bridge.sim.site import Site
-
-TUNING = {"spray": {"lane_overrun": 0.1, "lane_ratio": 0.52}, "sand": {"lane_overrun": 0.1, "lane_ratio": 0.8}}
-
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot()
-
-
-@pytest.fixture(scope="module")
-def envelope(robot):
-    return RobotEnvelope.from_robot(robot["robot"], derive(robot["robot"], TUNING), overrun={"spray": 0.1, "sand": 0.1})
-
 
 def corner_site(angle_deg, length=3.0):
     """wall_1 (plasterboard) along x from (0, 3) to (length, 3), the room below it; at its p1 a concrete wall_2

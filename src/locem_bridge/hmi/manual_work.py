@@ -24,21 +24,9 @@ An entry (the API's shape): ``{"kind": "area" | "joint", "work": "spray" | "sand
 import threading
 from typing import Any, Dict, List, Mapping, Tuple
 
-from ..hicem.nodes.area_work import parse_manual_joints, parse_manual_work
-
-#: action type -> the work its areas' manual parts are left from
-AREA_WORK = {"SPRAY_AREA": "spray", "SAND_AREA": "sand"}
+from ..hicem.nodes.area_work import AREA_WORK, parse_manual_joints, parse_manual_work, span_text
 #: action type -> the work its joints' manual parts are left from
 JOINT_WORK = {"TAPE_LINE": "tape"}
-
-
-def _num(value: float) -> str:
-    text = ("%.2f" % value).rstrip("0").rstrip(".")
-    return "0" if text in ("", "-0") else text
-
-
-def _span(pair: List[float]) -> str:
-    return "%s..%s m" % (_num(pair[0]), _num(pair[1]))
 
 
 def manual_parts(state: Mapping[str, Any]) -> List[Dict[str, Any]]:
@@ -62,7 +50,7 @@ def manual_parts(state: Mapping[str, Any]) -> List[Dict[str, Any]]:
             out.append(dict(common, kind="area", work=work, feature=p["area"], part=int(p["section"]), along=along,
                             height=height, reason="",
                             text="%s %s, section %d: along %s, height %s" % (work, p["area"], p["section"],
-                                                                             _span(along), _span(height))))
+                                                                             span_text(along), span_text(height))))
     elif action in JOINT_WORK:
         work = JOINT_WORK[action]
         for p in parse_manual_joints(detail):
@@ -74,7 +62,7 @@ def manual_parts(state: Mapping[str, Any]) -> List[Dict[str, Any]]:
             reason = str(p.get("reason") or "")
             out.append(dict(common, kind="joint", work=work, feature=p["joint"], part=int(p["part"]), along=along,
                             height=None, reason=reason,
-                            text="%s %s, part %d: along %s%s" % (work, p["joint"], p["part"], _span(along),
+                            text="%s %s, part %d: along %s%s" % (work, p["joint"], p["part"], span_text(along),
                                                                  ("; " + reason) if reason else "")))
     return out
 

@@ -11,14 +11,13 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
-from locem_bridge.hicem.nodes.area_work import parse_manual_joints, parse_manual_work
+from locem_bridge.hicem.nodes.area_work import AREA_WORK, parse_manual_joints, parse_manual_work
 
 from .report import ProcessRecord
 
 TERMINAL_PHASES = ("ended", "failed", "stopped")
 LINE_ACTIONS = ("VALIDATE_TAPE_LINE", "TAPE_LINE", "MANUAL_TAPING")
 AREA_ACTIONS = ("SPRAY_AREA", "SAND_AREA")
-AREA_WORK = {"SPRAY_AREA": "spray", "SAND_AREA": "sand"}
 
 
 def with_manual_plan(call: Callable[..., Dict[str, Any]], name: str, manual: Mapping[str, Any],

@@ -70,9 +70,18 @@ def _put_manual(store: Any, work: str, area_id: str, keep: Any, new: List[Dict[s
         store.put(PROGRESS, progress_key(work, area_id), record, source="tree")
 
 
+#: action type -> the area work its task details name manual parts of (the job report, the operator page)
+AREA_WORK = {"SPRAY_AREA": "spray", "SAND_AREA": "sand"}
+
+
 def _num(v: float) -> str:
     s = ("%.2f" % v).rstrip("0").rstrip(".")
     return "0" if s in ("-0", "") else s
+
+
+def span_text(pair: Any) -> str:
+    """``a..b m`` of an extent ``[a, b]`` (m, to the centimetre, as the manual-work texts write it)."""
+    return "%s..%s m" % (_num(float(pair[0])), _num(float(pair[1])))
 
 
 _MANUAL = re.compile(r"manual work on (\S+): (.*)$")
@@ -83,9 +92,7 @@ def manual_work_text(area_id: str, manual: List[Dict[str, Any]]) -> str:
     """``manual work on <area>: section 3 (along 1.2..1.8 m, height 0..2.5 m), section 4 (...)``; sections are
     numbered from 1, along = distance along the area from its origin, height = above the floor (m)."""
     return "manual work on %s: %s" % (area_id, ", ".join(
-        "section %d (along %s..%s m, height %s..%s m)" % (int(m["index"]) + 1, _num(m["along"][0]),
-                                                         _num(m["along"][1]), _num(m["height"][0]),
-                                                         _num(m["height"][1]))
+        "section %d (along %s, height %s)" % (int(m["index"]) + 1, span_text(m["along"]), span_text(m["height"]))
         for m in sorted(manual, key=lambda m: int(m["index"]))))
 
 
@@ -106,7 +113,7 @@ def manual_joint_text(joint_id: str, parts: List[Dict[str, Any]]) -> str:
     """``manual work on <joint>: part 1 (along 0..0.42 m; near a corner), part 2 (...)``: the stretches of a joint
     left for taping by hand, along = distance from the joint's start (m); a reason's parentheses are dropped."""
     return "manual work on %s: %s" % (joint_id, ", ".join(
-        "part %d (along %s..%s m%s)" % (k + 1, _num(m["along"][0]), _num(m["along"][1]),
+        "part %d (along %s%s)" % (k + 1, span_text(m["along"]),
                                         ("; " + re.sub(r"[()]", "", str(m["reason"]))) if m.get("reason") else "")
         for k, m in enumerate(sorted(parts, key=lambda m: float(m["along"][0])))))
 
