@@ -54,8 +54,8 @@ def test_spray_area_sections_and_command_arguments():
     st, locem, bb, ctx, hdh = run("SPRAY_AREA", area="wall_1_area_1")
     assert st == Status.SUCCESS, ctx.failures
     # 4.8 m wide, 2.5 m high area running into wall_2: planned first (GetWallReach), the spray gun's wrist keeps
-    # 0.21 m from wall_2 and its lanes run on 0.1 m past a section, the arm reaches z 0.1..2.15 m: so 0..4.48 x
-    # 0.1..2.15 m is sprayed in sections of
+    # 0.21 m from wall_2 and its lanes run on 0.1 m past a section, the arm reaches z 0.1..2.0 m: so 0..4.48 x
+    # 0.1..2.0 m is sprayed in sections of
     # at most 0.6 m (8 base poses, each reached with the arm in wall_ready) and the rest is manual work
     gotos = [c for c in locem.sent if c.startswith("GOTO")]
     sprays = [c for c in locem.sent if c.startswith("SPRAY_AREA")]
@@ -66,14 +66,14 @@ def test_spray_area_sections_and_command_arguments():
     assert len(gotos) == 3 + 7                     # the other sections: along the wall, no turn, no transit
     # the outer sections reach edge_run_in (0.05 m) beyond the worked part; every section's lanes run
     # section_run_in (0.02 m) beyond its own ends; a section not begun before is sprayed from its start (skip=0)
-    assert sprays[0] == ("SPRAY_AREA -0.05 3 0.1 1 0 0 0.61 2.05 0 -1 0 spacing=0.15 standoff=0.3 speed=0.5 "
+    assert sprays[0] == ("SPRAY_AREA -0.05 3 0.1 1 0 0 0.61 1.9 0 -1 0 spacing=0.15 standoff=0.3 speed=0.5 "
                          "pressure=3.5 run_in=0.02 skip=0")
-    assert sprays[1].startswith("SPRAY_AREA 0.56 3 0.1 1 0 0 0.56 2.05 ")
-    assert sprays[7].startswith("SPRAY_AREA 3.92 3 0.1 1 0 0 0.61 2.05 ")
+    assert sprays[1].startswith("SPRAY_AREA 0.56 3 0.1 1 0 0 0.56 1.9 ")
+    assert sprays[7].startswith("SPRAY_AREA 3.92 3 0.1 1 0 0 0.61 1.9 ")
     assert hdh.feature("wall_1_area_1")["status"] == "sprayed"
     assert bb.get("task_detail") == ("sprayed; manual work on wall_1_area_1: section 9 (along 4.48..4.8 m, height "
                                      "0..2.5 m), section 10 (along 0..4.48 m, height 0..0.1 m), section 11 (along "
-                                     "0..4.48 m, height 2.15..2.5 m)")
+                                     "0..4.48 m, height 2..2.5 m)")
 
 
 def test_sand_area_uses_the_sanding_parameters():
