@@ -80,3 +80,33 @@ def test_stop_during_force_controlled_sanding_ends_force_mode_and_switches_the_s
     assert execution.wait(5.0).code.value == "ABORTED"
     assert rig.standin.get_force_mode() is None
     assert wait_until(rig.nothing_running, timeout=3.0)
+
+
+def test_a_vertical_pass_of_width_0_sands_one_strip_up_the_side_under_force(wall, core):
+    """The edge pass HICEM sends beside a door frame: one lane upwards (lanes=vertical, width 0) at x = 2.0 m
+    (s = 0.2 m on wall_1), z 0.9 .. 1.5 m: the pad (radius 0.1125 m) sands a strip its diameter wide, nothing else."""
+    rig, built = wall
+    rig.standin.set_contact_planes([_wall_in_arm_base(rig.world)], STIFFNESS)
+    r = core.dispatcher.execute("SAND_AREA 2.0 3.6 0.9 1 0 0 0 0.6 %s spacing=0.1 speed=0.15 force=20 contact=force "
+                                "lanes=vertical" % NORMAL)
+    assert r.success, r.message
+    assert r.result["lanes"] == 1 and r.result["length_m"] == pytest.approx(0.6, abs=0.01), r.result
+    assert 18.0 <= r.result["force_min_n"] <= r.result["force_max_n"] <= 22.0, r.result
+    time.sleep(0.2)
+    m = rig.world.outcome.maps["wall_1"]
+    rows = (m.tc >= 0.9) & (m.tc <= 1.5)
+    strip = m.sanded[rows][:, (m.sc >= 0.11) & (m.sc <= 0.29)]
+    assert strip.mean() >= 0.98, strip.mean()
+    assert not m.sanded[:, m.sc >= 0.34].any() and not m.sanded[:, m.sc <= 0.06].any()
+    assert rig.standin.get_force_mode() is None
+    assert rig.nothing_running()
+
+
+def test_width_0_with_horizontal_lanes_is_refused_before_the_arm_moves(wall, core):
+    rig, built = wall
+    q = list(rig.standin.get_joint_positions())
+    r = core.dispatcher.execute("SAND_AREA 2.0 3.6 0.9 1 0 0 0 0.6 %s force=20 contact=force" % NORMAL)
+    assert r.code.value == "INVALID_ARGUMENT", (r.code, r.message)
+    assert "width" in r.message and "lanes=vertical" in r.message, r.message
+    assert max(abs(a - b) for a, b in zip(rig.standin.get_joint_positions(), q)) < 1e-6
+    assert rig.nothing_running()

@@ -130,6 +130,23 @@ def test_sand_area_sands_the_area_in_contact(wall, core):
     assert rig.nothing_running()
 
 
+def test_sand_area_with_vertical_lanes_sands_the_area_in_upward_lanes(wall, core):
+    rig, _ = wall
+    rig.world.mount_tool("sander")
+    assert run(core, "MOUNT_TOOL sander").success
+    assert run(core, "GOTO 2.4 2.6 1.5708").success
+    r = run(core, "SAND_AREA 2.0 3.6 0.9 1 0 0 0.3 0.6 %s spacing=0.1 speed=0.15 lanes=vertical" % NORMAL)
+    assert r.success, r.message
+    assert r.result["lanes"] == 4, r.result              # 0.3 m across at most 0.1 m apart: 4 lanes upwards
+    time.sleep(0.2)
+    m = rig.world.outcome.maps["wall_1"]
+    cells = m.sanded[(m.tc >= 0.9) & (m.tc <= 1.5)][:, (m.sc >= 0.2) & (m.sc <= 0.5)]
+    assert cells.mean() >= 0.98, cells.mean()
+    # upward lanes run no further than the area's height (no run-in for sanding): nothing a pad radius past it
+    assert not m.sanded[(m.tc >= 1.5 + 0.1125 + 0.03)].any() and not m.sanded[(m.tc <= 0.9 - 0.1125 - 0.03)].any()
+    assert rig.nothing_running()
+
+
 def test_stop_is_not_delayed_by_a_silent_compressor(wall, core):
     rig, _ = wall
     rig.server.drop_link(duration=None, mode="silent")

@@ -44,7 +44,7 @@ SITE = {
 }
 
 # keyword arguments that take a word (LOCEM's Arg.choice), with the words allowed
-CHOICES = {"contact": ("position", "force")}
+CHOICES = {"contact": ("position", "force"), "lanes": ("horizontal", "vertical")}
 # name -> number of positional numeric args (None = any count of numbers, key=value allowed)
 GRAMMAR = {"SCAN": 0, "HOME": 0, "GET_POSE": 0, "STOP": 0, "WAIT": 1, "STATUS": 0, "GOTO": 3, "LIFT": 0, "MOUNT_TOOL": "word", "CHANGE_TOOL": "word", "MOVE_HOME": "word", "WALL_READY": 0, "RESET_ARM": 0,
            "APPLY_TAPE_START": 9, "APPLY_TAPE": 9, "SPRAY_AREA": 11, "SAND_AREA": 11}

@@ -66,7 +66,9 @@ def test_spray_area_sections_and_command_arguments():
     assert len(gotos) == 3 + 7                     # the other sections: along the wall, no turn, no transit
     # the outer sections reach edge_run_in (0.05 m) beyond the worked part; every section's lanes run
     # section_run_in (0.02 m) beyond its own ends; a section not begun before is sprayed from its start (skip=0)
-    assert sprays[0] == ("SPRAY_AREA -0.05 3 0.1 1 0 0 0.61 1.9 0 -1 0 spacing=0.15 standoff=0.3 speed=0.5 "
+    # the 1.9 m in 13 whole lane spacings of 0.14616 m (not 0.15), the lanes sped up in proportion (0.5 x 0.15 /
+    # 0.14616 m/s): the same coat per m2 as at the nominal spacing
+    assert sprays[0] == ("SPRAY_AREA -0.05 3 0.1 1 0 0 0.61 1.9 0 -1 0 spacing=0.14616 standoff=0.3 speed=0.5131 "
                          "pressure=3.5 run_in=0.02 skip=0")
     assert sprays[1].startswith("SPRAY_AREA 0.56 3 0.1 1 0 0 0.56 1.9 ")
     assert sprays[7].startswith("SPRAY_AREA 3.92 3 0.1 1 0 0 0.61 1.9 ")
@@ -80,7 +82,7 @@ def test_sand_area_uses_the_sanding_parameters():
     st, locem, *_ = run("SAND_AREA", area="wall_1_area_1")
     assert st == Status.SUCCESS
     sands = [c for c in locem.sent if c.startswith("SAND_AREA")]
-    assert len(sands) == 8 and sands[0].endswith("spacing=0.18 speed=0.35 force=20 contact=force")
+    assert len(sands) == 8 and sands[0].endswith("spacing=0.18 speed=0.35 force=20 contact=force lanes=horizontal")
 
 
 def test_tape_line_on_a_horizontal_joint():

@@ -372,3 +372,68 @@ def test_get_area_raster_keeps_a_pad_its_radius_off_a_frame_and_runs_the_columns
         assert all(s["origin"][2] + s["height"] == pytest.approx(2.0) for s in beside)
         lintel = [s for s in secs if s["origin"][2] > 0.1 + 1e-9]
         assert lintel and all(s["origin"][2] == pytest.approx(1.85 + margin) for s in lintel)
+
+
+def test_get_area_raster_edge_passes_follow_the_sections_beside_a_frame_up_its_sides():
+    body = ('<GetAreaRaster area_id="wall_1_area_1" section_width="0.6" base_standoff="1.0" yaw_offset="0" '
+            'band_gap="0.18" hole_margin="0.1125" edge_passes="%s" sections="{s}" count="{c}"/>')
+    scan = {"walls": [dict(SITE["walls"][0], openings=[{"id": "door_1", "kind": "door", "s": [1.5, 2.4],
+                                                       "t": [0.0, 1.8], "frame": 0.05}])],
+            "areas": [{"id": "wall_1_area_1", "wall": "wall_1", "origin": [0.0, 3.0, 0.1], "u": [1.0, 0.0, 0.0],
+                       "width": 4.8, "height": 1.9, "holes": [{"s": [1.45, 2.45], "t": [0.0, 1.75]}]}]}
+    rig = Rig(body % "false")
+    rig.hdh.ingest_scan(scan)
+    assert rig.tree.tick() == S
+    plain = rig.bb.get("s")
+    assert {s["lanes"] for s in plain} == {"horizontal"}
+    rig = Rig(body % "true")
+    rig.hdh.ingest_scan(scan)
+    assert rig.tree.tick() == S
+    secs = rig.bb.get("s")
+    assert rig.bb.get("c") == len(secs) == len(plain) + 2 and [s["index"] for s in secs] == list(range(len(secs)))
+    passes = [(i, s) for i, s in enumerate(secs) if s["lanes"] == "vertical"]
+    margin = 0.1125 - GetAreaRaster.FRAME_REACH
+    assert [s["origin"][0] for _, s in passes] == pytest.approx([1.45 - margin, 2.45 + margin])
+    for i, s in passes:
+        # width 0 (one lane), from the column's bottom up to the frame's top plus the margin, the same base pose
+        # as the section it follows, which ends (left) or starts (right) at that side
+        assert s["width"] == 0.0 and s["origin"][2] == pytest.approx(0.1)
+        assert s["origin"][2] + s["height"] == pytest.approx(0.1 + 1.75 + margin)
+        before = secs[i - 1]
+        assert before["lanes"] == "horizontal" and s["approach"] == before["approach"]
+        assert s["origin"][0] == pytest.approx(before["origin"][0] + before["width"]) or \
+            s["origin"][0] == pytest.approx(before["origin"][0])
+    # the sections themselves are the same as without the passes
+    assert [dict(s, index=0) for s in secs if s["lanes"] == "horizontal"] == [dict(s, index=0) for s in plain]
+
+
+def test_get_area_raster_gives_every_section_the_same_coat_per_m2_whatever_its_height():
+    """A window cuts the area into pieces 0.7, 0.55, 0.5 and 0.35 m tall. At the nominal 0.15 m spacing LOCEM
+    would lay their lanes ceil(h / 0.15) intervals apart: 0.14, 0.1375, 0.125, 0.1167 m (+7 %, +9 %, +20 %,
+    +29 % of coat). Each
+    section gets the whole number of intervals nearest 0.15 m, rounded up to what the command carries, and a
+    speed scaled by the ratio (at most max_speed): spacing x speed, the coat's inverse, is the same everywhere."""
+    from locem_bridge.bridges.commands_wall import WallCommands
+    scan = {"walls": [dict(SITE["walls"][0], openings=[{"id": "w", "kind": "window", "s": [1.5, 2.4],
+                                                       "t": [0.85, 1.45], "frame": 0.05}])],
+            "areas": [{"id": "wall_1_area_1", "wall": "wall_1", "origin": [0.0, 3.0, 0.1], "u": [1.0, 0.0, 0.0],
+                       "width": 4.8, "height": 1.9, "holes": [{"s": [1.45, 2.45], "t": [0.7, 1.4]}]}]}
+    rig = Rig('<GetAreaRaster area_id="wall_1_area_1" section_width="0.6" base_standoff="1.3" yaw_offset="0" '
+              'band_gap="0.15" lane_spacing="0.15" speed="0.5" max_speed="0.6" sections="{s}" count="{c}"/>')
+    rig.hdh.ingest_scan(scan)
+    assert rig.tree.tick() == S
+    secs = rig.bb.get("s")
+    heights = sorted({round(s["height"], 4) for s in secs})
+    # the sill row, beside the window, above it (from its top at 1.4 m), above the columns (one gap higher)
+    assert heights == [0.35, 0.5, 0.55, 0.7]
+    for s in secs:
+        n = round(s["height"] / 0.15) or 1
+        lanes = WallCommands._lane_heights(s["height"], s["spacing"])
+        assert len(lanes) == n + 1 and s["spacing"] == pytest.approx(s["height"] / n, abs=1e-5), s
+        assert s["speed"] * s["spacing"] == pytest.approx(0.5 * 0.15, rel=1e-3), s
+    # without lane_spacing: the spacing given (band_gap) and the speed port as they are
+    rig = Rig('<GetAreaRaster area_id="wall_1_area_1" section_width="0.6" base_standoff="1.3" yaw_offset="0" '
+              'band_gap="0.15" speed="0.5" sections="{s}" count="{c}"/>')
+    rig.hdh.ingest_scan(scan)
+    assert rig.tree.tick() == S
+    assert {(s["spacing"], s["speed"]) for s in rig.bb.get("s")} == {(0.15, 0.5)}

@@ -26,13 +26,13 @@ LINK_DOWN = "compressor link is down (no answer for 0.61 s): connection closed"
 
 def _two_area_site():
     """Two 2.4 m areas side by side, inside what the spray gun reaches (wall_2 0.6 m further away than in the
-    doubles' site, the areas 0.1..2.1 m high): the plan leaves nothing manual, LOCEM's refusals decide."""
+    doubles' site, the areas 0.1..2.0 m high): the plan leaves nothing manual, LOCEM's refusals decide."""
     site = copy.deepcopy(SITE)
     site["walls"][0]["p1"] = [5.4, 3.0]
     site["walls"][1].update(p0=[5.4, 3.0], p1=[5.4, 0.0])
     site["joints"][2].update(start=[5.4, 2.5, 1.2], end=[5.4, 0.5, 1.2])
     site["areas"] = [{"id": "wall_1_area_%d" % i, "wall": "wall_1", "origin": [2.4 * (i - 1), 3.0, 0.1],
-                      "u": [1.0, 0.0, 0.0], "width": 2.4, "height": 2.0} for i in (1, 2)]
+                      "u": [1.0, 0.0, 0.0], "width": 2.4, "height": 1.9} for i in (1, 2)]
     return site
 
 
@@ -236,7 +236,7 @@ def test_a_section_out_of_reach_is_manual_work_and_the_process_succeeds(tmp_path
     assert [x[:2] for x in log] == [("SCAN", "succeeded"), ("GET_TOOL", "succeeded"), ("SPRAY_AREA", "succeeded"),
                                     ("SPRAY_AREA", "succeeded"), ("GO_HOME", "succeeded")]
     assert log[2][2] == "sprayed"
-    assert log[3][2] == ("sprayed; manual work on wall_1_area_2: section 2 (along 0.6..1.2 m, height 0.1..2.1 m)")
+    assert log[3][2] == ("sprayed; manual work on wall_1_area_2: section 2 (along 0.6..1.2 m, height 0.1..2 m)")
     assert len([c for c in locem.sent if c.startswith("SPRAY_AREA ")]) == 8 and "RECOVER" not in locem.sent
     for a in ("wall_1_area_1", "wall_1_area_2"):
         assert engine.store.value(SITE_NS[a], PPR.sprayingStatus) == PPR.processed

@@ -20,12 +20,12 @@ S, F, R = Status.SUCCESS, Status.FAILURE, Status.RUNNING
 
 
 # the doubles' site with the area inside what the spray gun reaches (planned by GetWallReach: wall_2 moved 0.6 m
-# away, the area 0.1..2.1 m high), so these tests see only the sections LOCEM refuses or a failure cuts
+# away, the area 0.1..2.0 m high), so these tests see only the sections LOCEM refuses or a failure cuts
 REACHABLE = copy.deepcopy(SITE)
 REACHABLE["walls"][0]["p1"] = [5.4, 3.0]
 REACHABLE["walls"][1].update(p0=[5.4, 3.0], p1=[5.4, 0.0])
 REACHABLE["joints"][2].update(start=[5.4, 2.5, 1.2], end=[5.4, 0.5, 1.2])
-REACHABLE["areas"][0].update(origin=[0.0, 3.0, 0.1], height=2.0)
+REACHABLE["areas"][0].update(origin=[0.0, 3.0, 0.1], height=1.9)
 
 
 def _store(path):
@@ -143,12 +143,12 @@ def test_a_section_the_arm_cannot_reach_is_left_for_manual_work_and_the_area_goe
     assert len(_sprays(locem)) == 8                       # every section tried once, none twice
     detail = tree.blackboard.get("task_detail")
     ext = params().raw["spray"]["edge_run_in"]
-    assert detail == ("sprayed; manual work on wall_1_area_1: section 3 (along 1.2..1.8 m, height 0.1..2.1 m), "
-                      "section 8 (along 4.2..4.8 m, height 0.1..2.1 m)"), detail
+    assert detail == ("sprayed; manual work on wall_1_area_1: section 3 (along 1.2..1.8 m, height 0.1..2 m), "
+                      "section 8 (along 4.2..4.8 m, height 0.1..2 m)"), detail
     assert ext > 0                                       # the last section reaches beyond the area: clipped to it
     assert parse_manual_work(detail) == [
-        {"area": "wall_1_area_1", "section": 3, "along": [1.2, 1.8], "height": [0.1, 2.1]},
-        {"area": "wall_1_area_1", "section": 8, "along": [4.2, 4.8], "height": [0.1, 2.1]}]
+        {"area": "wall_1_area_1", "section": 3, "along": [1.2, 1.8], "height": [0.1, 2.0]},
+        {"area": "wall_1_area_1", "section": 8, "along": [4.2, 4.8], "height": [0.1, 2.0]}]
     assert store.value(PROGRESS, "spray/wall_1_area_1") is None      # the area is done: record dropped
     assert parse_manual_work("sprayed") == [] and parse_manual_work("") == []
 

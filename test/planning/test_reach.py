@@ -126,6 +126,26 @@ def test_a_vertical_joint_is_clipped_to_the_band_and_left_whole_when_no_base_is_
         assert narrow.pieces == [] and "no free base pose" in narrow.manual[0]["reason"]
 
 
+def test_a_stretch_of_joint_shorter_than_the_shortest_piece_is_manual_not_a_stub_of_tape(envelope):
+    """A horizontal joint whose reachable stretch is a few centimetres (cut by a corner and a frame: seed 125's
+    wall_4_joint_2 taped 5 cm) and a vertical one whose part in the band is: manual, with that reason."""
+    from locem_bridge.planning.reach import SHORTEST_PIECE, WallReach
+    w1, r, scan = _reach(90, envelope, "taping")
+    horizontal = next(j for j in scan["joints"] if j["kind"] == "horizontal")
+    p0 = r.tool[0][0]
+    cut = WallReach(r.wall, r.work, [(p0, p0 + 0.06), (p0 + 0.5, p0 + 1.0)], list(r.base), r.t, list(r.why))
+    plan = plan_joint(horizontal, w1, cut, side=0.4, segment_length=1.2)
+    assert [round(p["along"][1] - p["along"][0], 6) for p in plan.pieces] == [0.5]
+    stub = [m for m in plan.manual if m["along"][0] <= p0 + 0.03 <= m["along"][1]]
+    assert len(stub) == 1 and stub[0]["reason"] == "shorter than the 0.10 m the robot tapes as one piece"
+    assert SHORTEST_PIECE == 0.10
+    vertical = next(j for j in scan["joints"] if j["kind"] == "vertical")
+    top = dict(vertical, start=[vertical["start"][0], vertical["start"][1], r.t[1] - 0.06],
+               end=[vertical["end"][0], vertical["end"][1], r.t[1] + 0.3])
+    plan = plan_joint(top, w1, r, side=0.4)
+    assert plan.pieces == [] and [m["reason"] for m in plan.manual] == [stub[0]["reason"]]
+
+
 def test_planning_takes_milliseconds_per_wall(envelope):
     scan = Site(copy.deepcopy(corner_site(90))).to_contract()
     plan = plan_site(scan, envelope)

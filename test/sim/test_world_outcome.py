@@ -66,22 +66,44 @@ def test_taping_pass_along_joint_with_tool_on_covers_it(rig):
     assert world.collisions == 0
 
 
-def test_joint_above_a_skirting_is_measured_from_its_own_foot(site_cfg, robot_cfg):
+def _tape_joint_1(site_cfg, robot_cfg, z0, z1, step=0.01, **wall_1):
+    """A world whose wall_1 has ``wall_1`` changed; the taping tool laid along its joint 1 (x = 1.2 m) from z0 to
+    z1 in steps of ``step``; returns the world (closed by the caller)."""
     site = copy.deepcopy(site_cfg)
-    site["site"]["walls"][0]["skirting"] = 0.3             # wall_1: joints from z 0.3 to 2.5 (2.2 m)
+    site["site"]["walls"][0].update(wall_1)
     wall = ManualWall()
     arm = KinematicArm(robot_cfg["robot"]["arm"]["named_poses"]["wall_ready"])
     world = World(site, robot_cfg, SimClock(1.0, wall=wall), arm=arm, gui=False)
+    world.set_base_pose(1.2, 2.5, np.pi / 2)
+    world.mount_tool("taping_tool")
+    _pass(world, arm, wall, [[1.2, 3.5, z0]], [0, 1, 0])
+    arm.set_digital_output(0, True)
+    _pass(world, arm, wall, _vertical(1.2, 3.6, z0, z1, step), [0, 1, 0])
+    return world
+
+
+def test_joint_above_a_skirting_is_measured_from_its_own_foot(site_cfg, robot_cfg):
+    # wall_1: joints from z 0.3 to 2.5 (2.2 m); the lower half of joint 1 taped
+    world = _tape_joint_1(site_cfg, robot_cfg, 0.3, 1.4, skirting=0.3)
     try:
-        world.set_base_pose(1.2, 2.5, np.pi / 2)
-        world.mount_tool("taping_tool")
-        _pass(world, arm, wall, [[1.2, 3.5, 0.3]], [0, 1, 0])
-        arm.set_digital_output(0, True)
-        _pass(world, arm, wall, _vertical(1.2, 3.6, 0.3, 1.4), [0, 1, 0])     # the lower half of the joint
         j = world.outcome.summary()["joints"]["wall_1_joint_1"]
         assert j["coverage"] == pytest.approx(1.1 / 2.2, abs=0.02)
         bins = world.outcome.tape["wall_1_joint_1"]
         assert bins[:100].all() and not bins[120:].any()   # the taped bins are the bottom ones
+    finally:
+        world.close()
+
+
+def test_a_joint_whose_length_is_no_whole_number_of_bins_counts_its_last_bin_for_what_it_holds(site_cfg, robot_cfg):
+    """A joint 0.791 m long (up to a window frame, say) taped to 2 mm short of its end, as scan noise leaves it:
+    its last 1 cm bin holds 1 mm of joint, and the joint is 99.7 % taped, not 98.75 % (79 of 80 bins)."""
+    # wall_1: joints from z 0.709 to 1.5 (0.791 m)
+    world = _tape_joint_1(site_cfg, robot_cfg, 0.709, 1.498, 0.005, skirting=0.709, height=1.5)
+    try:
+        assert len(world.outcome.tape["wall_1_joint_1"]) == 80 and not world.outcome.tape["wall_1_joint_1"][-1]
+        j = world.outcome.summary()["joints"]["wall_1_joint_1"]
+        assert j["coverage"] == pytest.approx(0.790 / 0.791, abs=1e-3) and j["coverage"] >= 0.99
+        assert j["coverage_reachable"] == j["coverage"]
     finally:
         world.close()
 

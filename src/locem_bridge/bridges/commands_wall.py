@@ -63,8 +63,9 @@ def _line_len(v: Mapping[str, Any]) -> float:
 
 
 def _raster_len(v: Mapping[str, Any]) -> float:
-    lanes = math.ceil(v["height"] / v["spacing"]) + 1
-    return lanes * (v["width"] + 2.0 * v.get("run_in", 0.0) + v["spacing"] + 0.6)
+    length, extent = ((v["height"], v["width"]) if v.get("lanes") == "vertical" else (v["width"], v["height"]))
+    lanes = math.ceil(extent / v["spacing"]) + 1
+    return lanes * (length + 2.0 * v.get("run_in", 0.0) + v["spacing"] + 0.6)
 
 
 _LINE_ARGS = _point("", "line start", "0") + _point("", "line end", "1")
@@ -128,15 +129,23 @@ SPRAY_AREA = CommandSpec(
     + (("lanes", "lanes sprayed (a lane begun part way counts)"), ("skipped_m", "raster length left out (skip)")),
     deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0, capability="plb:cap_SprayRaster")
 SAND_AREA = CommandSpec(
-    "SAND_AREA", "Sand an area in horizontal raster lanes in contact with the wall, sander on only on the lanes.",
-    args=_AREA_ARGS + _normal() + (
+    "SAND_AREA", "Sand an area in raster lanes in contact with the wall, sander on only on the lanes: horizontal "
+    "lanes stacked upwards, or (lanes=vertical) vertical lanes stacked along u, e.g. one pass (width 0) up the side "
+    "of a door frame, where horizontal lanes cannot run on and a round pad leaves bare scallops between them.",
+    args=_AREA_ARGS[:6] + (
+        Arg.number("width", "m", 0.0, 10.0, "extent along u (at least 0.01 m; 0 with lanes=vertical: one lane up "
+                   "the origin's side)"),
+        Arg.number("height", "m", 0.01, 5.0, "extent upwards")) + _normal() + (
         Arg.number("spacing", "m", 0.02, 1.0, "distance between lanes", default=0.1, keyword_only=True),
         Arg.number("speed", "m/s", 0.01, 0.5, "speed along a lane", default=0.15, keyword_only=True),
         Arg.number("force", "N", 0.0, 100.0, "contact force set-point along the tool axis (contact=force)",
                    default=20.0, keyword_only=True),
         Arg.choice("contact", ("position", "force"), "position: lanes on the wall surface; force: force mode holds "
                    "the set-point along the tool axis while the lanes run (needs a controller with force control; "
-                   "the UR stand-in needs contact surfaces)", default="position", keyword_only=True)),
+                   "the UR stand-in needs contact surfaces)", default="position", keyword_only=True),
+        Arg.choice("lanes", ("horizontal", "vertical"), "direction of the lanes: horizontal (along u, stacked "
+                   "upwards over height) or vertical (upwards, stacked along u over width)", default="horizontal",
+                   keyword_only=True)),
     resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=600.0, pausable=True, result=_WORK_RESULT
     + (("lanes", "lanes sanded"),), deadline=lambda v: _raster_len(v) / v["speed"] * 2.0 + 90.0,
     capability="plb:cap_SandRaster")
@@ -722,6 +731,8 @@ class WallCommands:
     @staticmethod
     def _lane_heights(height: float, spacing: float) -> List[float]:
         """Heights of a raster's lanes above the area's origin: bottom to top, ``spacing`` at most apart."""
+        if height <= 1e-9:
+            return [0.0]                 # no extent across the lanes: one lane (a vertical pass of width 0)
         lanes = max(1, int(math.ceil(height / spacing - 1e-9))) + 1
         return [height * k / (lanes - 1) for k in range(lanes)] if lanes > 1 else [height / 2.0]
 
@@ -749,8 +760,9 @@ class WallCommands:
     def _raster(self, ctx: Any, tool: str, origin: Sequence[float], u: Sequence[float], width: float,
                 height: float, normal: Sequence[float], spacing: float, speed: float, offset: float,
                 run_in: float, skip: float = 0.0, hold_s: float = 0.0,
-                live: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
-        """Horizontal lanes from the area's bottom to its top, alternating direction. Each lane is one straight
+                live: Optional[Dict[str, Any]] = None, across: Optional[Sequence[float]] = None) -> Dict[str, Any]:
+        """Lanes along ``u`` stacked along ``across`` (default: up; horizontal lanes from the area's bottom to its
+        top), alternating direction. Each lane is one straight
         move that starts ``run-up`` before the worked stretch [-run_in, width + run_in] and ends as far after
         it (the distance the arm needs to reach ``speed`` at ``LANE_ACCEL``); the tool is on only over the
         worked stretch (:class:`LaneSwitch`). ``skip``: metres of the raster's worked length (the stretches end
@@ -762,7 +774,7 @@ class WallCommands:
         live = live if live is not None else {}
         n = self._unit(normal, "normal")
         uu = self._unit(u, "u")
-        up = np.array([0.0, 0.0, 1.0])
+        up = np.array([0.0, 0.0, 1.0]) if across is None else self._unit(across, "across")
         o = np.asarray(origin, dtype=float)
         heights = self._lane_heights(height, spacing)
         total_m = len(heights) * (width + 2.0 * run_in)
@@ -902,22 +914,32 @@ class WallCommands:
 
     def sand_area(self, ctx: Any, ox: float, oy: float, oz: float, ux: float, uy: float, uz: float, width: float,
                   height: float, nx: float, ny: float, nz: float, spacing: float, speed: float,
-                  force: float, contact: str = "position") -> Dict[str, Any]:
+                  force: float, contact: str = "position", lanes: str = "horizontal") -> Dict[str, Any]:
         """Raster lanes over the area. ``contact=force``: each lane starts ``standoff`` in front of the wall, force
         mode pushes along the tool axis until the contact force is within tolerance, the sander runs while the
-        lane is followed under force control, then force mode ends and the tool lifts back to the standoff."""
+        lane is followed under force control, then force mode ends and the tool lifts back to the standoff.
+        ``lanes=vertical``: the lanes run upwards over ``height`` and are stacked along u over ``width``."""
+        vertical = lanes == "vertical"
+        if width < 0.01 and not vertical:
+            raise BadRequest("SAND_AREA: width %.3f m: horizontal lanes need a width of at least 0.01 m; width 0 "
+                             "is allowed with lanes=vertical (one lane up the origin's side)" % width,
+                             argument="width")
         self._need_tool("sander")
         arm = self._need("arm")
+        up_axis = [0.0, 0.0, 1.0]
+        # the lanes' direction and the direction they are stacked in, with their extents
+        along, across, length, extent = ((up_axis, [ux, uy, uz], height, width) if vertical
+                                         else ([ux, uy, uz], up_axis, width, height))
         if contact != "force" or not arm.supports(Arm.FORCE):
             live: Dict[str, Any] = {"skip": 0.0}
             resumable = self._resumable(ctx, "sander", live, lift_off=True)
             try:
-                out = resumable.run(lambda: self._raster(ctx, "sander", [ox, oy, oz], [ux, uy, uz], width, height,
+                out = resumable.run(lambda: self._raster(ctx, "sander", [ox, oy, oz], along, length, extent,
                                                          [nx, ny, nz], spacing, speed, 0.0, run_in=0.0,
-                                                         skip=live["skip"], live=live))
+                                                         skip=live["skip"], live=live, across=across))
             finally:
                 self._switch_off_safely("sander")
-            out = self._worked(out, len(self._lane_heights(height, spacing)) * width, 0.0, resumable.suspensions)
+            out = self._worked(out, len(self._lane_heights(extent, spacing)) * length, 0.0, resumable.suspensions)
             out["force_n"] = force
             out["contact"] = "position"
             return out
@@ -925,11 +947,11 @@ class WallCommands:
             raise BadRequest("SAND_AREA: contact=force needs force > 0 N", argument="force")
         standoff, approach_speed, tolerance = 0.01, 0.02, max(1.0, 0.1 * force)     # m, m/s along the axis, N
         n = self._unit([nx, ny, nz], "normal")
-        uu = self._unit([ux, uy, uz], "u")
-        up = np.array([0.0, 0.0, 1.0])
+        uu = self._unit(along, "u")
+        up = self._unit(across, "u")
         o = np.array([ox, oy, oz], dtype=float)
-        lanes = max(1, int(math.ceil(height / spacing - 1e-9))) + 1
-        heights = [height * k / (lanes - 1) for k in range(lanes)] if lanes > 1 else [height / 2.0]
+        heights = self._lane_heights(extent, spacing)
+        width = length             # below: lanes of this length along uu, at heights along up
         start = time.monotonic()
         total = 0.0
         samples: List[float] = []
@@ -939,7 +961,7 @@ class WallCommands:
         live: Dict[str, Any] = {"k": 0, "f": 0.0, "lane": None, "at": None}
         resumable = self._resumable(ctx, "sander", live, lift_off=True)
 
-        def lanes() -> None:
+        def work_lanes() -> None:
             nonlocal total, end_pose
             first = True
             for k in range(live["k"], len(heights)):
@@ -982,7 +1004,7 @@ class WallCommands:
                 live.update(k=k + 1, f=0.0)
                 ctx.report((k + 1) / len(heights), "lane %d of %d" % (k + 1, len(heights)))
         try:
-            resumable.run(lanes)
+            resumable.run(work_lanes)
         finally:
             self._switch_off_safely("sander")
             arm.force_mode_stop()

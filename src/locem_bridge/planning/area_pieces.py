@@ -24,9 +24,10 @@ row's free cells form runs (whose sides are then all open -- within a row every 
 but an area's end shared in that row); a run is split where what lies below it changes
 (free, hole or the area's bottom), and a split point is a shared side; a run whose interval and side kinds
 equal those of the piece right below it, and which sits on it, is merged into that piece (a full-height column
-beside a window stays one piece). A strip on top of a piece no taller than ``gap`` is merged into the piece
-below it, whatever its sides (it would get no lane of its own: above a door's columns, under the ceiling), and so
-is a strip on top of pieces side by side, into each of them.
+beside a window stays one piece). A strip on top of a piece less than two ``gap`` tall is merged into the piece
+below it, whatever its sides (after the gap it would get no lane of its own, or two lanes closer than the
+spacing: above a door's columns, beside a window's top under the tool's band), and so is a strip on top of
+pieces side by side, into each of them.
 """
 from dataclasses import dataclass
 from typing import Any, Dict, List, Sequence, Tuple
@@ -114,15 +115,17 @@ def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float =
                     b += 1
                 sits = under(a) == 1
                 t0 = T[j] + (gap if sits else 0.0)
+                short = T[j + 1] - T[j] < 2.0 * gap - _EPS
                 piece = Piece(S[a], S[b + 1], t0, T[j + 1], open_left=(a == i and not (i == 0 and shared(0, j))),
                               open_right=(b == k and not (k == ncol - 1 and shared(1, j))), on_piece=sits)
                 merged = False
                 if sits:
                     for c0, c1, p in below:
                         same = (c0, c1) == (a, b) and (p.open_left, p.open_right) == (piece.open_left, piece.open_right)
-                        # a strip no taller than the gap on top of a piece: that piece runs on up to its top (one
-                        # more lane there, not a piece with no lane of its own)
-                        thin = T[j + 1] - T[j] <= gap + _EPS and c0 <= a and b <= c1
+                        # a strip on top of a piece that would be left shorter than a lane spacing after the gap:
+                        # that piece runs on up to its top (its lanes spread over it), not a piece with no lane of
+                        # its own or two lanes closer than the spacing (a stripe of double coat)
+                        thin = short and c0 <= a and b <= c1
                         if same or thin:
                             p.t1 = T[j + 1]
                             row.append((c0, c1, p) if thin and not same else (a, b, p))
@@ -131,7 +134,7 @@ def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float =
                     # a thin strip on top of several pieces side by side (whose sides differ where a shared end
                     # begins below it): each of them runs on up to its top
                     parts = [(c0, c1, p) for c0, c1, p in below if c0 <= b and a <= c1]
-                    if (not merged and T[j + 1] - T[j] <= gap + _EPS and parts
+                    if (not merged and short and parts
                             and all(a <= c0 and c1 <= b for c0, c1, _p in parts)
                             and sum(c1 - c0 + 1 for c0, c1, _p in parts) == b - a + 1):
                         for c0, c1, p in parts:

@@ -34,7 +34,8 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 STEP = 0.02                       # m, sampling step along the wall
-SHORTEST_PIECE = 0.10            # m, a horizontal joint's piece is not split shorter for a free base
+SHORTEST_PIECE = 0.10            # m, no piece of joint the robot tapes is shorter (nor split shorter for a base)
+SHORT_REASON = "shorter than the %.2f m the robot tapes as one piece" % SHORTEST_PIECE
 OUTLINE_STEP = 0.10               # m, spacing of the sample points on the chassis outline
 Interval = Tuple[float, float]
 
@@ -390,7 +391,8 @@ def plan_joint(joint: Mapping[str, Any], wall: Wall2D, reach: WallReach, side: O
     is left -- out of the band, near a corner, no free base -- is manual, with its reason. A vertical joint
     reaching less than ``min_manual`` past the band is taped to its end (the band is measured with margin; a
     scanned end a few millimetres below it is no manual work); a horizontal manual part shorter than
-    ``min_manual`` is not listed."""
+    ``min_manual`` is not listed. A stretch the tool reaches that is shorter than SHORTEST_PIECE (between a
+    corner and a frame, say) is manual too: the robot lays no tape shorter than that."""
     a, b = np.array(joint["start"], dtype=float), np.array(joint["end"], dtype=float)
     total = float(np.linalg.norm(b - a))
 
@@ -421,6 +423,8 @@ def plan_joint(joint: Mapping[str, Any], wall: Wall2D, reach: WallReach, side: O
         hi = z1 if z1 - reach.t[1] < min_manual else min(z1, reach.t[1])
         if hi - lo < 1e-3:
             return JointPlan(jid, [], [part(0.0, 1.0, reason="outside the tool's height band")])
+        if hi - lo < SHORTEST_PIECE - 1e-9:
+            return JointPlan(jid, [], [part(0.0, 1.0, reason=SHORT_REASON)])
         span = float(b[2] - a[2])
         if abs(span) < 1e-9:
             return JointPlan(jid, [part(0.0, 1.0, base=base)], [])
@@ -437,7 +441,11 @@ def plan_joint(joint: Mapping[str, Any], wall: Wall2D, reach: WallReach, side: O
     if abs(length) < 1e-9:
         return JointPlan(jid, [], [part(0.0, 1.0, reason="not along the wall")])
     pieces: List[Dict[str, Any]] = []
+    short: List[Tuple[float, float]] = []          # reachable stretches too short to tape (along the joint)
     for p, q in _clip(min(sa, sb), max(sa, sb), reach.tool):
+        if q - p < SHORTEST_PIECE - 1e-9:
+            short.append(tuple(sorted(((p - sa) / length * total, (q - sa) / length * total))))
+            continue
         n = max(1, int(math.ceil((q - p) / segment_length - 1e-9))) if segment_length > 0 else 1
         todo = [(p + (q - p) * i / n, p + (q - p) * (i + 1) / n) for i in range(n)]
         while todo:
@@ -451,9 +459,11 @@ def plan_joint(joint: Mapping[str, Any], wall: Wall2D, reach: WallReach, side: O
                 todo += [(u, (u + v) / 2.0), ((u + v) / 2.0, v)]
     pieces.sort(key=lambda x: x["along"][0])
     manual = []
-    for lo_, hi_ in interval_minus(0.0, total, [tuple(x["along"]) for x in pieces], max(min_manual, 1e-6)):
+    for lo_, hi_ in interval_minus(0.0, total, [tuple(x["along"]) for x in pieces] + short, max(min_manual, 1e-6)):
         mid = sa + length * (lo_ + hi_) / 2.0 / total
         manual.append(part(lo_ / total, hi_ / total, reason=why(mid)))
+    manual += [part(lo_ / total, hi_ / total, reason=SHORT_REASON) for lo_, hi_ in short if hi_ - lo_ >= min_manual]
+    manual.sort(key=lambda x: x["along"][0])
     return JointPlan(jid, pieces, manual)
 
 

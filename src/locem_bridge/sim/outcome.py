@@ -424,7 +424,8 @@ class OutcomeRecorder:
         joints = {}
         touched_tape = 0
         for jid, bins in self.tape.items():
-            cov = float(bins.mean())
+            weight = _bin_lengths(self.site.joint(jid).length, len(bins))
+            cov = _weighted(bins, weight)
             taped = np.flatnonzero(bins)
             inner = bins[taped[0]:taped[-1] + 1] if taped.size else bins[:0]
             planned = self._manual_bins(jid, plan)
@@ -440,7 +441,8 @@ class OutcomeRecorder:
                            "gap_m": round(_longest_run(~inner) * TAPE_BIN, 4),
                            "manual_m": round(_union_length([(a, b) for j, a, b in plan.joints if j == jid],
                                                            0.0, length), 4),
-                           "coverage_reachable": float(bins[counted].mean()) if counted.any() else None}
+                           "coverage_reachable": _weighted(bins[counted], weight[counted]) if counted.any()
+                           else None}
         seams = [x for x in (self._seam(*e) for e in self.spray_pass_ends) if x is not None]
         walls = {}
         total_cells = covered_cells = sanded_cells = 0
@@ -844,6 +846,18 @@ def _touching_run(flags: List[bool], at: List[bool]) -> int:
                 best = max(best, n)
             n, touches = 0, False
     return best
+
+
+def _bin_lengths(length: float, n: int) -> np.ndarray:
+    """How much of a joint of ``length`` each of its ``n`` TAPE_BINs holds: TAPE_BIN, the last one the rest (a
+    joint 0.791 m long has 79 bins of 1 cm and one of 1 mm, which counts for 1 mm, not for 1 cm)."""
+    return np.clip(length - np.arange(n) * TAPE_BIN, 0.0, TAPE_BIN)
+
+
+def _weighted(bins: np.ndarray, weight: np.ndarray) -> float:
+    """The share of the length ``weight`` the set ``bins`` hold."""
+    total = float(weight.sum())
+    return float(weight[bins].sum()) / total if total > 0 else float(bins.mean()) if bins.size else 0.0
 
 
 def _longest_run(flags: Any) -> int:

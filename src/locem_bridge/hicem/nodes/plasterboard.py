@@ -13,8 +13,8 @@ default from the robot facts (``robot.work.taping.*``, ``robot.tools``: the robo
 """
 import json
 import math
-from dataclasses import asdict
-from typing import Any, Dict, List, Tuple
+from dataclasses import asdict, replace
+from typing import Any, Dict, List, Sequence, Tuple
 
 from py_trees.common import Status
 
@@ -232,6 +232,16 @@ class GetTapeSegments(Leaf):
         return Status.SUCCESS
 
 
+def _outwards(length: float, most: float) -> List[Tuple[float, float]]:
+    """A line of ``length`` taped from its middle outwards in pieces no longer than ``most``: (from, to) as
+    fractions of it, middle to the end (1) first, then middle to the start (0)."""
+    out = []
+    for end in (1.0, 0.0):
+        n = max(1, int(math.ceil(length / 2.0 / most - 1e-9)))
+        out += [(0.5 + (end - 0.5) * i / n, 0.5 + (end - 0.5) * (i + 1) / n) for i in range(n)]
+    return out
+
+
 def _reach_of(plan: Dict[str, Any]) -> WallReach:
     """The :class:`WallReach` GetWallReach's ``plan`` output describes."""
     return WallReach(plan["wall"], plan["work"], [tuple(iv) for iv in plan["tool"]], [tuple(iv) for iv in plan["base"]],
@@ -259,7 +269,11 @@ class GetTapePlan(Leaf):
                    "past the height band is taped to its end; a shorter manual part is not listed"),
         STANDOFF, LATERAL_OFFSET, YAW_OFFSET, SURFACE_OFFSET, MAX_TILT,
         input_port("done", STRING, "taped", "", "the task detail's first word when something is taped"),
-        output_port("segments", JSON, None, "", "list of {approach, start, end, normal, length, along: [a, b]}"),
+        input_port("outwards", BOOL, "false", "", "true (an arm on a lift, the plan's band is the lift's z_range): "
+                   "a vertical piece is taped from its middle outwards, middle to top then middle to bottom, in "
+                   "pieces no longer than segment_length, each at its own lift height (its z)"),
+        output_port("segments", JSON, None, "", "list of {approach, start, end, normal, length, along: [a, b], "
+                    "z: [z_min, z_max]}"),
         output_port("count", INT, None, "", "number of pieces taped by the robot"),
         output_port("manual", JSON, None, "", "[{along: [a, b], reason}] left to the hand (m from the joint's start)"),
         output_port("status", STRING, None, "", "'taped' when a piece is taped, 'manual' when none is"),
@@ -297,10 +311,19 @@ class GetTapePlan(Leaf):
             a, b = piece["from"], piece["to"]
             foot = a if j["kind"] == "vertical" else [(a[k] + b[k]) / 2.0 for k in range(3)]
             shift = piece["base"] - float((foot[0] - wall.p0[0]) * u[0] + (foot[1] - wall.p0[1]) * u[1]) + lat
-            segments.append({"approach": [foot[0] + nx * d + u[0] * shift, foot[1] + ny * d + u[1] * shift, heading],
-                             "start": [a[k] + nrm[k] * off for k in range(3)],
-                             "end": [b[k] + nrm[k] * off for k in range(3)], "normal": list(nrm),
-                             "length": math.dist(a, b), "along": list(piece["along"])})
+            approach = [foot[0] + nx * d + u[0] * shift, foot[1] + ny * d + u[1] * shift, heading]
+            parts = [(0.0, 1.0)]
+            if self.get("outwards") and j["kind"] == "vertical" and seg > 0:
+                parts = _outwards(math.dist(a, b), seg)
+            al0, al1 = piece["along"]
+            for fa, fb in parts:
+                pa = [a[k] + (b[k] - a[k]) * fa for k in range(3)]
+                pb = [a[k] + (b[k] - a[k]) * fb for k in range(3)]
+                segments.append({"approach": list(approach), "start": [pa[k] + nrm[k] * off for k in range(3)],
+                                 "end": [pb[k] + nrm[k] * off for k in range(3)], "normal": list(nrm),
+                                 "length": math.dist(pa, pb), "along": [al0 + (al1 - al0) * fa,
+                                                                        al0 + (al1 - al0) * fb],
+                                 "z": sorted((pa[2], pb[2]))})
         manual = [{"along": list(m["along"]), "reason": m["reason"]} for m in planned.manual]
         detail = self.get("done") if segments else ""
         if manual:
@@ -336,6 +359,8 @@ class GetLiftHeight(Leaf):
         input_port("z", FLOAT_LIST, None, "m", "z_min;z_max of the piece (e.g. {piece.z})"),
         input_port("band", FLOAT_LIST, None, "m", "z_min;z_max reached from one lift height, at the lift's bottom"),
         input_port("lift_range", FLOAT_LIST, "{@robot.lift.range}", "m", "bottom;top of the lift, empty: no lift"),
+        input_port("tolerance", FLOAT, "0.0", "m", "how far the piece may reach past the band at either end (a "
+                   "joint GetTapePlan tapes to its scanned end within cfg.plan.min_manual of the band)"),
         output_port("command", STRING, None, "", "'LIFT z=<m>', or empty when the robot has no lift"),
         output_port("height", FLOAT, None, "m", "the lift height (0 without a lift)"),
     )
@@ -345,6 +370,9 @@ class GetLiftHeight(Leaf):
         if len(z) != 2:
             raise PortError("%s: z must be two heights z_min;z_max, got %s" % (self.name, z))
         lo, hi = sorted(z)
+        tol = self.get("tolerance")
+        if tol < 0:
+            raise PortError("%s: tolerance must be >= 0 m, got %g" % (self.name, tol))
         band, lift = list(self.get("band")), list(self.get("lift_range"))
         if len(band) != 2 or band[0] >= band[1]:
             raise PortError("%s: band must be two heights z_min < z_max, got %s" % (self.name, band))
@@ -358,9 +386,16 @@ class GetLiftHeight(Leaf):
         # piece's middle (the arm reaches furthest sideways at its mount's height)
         low, high = max(lift[0], lift[0] + hi - band[1]), min(lift[1], lift[0] + lo - band[0])
         if low > high + 1e-6:
-            return self.fail("heights %.3f..%.3f m are out of reach from one lift height (band %.2f..%.2f m at the "
-                             "lift's bottom, lift %.2f..%.2f m)" % (lo, hi, band[0], band[1], lift[0], lift[1]))
-        height = min(max((lo + hi) / 2.0, low), max(low, high))
+            # within the tolerance: the height between the two limits, inside what the tolerance allows
+            lo_t, hi_t = min(lo + tol, (lo + hi) / 2.0), max(hi - tol, (lo + hi) / 2.0)
+            low_t, high_t = max(lift[0], lift[0] + hi_t - band[1]), min(lift[1], lift[0] + lo_t - band[0])
+            if low_t > high_t + 1e-6:
+                return self.fail("heights %.3f..%.3f m are out of reach from one lift height (band %.2f..%.2f m at "
+                                 "the lift's bottom, lift %.2f..%.2f m)" % (lo, hi, band[0], band[1], lift[0],
+                                                                           lift[1]))
+            height = min(max((low + high) / 2.0, low_t), max(low_t, high_t))
+        else:
+            height = min(max((lo + hi) / 2.0, low), max(low, high))
         self.set("command", "LIFT z=%.4f" % height)
         self.set("height", height)
         return Status.SUCCESS
@@ -480,9 +515,21 @@ class GetAreaRaster(Leaf):
                    "frame itself is not sanded)"),
         input_port("min_manual", FLOAT, "{@cfg.plan.min_manual}", "m", "a planned manual strip narrower than this "
                    "is not reported (the fan or pad past the worked part's edge covers it)"),
+        input_port("edge_passes", BOOL, "false", "", "true: where a section's side is a hole's edge (the lanes "
+                   "stop there, hole_margin off the frame) a vertical pass follows the section, from the same "
+                   "base pose, up that side over the height the hole borders it (lanes 'vertical', width 0): a "
+                   "round pad on horizontal lanes that cannot run on leaves scallops of wall bare between them"),
         input_port("plan", JSON, "null", "", "what the work reaches on the area's wall (GetWallReach); null: the "
                    "whole area, each section's base in front of its middle"),
-        output_port("sections", JSON, None, "", "list of {approach, origin, u, width, height, normal, index, z}"),
+        input_port("lane_spacing", FLOAT, "0.0", "m", "even coat (spray): a section's lanes are spread over its "
+                   "height as near this spacing as whole intervals allow (a 0.2 m strip: 2 lanes 0.2 m apart, "
+                   "not 3 lanes 0.1 m apart, half again the coat) and its speed is scaled by its spacing's ratio "
+                   "to this one, so every m2 gets the same coat; 0: spacing band_gap, at most that far apart"),
+        input_port("speed", FLOAT, "0.0", "m/s", "lane speed at lane_spacing (each section's 'speed')"),
+        input_port("max_speed", FLOAT, "1.0", "m/s", "the scaled speed's cap (the run-up a lane has room for)"),
+        output_port("sections", JSON, None, "", "list of {approach, origin, u, width, height, normal, index, z, "
+                    "lanes, spacing, speed} (lanes: 'horizontal', or 'vertical' for an edge pass; spacing (m) and "
+                    "speed (m/s) of its lanes)"),
         output_port("count", INT, None, "", "number of sections"),
         output_port("manual", JSON, None, "", "the parts of the area the plan leaves to the hand: "
                     "[{along: [a, b], height: [c, d], reason}] (along from the area's origin, height above the floor)"),
@@ -514,6 +561,7 @@ class GetAreaRaster(Leaf):
         holes = [(h["s"][0] - margin, h["s"][1] + margin, h["t"][0] - margin if h["t"][0] > 1e-9 else h["t"][0],
                   h["t"][1] + margin) for h in a.get("holes", [])]
         u = a["u"]
+        frames = list(holes) if self.get("edge_passes") else []       # the openings' holes, not the manual parts
         plan, reach, manual = self.get("plan"), None, []
         if plan:
             wall = Wall2D.from_scan(hdh.feature(a["wall"], "wall"))
@@ -530,15 +578,23 @@ class GetAreaRaster(Leaf):
         shared: Any = shared_ends(a, hdh.features("area"), tol, gap) if self.get("neighbours") else ((), ())
         sections: List[Dict[str, Any]] = []
         smallest = max(0.0, self.get("min_manual")) if reach is not None else 0.0
+        top = math.inf
         for piece in area_pieces(a["width"], a["height"], holes, gap, *shared):
             if reach is not None:
+                # never above the band the tool reaches (a sliver the plan's manual parts leave beside a hole at
+                # the area's end ran up to the wall's top: protective stop); below it by min_manual at most
+                top = reach.t[1] - a["origin"][2]
+                lo = reach.t[0] - a["origin"][2] - smallest
+                if piece.t1 > top + 1e-9 or piece.t0 < lo - 1e-9:
+                    piece = replace(piece, t0=max(piece.t0, min(lo, piece.t1)), t1=min(piece.t1, max(top, piece.t0)))
                 # a sliver the plan's cuts leave (scan noise between a manual part and a hole) or a piece outside
                 # the tool's band is never sent to the arm: manual work if it is worth listing
                 z0, z1 = a["origin"][2] + piece.t0, a["origin"][2] + piece.t1
                 inside = min(z1, reach.t[1]) - max(z0, reach.t[0])
                 if piece.width < smallest or piece.height < smallest or inside < min(smallest, piece.height) - 1e-9:
                     if piece.width >= smallest and piece.height >= smallest:
-                        manual.append({"along": [piece.s0, piece.s1], "height": [z0, z1],
+                        manual.append({"along": [piece.s0, piece.s1],
+                                       "height": [z0 - (gap if piece.on_piece else 0.0), z1],
                                        "reason": "outside the tool's height band"})
                     continue
             count = max(1, int(math.ceil(piece.width / sw - 1e-9)))
@@ -559,8 +615,28 @@ class GetAreaRaster(Leaf):
             if bh <= 0:
                 raise PortError("%s: band_gap %g m leaves no band in a %g m high piece of the area"
                                 % (self.name, gap, piece.height))
-            for i in range(count):
-                along = piece.s0 + w * i
+            # the columns of the piece, each with its planned free base pose (None: none reaches all of it);
+            # neighbours one base reaches together are one column (no seam of run-ins between them)
+            cols: List[List[Any]] = [[piece.s0 + w * i, piece.s0 + w * (i + 1), None] for i in range(count)]
+            if reach is not None:
+                for col in cols:
+                    col[2] = reach.base_for(along0 + col[0], along0 + col[1], float(plan["reach"]))
+                joined = [cols[0]]
+                for col in cols[1:]:
+                    last = joined[-1]
+                    both = (reach.base_for(along0 + last[0], along0 + col[1], float(plan["reach"]))
+                            if last[2] is not None and col[2] is not None and col[1] - last[0] <= sw + 1e-9
+                            else None)
+                    if both is not None:
+                        last[1], last[2] = col[1], both
+                    elif last[2] is None and col[2] is None:
+                        last[1] = col[1]                      # one manual part, not several side by side
+                    else:
+                        joined.append(col)
+                cols = joined
+            count = len(cols)
+            for i, (along, end, at) in enumerate(cols):
+                w = end - along
                 o = [a["origin"][k] + u[k] * along for k in range(3)]
                 o[2] += piece.t0
                 mx, my = o[0] + u[0] * w / 2.0, o[1] + u[1] * w / 2.0
@@ -568,25 +644,70 @@ class GetAreaRaster(Leaf):
                 s1 = w + ext if i == count - 1 and piece.open_right else w
                 o = [o[k] + u[k] * s0 for k in range(3)]
                 if reach is not None:      # the free base pose nearest the section's middle (planned)
-                    sa, sb = along0 + along, along0 + along + w      # the section without its run-in
-                    at = reach.base_for(sa, sb, float(plan["reach"]))
                     if at is None:
-                        manual.append({"along": [along, along + w], "height": [a["origin"][2] + piece.t0,
-                                                                             a["origin"][2] + piece.t1],
+                        # a piece sitting on another begins one lane spacing above it: that strip is its own
+                        manual.append({"along": [along, along + w],
+                                       "height": [a["origin"][2] + piece.t0 - (gap if piece.on_piece else 0.0),
+                                                  a["origin"][2] + piece.t1],
                                        "reason": "no free base pose reaches all of it"})
                         continue
                     mx, my = wall.p0[0] + wall.u[0] * at, wall.p0[1] + wall.u[1] * at
+                sides = ([piece.s0] if i == 0 else []) + ([piece.s1] if i == count - 1 else [])
                 for b in (range(bands) if i % 2 == 0 else reversed(range(bands))):
                     ob = list(o)
                     ob[2] = o[2] + b * (bh + gap)
-                    sections.append({"approach": [mx + n[0] / nxy * bs, my + n[1] / nxy * bs, heading],
-                                     "origin": ob, "u": list(u), "width": s1 - s0,
-                                     "height": bh if bands > 1 else piece.height, "normal": n,
-                                     "index": len(sections), "z": [ob[2], ob[2] + bh]})
+                    approach = [mx + n[0] / nxy * bs, my + n[1] / nxy * bs, heading]
+                    sh = bh if bands > 1 else piece.height
+                    spacing, speed = self._lanes(sh, gap)
+                    sections.append({"approach": approach, "origin": ob, "u": list(u), "width": s1 - s0,
+                                     "height": sh, "normal": n, "index": len(sections), "z": [ob[2], ob[2] + bh],
+                                     "lanes": "horizontal", "spacing": spacing, "speed": speed})
+                    t0 = piece.t0 + b * (bh + gap)
+                    for side, lo, hi in _edge_passes(frames, sides, t0, min(top, t0 + (bh if bands > 1
+                                                                             else piece.height))):
+                        og = [a["origin"][k] + u[k] * side for k in range(3)]
+                        og[2] = a["origin"][2] + lo
+                        sections.append({"approach": approach, "origin": og, "u": list(u), "width": 0.0,
+                                         "height": hi - lo, "normal": n, "index": len(sections),
+                                         "z": [ob[2], ob[2] + bh], "lanes": "vertical", "spacing": gap,
+                                         "speed": self.get("speed")})
         self.set("sections", sections)
         self.set("count", len(sections))
         self.set("manual", manual)
         return Status.SUCCESS
+
+    def _lanes(self, height: float, gap: float) -> Tuple[float, float]:
+        """(spacing, speed) of a section ``height`` tall (see the ports lane_spacing, speed, max_speed)."""
+        nominal, speed = self.get("lane_spacing"), self.get("speed")
+        if nominal < 0 or speed < 0 or self.get("max_speed") <= 0:
+            raise PortError("%s: lane_spacing and speed must be >= 0 and max_speed > 0, got %g, %g, %g"
+                            % (self.name, nominal, speed, self.get("max_speed")))
+        if nominal <= 0:
+            return gap, speed
+        spacing = height / max(1, int(round(height / nominal))) if height > 1e-9 else nominal
+        # rounded up (to what the command text carries): LOCEM's lanes at most this far apart are then exactly
+        # the whole intervals above, not one more
+        spacing = math.ceil(spacing * 1e5 - 1e-6) / 1e5
+        return spacing, round(min(self.get("max_speed"), speed * nominal / spacing), 4)
+
+
+#: m, shortest edge pass (GetAreaRaster edge_passes): a hole bordering a section over less is left to its lanes
+EDGE_PASS_MIN = 0.05
+
+
+def _edge_passes(holes: Sequence[Tuple[float, float, float, float]], sides: Sequence[float], t0: float,
+                 t1: float) -> List[Tuple[float, float, float]]:
+    """(along, from, to) of the vertical passes up a section's ``sides`` (along the area) over [t0, t1] (above
+    the area's origin): where a hole (s0, s1, t0, t1) ends or starts exactly at a side, over the height they
+    share, EDGE_PASS_MIN or more."""
+    out = []
+    for side in sides:
+        for hs0, hs1, ht0, ht1 in holes:
+            if abs(hs1 - side) < 1e-6 or abs(hs0 - side) < 1e-6:
+                lo, hi = max(t0, ht0), min(t1, ht1)
+                if hi - lo >= EDGE_PASS_MIN:
+                    out.append((side, lo, hi))
+    return out
 
 
 def _pose_of(here: Any) -> Any:
