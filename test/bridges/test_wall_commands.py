@@ -116,15 +116,20 @@ def test_home_switches_outputs_off_and_parks_the_arm(wall, core):
     assert max(abs(a - b) for a, b in zip(rig.standin.get_joint_positions(), home)) < 1e-3
 
 
-def test_sand_area_sands_the_area_in_contact(wall, core):
-    rig, _ = wall
+def _sand(rig, core, command):
+    """The sander mounted, the base 1 m from wall_1, ``command`` run; the wall's outcome maps after it."""
     rig.world.mount_tool("sander")
     assert run(core, "MOUNT_TOOL sander").success
     assert run(core, "GOTO 2.4 2.6 1.5708").success
-    r = run(core, "SAND_AREA 2.0 3.6 0.9 1 0 0 0.8 0.6 %s spacing=0.1 speed=0.15" % NORMAL)
+    r = run(core, command)
     assert r.success, r.message
     time.sleep(0.2)
-    m = rig.world.outcome.maps["wall_1"]
+    return r, rig.world.outcome.maps["wall_1"]
+
+
+def test_sand_area_sands_the_area_in_contact(wall, core):
+    rig, _ = wall
+    _r, m = _sand(rig, core, "SAND_AREA 2.0 3.6 0.9 1 0 0 0.8 0.6 %s spacing=0.1 speed=0.15" % NORMAL)
     cells = m.sanded[(m.tc >= 0.9) & (m.tc <= 1.5)][:, (m.sc >= 0.2) & (m.sc <= 1.0)]
     assert cells.mean() >= 0.98, cells.mean()
     assert rig.nothing_running()
@@ -132,14 +137,8 @@ def test_sand_area_sands_the_area_in_contact(wall, core):
 
 def test_sand_area_with_vertical_lanes_sands_the_area_in_upward_lanes(wall, core):
     rig, _ = wall
-    rig.world.mount_tool("sander")
-    assert run(core, "MOUNT_TOOL sander").success
-    assert run(core, "GOTO 2.4 2.6 1.5708").success
-    r = run(core, "SAND_AREA 2.0 3.6 0.9 1 0 0 0.3 0.6 %s spacing=0.1 speed=0.15 lanes=vertical" % NORMAL)
-    assert r.success, r.message
+    r, m = _sand(rig, core, "SAND_AREA 2.0 3.6 0.9 1 0 0 0.3 0.6 %s spacing=0.1 speed=0.15 lanes=vertical" % NORMAL)
     assert r.result["lanes"] == 4, r.result              # 0.3 m across at most 0.1 m apart: 4 lanes upwards
-    time.sleep(0.2)
-    m = rig.world.outcome.maps["wall_1"]
     cells = m.sanded[(m.tc >= 0.9) & (m.tc <= 1.5)][:, (m.sc >= 0.2) & (m.sc <= 0.5)]
     assert cells.mean() >= 0.98, cells.mean()
     # upward lanes run no further than the area's height (no run-in for sanding): nothing a pad radius past it

@@ -950,8 +950,7 @@ class WallCommands:
         uu = self._unit(along, "u")
         up = self._unit(across, "u")
         o = np.array([ox, oy, oz], dtype=float)
-        heights = self._lane_heights(extent, spacing)
-        width = length             # below: lanes of this length along uu, at heights along up
+        heights = self._lane_heights(extent, spacing)          # lanes of ``length`` along uu, at heights along up
         start = time.monotonic()
         total = 0.0
         samples: List[float] = []
@@ -966,7 +965,7 @@ class WallCommands:
             first = True
             for k in range(live["k"], len(heights)):
                 t = heights[k]
-                s0, s1 = (0.0, width) if k % 2 == 0 else (width, 0.0)
+                s0, s1 = (0.0, length) if k % 2 == 0 else (length, 0.0)
                 s0 = s0 + (s1 - s0) * live["f"]
                 a = o + uu * s0 + up * t + n * standoff
                 b = o + uu * s1 + up * t + n * standoff
@@ -1009,7 +1008,7 @@ class WallCommands:
             self._switch_off_safely("sander")
             arm.force_mode_stop()
         if end_pose is not None:
-            last = o + uu * (width if len(heights) % 2 else 0.0) + up * heights[-1] + n * 0.05
+            last = o + uu * (length if len(heights) % 2 else 0.0) + up * heights[-1] + n * 0.05
             arm.move_linear(ctx, self.to_arm(last, n), APPROACH_SPEED, 1.2)
         return {"length_m": round(total, 4), "lanes": len(heights), "duration_s": round(time.monotonic() - start, 3),
                 "force_n": force, "contact": "force", "suspensions": resumable.suspensions,

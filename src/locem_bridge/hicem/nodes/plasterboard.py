@@ -384,11 +384,13 @@ class GetLiftHeight(Leaf):
             return Status.SUCCESS
         # lift heights that keep the piece in the band, within the lift's range; of these the one nearest the
         # piece's middle (the arm reaches furthest sideways at its mount's height)
-        low, high = max(lift[0], lift[0] + hi - band[1]), min(lift[1], lift[0] + lo - band[0])
+        def limits(z0: float, z1: float) -> Tuple[float, float]:
+            return max(lift[0], lift[0] + z1 - band[1]), min(lift[1], lift[0] + z0 - band[0])
+
+        low, high = limits(lo, hi)
         if low > high + 1e-6:
             # within the tolerance: the height between the two limits, inside what the tolerance allows
-            lo_t, hi_t = min(lo + tol, (lo + hi) / 2.0), max(hi - tol, (lo + hi) / 2.0)
-            low_t, high_t = max(lift[0], lift[0] + hi_t - band[1]), min(lift[1], lift[0] + lo_t - band[0])
+            low_t, high_t = limits(min(lo + tol, (lo + hi) / 2.0), max(hi - tol, (lo + hi) / 2.0))
             if low_t > high_t + 1e-6:
                 return self.fail("heights %.3f..%.3f m are out of reach from one lift height (band %.2f..%.2f m at "
                                  "the lift's bottom, lift %.2f..%.2f m)" % (lo, hi, band[0], band[1], lift[0],
@@ -578,23 +580,24 @@ class GetAreaRaster(Leaf):
         shared: Any = shared_ends(a, hdh.features("area"), tol, gap) if self.get("neighbours") else ((), ())
         sections: List[Dict[str, Any]] = []
         smallest = max(0.0, self.get("min_manual")) if reach is not None else 0.0
-        top = math.inf
+        # never above the band the tool reaches (a sliver the plan's manual parts leave beside a hole at the area's
+        # end ran up to the wall's top: protective stop); below it by min_manual at most (above the area's origin)
+        top = reach.t[1] - a["origin"][2] if reach is not None else math.inf
+        bottom = reach.t[0] - a["origin"][2] - smallest if reach is not None else -math.inf
         for piece in area_pieces(a["width"], a["height"], holes, gap, *shared):
+            # a piece sitting on another begins one lane spacing above it: as manual work that strip is its own
+            below = piece.t0 - (gap if piece.on_piece else 0.0)
             if reach is not None:
-                # never above the band the tool reaches (a sliver the plan's manual parts leave beside a hole at
-                # the area's end ran up to the wall's top: protective stop); below it by min_manual at most
-                top = reach.t[1] - a["origin"][2]
-                lo = reach.t[0] - a["origin"][2] - smallest
-                if piece.t1 > top + 1e-9 or piece.t0 < lo - 1e-9:
-                    piece = replace(piece, t0=max(piece.t0, min(lo, piece.t1)), t1=min(piece.t1, max(top, piece.t0)))
+                if piece.t1 > top + 1e-9 or piece.t0 < bottom - 1e-9:
+                    piece = replace(piece, t0=max(piece.t0, min(bottom, piece.t1)),
+                                    t1=min(piece.t1, max(top, piece.t0)))
                 # a sliver the plan's cuts leave (scan noise between a manual part and a hole) or a piece outside
                 # the tool's band is never sent to the arm: manual work if it is worth listing
                 z0, z1 = a["origin"][2] + piece.t0, a["origin"][2] + piece.t1
                 inside = min(z1, reach.t[1]) - max(z0, reach.t[0])
                 if piece.width < smallest or piece.height < smallest or inside < min(smallest, piece.height) - 1e-9:
                     if piece.width >= smallest and piece.height >= smallest:
-                        manual.append({"along": [piece.s0, piece.s1],
-                                       "height": [z0 - (gap if piece.on_piece else 0.0), z1],
+                        manual.append({"along": [piece.s0, piece.s1], "height": [a["origin"][2] + below, z1],
                                        "reason": "outside the tool's height band"})
                     continue
             count = max(1, int(math.ceil(piece.width / sw - 1e-9)))
@@ -615,6 +618,8 @@ class GetAreaRaster(Leaf):
             if bh <= 0:
                 raise PortError("%s: band_gap %g m leaves no band in a %g m high piece of the area"
                                 % (self.name, gap, piece.height))
+            sh = bh if bands > 1 else piece.height                # a section's height
+            spacing, speed = self._lanes(sh, gap)
             # the columns of the piece, each with its planned free base pose (None: none reaches all of it);
             # neighbours one base reaches together are one column (no seam of run-ins between them)
             cols: List[List[Any]] = [[piece.s0 + w * i, piece.s0 + w * (i + 1), None] for i in range(count)]
@@ -645,10 +650,8 @@ class GetAreaRaster(Leaf):
                 o = [o[k] + u[k] * s0 for k in range(3)]
                 if reach is not None:      # the free base pose nearest the section's middle (planned)
                     if at is None:
-                        # a piece sitting on another begins one lane spacing above it: that strip is its own
                         manual.append({"along": [along, along + w],
-                                       "height": [a["origin"][2] + piece.t0 - (gap if piece.on_piece else 0.0),
-                                                  a["origin"][2] + piece.t1],
+                                       "height": [a["origin"][2] + below, a["origin"][2] + piece.t1],
                                        "reason": "no free base pose reaches all of it"})
                         continue
                     mx, my = wall.p0[0] + wall.u[0] * at, wall.p0[1] + wall.u[1] * at
@@ -657,14 +660,11 @@ class GetAreaRaster(Leaf):
                     ob = list(o)
                     ob[2] = o[2] + b * (bh + gap)
                     approach = [mx + n[0] / nxy * bs, my + n[1] / nxy * bs, heading]
-                    sh = bh if bands > 1 else piece.height
-                    spacing, speed = self._lanes(sh, gap)
                     sections.append({"approach": approach, "origin": ob, "u": list(u), "width": s1 - s0,
                                      "height": sh, "normal": n, "index": len(sections), "z": [ob[2], ob[2] + bh],
                                      "lanes": "horizontal", "spacing": spacing, "speed": speed})
                     t0 = piece.t0 + b * (bh + gap)
-                    for side, lo, hi in _edge_passes(frames, sides, t0, min(top, t0 + (bh if bands > 1
-                                                                             else piece.height))):
+                    for side, lo, hi in _edge_passes(frames, sides, t0, min(top, t0 + sh)):
                         og = [a["origin"][k] + u[k] * side for k in range(3)]
                         og[2] = a["origin"][2] + lo
                         sections.append({"approach": approach, "origin": og, "u": list(u), "width": 0.0,
