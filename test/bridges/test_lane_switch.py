@@ -3,7 +3,7 @@ starts and ends, not one sample age plus one request later (a fake clock, arm an
 import numpy as np
 import pytest
 
-from locem_bridge.bridges.commands_wall import LaneSwitch, RasterSwitch
+from locem_bridge.bridges.commands_wall import SWITCH_LEADS, LaneSwitch, RasterSwitch
 
 SPEED = 2.0          # m/s of wall time (0.2 m/s at time scale 10 ... or a fast arm)
 AGE = 0.012          # s, how old the arm's state is when read
@@ -61,6 +61,36 @@ def test_the_output_changes_where_the_stretch_starts_and_ends():
     # left: only the loop's own step (SPEED x PERIOD = 2 cm), either side
     assert changes[0][1] == pytest.approx(0.2, abs=SPEED * PERIOD)
     assert changes[1][1] == pytest.approx(0.8, abs=SPEED * PERIOD)
+
+
+def _phases(on_lead, off_lead, n=20):
+    """The switch positions' errors (m, + late along the travel) at n loop phases spread over one step."""
+    on_err, off_err = [], []
+    for k in range(n):
+        def make(r, k=k):
+            r.t0 -= k / n * PERIOD                         # the loop's phase against the crossing
+            return LaneSwitch(r, r, r.switch, [0, 0, 0.5], [1, 0, 0.5], 0.2, 0.8, r.clock, on_lead, off_lead)
+        changes = _run(make)
+        on_err.append(changes[0][1] - 0.2)
+        off_err.append(changes[1][1] - 0.8)
+    return on_err, off_err
+
+
+def test_the_step_leads_choose_which_wait_switches():
+    """Over loop phases spread across one step (SPEED x PERIOD = 2 cm): with no lead the output changes at the first
+    wait past each end (half a step late on average, what sanding keeps); with half a step, at the nearest wait
+    (unbiased, within half a step); the spray gun's leads (1 on, 0 off) switch on at the last wait before the start
+    and off at the first wait past the end: the whole stretch worked at every phase, at most a step more."""
+    step, tol = SPEED * PERIOD, 0.002
+    on_err, off_err = _phases(0.0, 0.0)
+    assert min(on_err + off_err) >= -tol and float(np.mean(on_err)) >= 0.35 * step, (on_err, off_err)
+    on_err, off_err = _phases(0.5, 0.5)
+    for errors in (on_err, off_err):
+        assert max(abs(e) for e in errors) <= 0.5 * step + tol, errors
+        assert abs(float(np.mean(errors))) <= 0.1 * step, errors
+    on_err, off_err = _phases(*SWITCH_LEADS["spray_gun"])
+    assert max(on_err) <= tol and min(on_err) >= -step - tol, on_err            # on before the start
+    assert min(off_err) >= -tol and max(off_err) <= step + tol, off_err         # off after the end
 
 
 def test_without_compensation_the_output_would_change_late():

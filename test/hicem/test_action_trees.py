@@ -64,14 +64,14 @@ def test_spray_area_sections_and_command_arguments():
     assert gotos[1:3] == ["GOTO 1.4 1.4 1.570796",
                           "GOTO 0.28 1.7 1.570796"]  # 1.3 m in front of the first section's middle, facing it
     assert len(gotos) == 3 + 7                     # the other sections: along the wall, no turn, no transit
-    # the outer sections reach edge_run_in (0.05 m) beyond the worked part; every section's lanes run
-    # section_run_in (0.02 m) beyond its own ends; a section not begun before is sprayed from its start (skip=0)
+    # the outer sections reach edge_run_in (0.07 m) beyond the worked part; every section's lanes run
+    # section_run_in (0 m) beyond its own ends; a section not begun before is sprayed from its start (skip=0)
     # the 1.9 m in 13 whole lane spacings of 0.14616 m (not 0.15), the lanes sped up in proportion (0.5 x 0.15 /
     # 0.14616 m/s): the same coat per m2 as at the nominal spacing
-    assert sprays[0] == ("SPRAY_AREA -0.05 3 0.1 1 0 0 0.61 1.9 0 -1 0 spacing=0.14616 standoff=0.3 speed=0.5131 "
-                         "pressure=3.5 run_in=0.02 skip=0")
+    assert sprays[0] == ("SPRAY_AREA -0.07 3 0.1 1 0 0 0.63 1.9 0 -1 0 spacing=0.14616 standoff=0.3 speed=0.5131 "
+                         "pressure=3.5 run_in=0 skip=0")
     assert sprays[1].startswith("SPRAY_AREA 0.56 3 0.1 1 0 0 0.56 1.9 ")
-    assert sprays[7].startswith("SPRAY_AREA 3.92 3 0.1 1 0 0 0.61 1.9 ")
+    assert sprays[7].startswith("SPRAY_AREA 3.92 3 0.1 1 0 0 0.63 1.9 ")
     assert hdh.feature("wall_1_area_1")["status"] == "sprayed"
     assert bb.get("task_detail") == ("sprayed; manual work on wall_1_area_1: section 9 (along 4.48..4.8 m, height "
                                      "0..2.5 m), section 10 (along 0..4.48 m, height 0..0.1 m), section 11 (along "

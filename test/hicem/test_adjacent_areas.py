@@ -116,6 +116,34 @@ def test_an_end_adjoined_over_part_of_its_height_is_split_at_the_neighbours_top(
     assert len({(s[2], s[3]) for s in secs}) == 1 and max(s[1] for s in secs) == pytest.approx(EDGE)
 
 
+def test_stacked_areas_the_upper_ones_lanes_begin_one_lane_above_the_lower_ones_top_lane():
+    """Two areas one above the other (a common horizontal edge at 1.0 m): the lower one's top lane lies on the edge,
+    the upper one's first lane one lane spacing (band_gap) above it -- the lanes of the area they were split from,
+    one coat across the edge, not two lanes on it."""
+    areas = [_area("wall_1_area_1", 0.3, 2.7, t1=1.0), _area("wall_1_area_2", 0.3, 2.7, t0=1.0)]
+    low, up = (_sections(areas, a["id"], lane_spacing=0.15, speed=0.5) for a in areas)
+    assert {(round(_along(s)[2], 6), round(_along(s)[3], 6)) for s in low} == {(0.1, 1.0)}
+    assert {(round(_along(s)[2], 6), round(_along(s)[3], 6)) for s in up} == {(1.15, 2.0)}
+
+    def lanes(secs):
+        return sorted({round(s["origin"][2] + k * s["spacing"], 3) for s in secs
+                       for k in range(int(round(s["height"] / s["spacing"])) + 1)})
+    heights = lanes(low) + lanes(up)
+    assert len(heights) == len(set(heights))                      # no lane twice
+    gaps = [b - a for a, b in zip(heights, heights[1:])]
+    assert max(gaps) <= 0.15 + 1e-3 and min(gaps) >= 0.12, gaps    # and none closer than an even coat's spacing
+    # each on its own (neighbours off, or 5 cm apart): both have a lane on their edge
+    alone = _sections(areas, "wall_1_area_2", lane_spacing=0.15, speed=0.5, neighbours="false")
+    assert {round(_along(s)[2], 6) for s in alone} == {1.0}
+    apart = [_area("wall_1_area_1", 0.3, 2.7, t1=0.95), _area("wall_1_area_2", 0.3, 2.7, t0=1.0)]
+    assert {round(_along(s)[2], 6) for s in _sections(apart, "wall_1_area_2")} == {1.0}
+    # under part of its width only: split there, the rest starts on its own edge
+    part = [_area("wall_1_area_1", 0.3, 1.5, t1=1.0), _area("wall_1_area_2", 0.3, 2.7, t0=1.0)]
+    secs = [_along(s) for s in _sections(part, "wall_1_area_2")]
+    assert {round(s[2], 6) for s in secs if s[1] <= 1.5 + 1e-9} == {1.15}
+    assert {round(s[2], 6) for s in secs if s[0] >= 1.5 - 1e-9} == {1.0}
+
+
 # ------------------------------------------------------------ sprayed and sanded on the simulated site --
 class _Done(CommandHandle):
     def __init__(self, reply: LocemReply) -> None:
@@ -293,11 +321,54 @@ def test_two_touching_areas_sprayed_on_the_site_get_one_coat_across_their_edge()
     rasters = _rasters(out["sent"], "SPRAY_AREA")
     assert all(b <= EDGE + 1e-6 or a >= EDGE - 1e-6 for a, b in rasters), rasters
     assert EDGE in [pytest.approx(b) for a, b in rasters] and EDGE in [pytest.approx(a) for a, b in rasters]
-    assert rasters[0][0] == pytest.approx(0.3 - RUN_IN) and rasters[-1][1] == pytest.approx(2.7 + RUN_IN)
+    run_in = params().raw["spray"]["edge_run_in"]
+    assert rasters[0][0] == pytest.approx(0.3 - run_in) and rasters[-1][1] == pytest.approx(2.7 + run_in)
     assert wall["spray_coverage"] >= 0.98, wall
     assert wall["thickness_cv"] <= 0.15, wall
     assert ratio <= 1.3, ratio                               # no second coat along the edge
     assert out["collisions"] == 0
+
+
+STACKED_EDGE = 1.05           # m above the floor: wall_2_area_1 (t 0.1 .. 1.05) under wall_2_area_2 (1.05 .. 2.0)
+
+
+def row_ratio(maps: Any, edge: float = STACKED_EDGE, half: float = 0.05) -> float:
+    """The thickest coat along a horizontal edge: the largest mean thickness of a grid row within ``half`` of
+    ``edge`` (height above the floor, over the wall's work cells), divided by the wall's mean thickness."""
+    work = maps.work
+    rows = [k for k in range(maps.nt) if abs(maps.tc[k] - edge) <= half]
+    mean = float(maps.thickness[work].mean())
+    return max(float(maps.thickness[k][work[k]].mean()) for k in rows if work[k].any()) / mean
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("neighbours", [True, False], ids=["stacked", "each_on_its_own"])
+def test_two_stacked_areas_sprayed_on_the_site_get_one_coat_across_their_edge(neighbours, monkeypatch):
+    """About 40 s each: wall_2's two stacked areas (config/sites/adjacent.yaml) sprayed at time scale 5. Stacked
+    (the shipped trees), the upper area's first lane is one lane spacing above the lower one's top lane: the rows
+    along the edge get one coat. Each area on its own (no shared bottom: what GetAreaRaster did before) both lay a
+    lane on the edge: the comparison shows the test can tell."""
+    pytest.importorskip("rtde_control")
+    if not neighbours:
+        from locem_bridge.hicem.nodes import plasterboard
+        monkeypatch.setattr(plasterboard, "shared_bottom", lambda *args, **kwargs: [])
+    faulthandler.dump_traceback_later(240, exit=True)
+    try:
+        out = work_areas_on_site(ADJACENT, "spray", ("wall_2_area_1", "wall_2_area_2"), 5.0)
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+    wall, ratio = out["wall"], row_ratio(out["maps"])
+    print("wall_2 sprayed (%s): coverage %.4f, thickness CV %.4f, thickest row within 5 cm of the edge %.3f x the "
+          "mean; %.0f s" % ("stacked" if neighbours else "each on its own", wall["spray_coverage"],
+                            wall["thickness_cv"], ratio, out["seconds"]))
+    assert out["details"] == [("wall_2_area_1", "sprayed"), ("wall_2_area_2", "sprayed")]
+    assert wall["spray_coverage"] >= 0.98, wall
+    assert out["collisions"] == 0
+    if neighbours:
+        assert wall["thickness_cv"] <= 0.15, wall
+        assert ratio <= 1.15, ratio                          # no second lane on the edge
+    else:
+        assert ratio >= 1.25, ratio                          # the stripe the shared bottom removes
 
 
 @pytest.mark.slow

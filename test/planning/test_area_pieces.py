@@ -4,7 +4,7 @@ import random
 
 import pytest
 
-from locem_bridge.planning.area_pieces import area_pieces, shared_ends
+from locem_bridge.planning.area_pieces import area_pieces, shared_bottom, shared_ends
 
 
 def _covers(pieces, width, height, holes, gap, step=0.01):
@@ -118,3 +118,54 @@ def test_shared_ends_of_two_touching_areas_and_what_is_not_a_neighbour():
     # the neighbour's window at the edge: not shared beside it
     win = area("b", 1.3, 2.7, holes=[{"s": [0.0, 0.5], "t": [0.8, 1.5]}])
     assert shared_ends(a, [a, win], 0.02, 0.15) == ([], [(0.0, pytest.approx(0.8)), (pytest.approx(1.5), 1.9)])
+
+
+def _area(aid, s0, s1, t0=0.1, t1=2.0, wall="wall_1", **kw):
+    return dict({"id": aid, "wall": wall, "origin": [s0, 3.0, t0], "u": [1.0, 0.0, 0.0], "width": s1 - s0,
+                 "height": t1 - t0}, **kw)
+
+
+def test_shared_bottom_of_stacked_areas_and_what_does_not_adjoin_it():
+    """An area whose bottom another area of the wall ends right under: the stretch along the bottom it covers."""
+    low, up = _area("low", 0.3, 2.7, t1=1.1), _area("up", 0.3, 2.7, t0=1.1)
+    assert shared_bottom(up, [low, up], 0.02, 0.15) == [(0.0, pytest.approx(2.4))]
+    assert shared_bottom(low, [low, up], 0.02, 0.15) == []              # the lower one keeps its top lane
+    assert shared_bottom(up, [_area("low", 0.3, 2.7, t1=1.09), up], 0.02, 0.15) == [(0.0, pytest.approx(2.4))]
+    assert shared_bottom(up, [_area("low", 0.3, 2.7, t1=1.05), up], 0.02, 0.15) == []       # 5 cm apart
+    assert shared_bottom(up, [_area("low", 0.3, 2.7, t1=1.1, wall="wall_2"), up], 0.02, 0.15) == []
+    # under part of it (the lower one narrower), a lower area too short to count, one beside it in line
+    assert shared_bottom(up, [_area("low", 1.3, 2.0, t1=1.1), up], 0.02, 0.15) == \
+        [(pytest.approx(1.0), pytest.approx(1.7))]
+    assert shared_bottom(up, [_area("low", 1.3, 1.4, t1=1.1), up], 0.02, 0.15) == []
+    # the lower area's window reaching its top: nothing of it meets the bottom there
+    win = _area("low", 0.3, 2.7, t1=1.1, holes=[{"s": [1.0, 1.6], "t": [0.3, 1.0]}])
+    assert shared_bottom(up, [win, up], 0.02, 0.15) == [(0.0, pytest.approx(1.0)), (pytest.approx(1.6), pytest.approx(2.4))]
+
+
+def test_a_piece_on_a_stacked_area_begins_one_lane_spacing_above_the_common_edge():
+    """Over the shared stretch the bottom row sits on the lower area (first lane one gap up); beside it, it starts
+    on the edge as on an area's own bottom; the two are split where the stretch ends."""
+    pieces = area_pieces(2.4, 0.9, [], 0.15, shared_bottom=[(0.0, 1.2)])
+    got = sorted((p.s0, p.s1, round(p.t0, 6), p.t1, p.on_piece) for p in pieces)
+    assert got == [(0.0, 1.2, 0.15, 0.9, True), (1.2, 2.4, 0.0, 0.9, False)]
+    assert _covers(pieces, 2.4, 0.9, [], 0.15) == []
+    whole = area_pieces(2.4, 0.9, [], 0.15, shared_bottom=[(0.0, 2.4)])
+    assert [(p.s0, p.s1, round(p.t0, 6), p.t1, p.open_left, p.open_right) for p in whole] == \
+        [(0.0, 2.4, 0.15, 0.9, True, True)]
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_random_shared_bottom_every_point_is_still_worked_once(seed):
+    rng = random.Random(300 + seed)
+    width, height = rng.uniform(1.0, 3.0), rng.uniform(0.6, 1.6)
+    holes = [] if rng.random() < 0.5 else [(width * 0.4, width * 0.6, rng.uniform(0.0, 0.3), height * 0.8)]
+    c = rng.uniform(0.0, width / 2)
+    bottom = [(c, rng.uniform(c + 0.2, width))]
+    pieces = area_pieces(width, height, holes, 0.15, shared_bottom=bottom)
+    # within one gap of a shared bottom the lower area's top lane lays the coat (under a hole's low sill too)
+    assert [(s, t) for s, t in _covers(pieces, width, height, holes, 0.15)
+            if not (t < 0.15 and any(a < s < b for a, b in bottom))] == []
+    for p in pieces:
+        if p.t0 - (0.15 if p.on_piece else 0.0) < 1e-9:           # on the area's bottom
+            sm = (p.s0 + p.s1) / 2
+            assert p.on_piece == any(a < sm < b for a, b in bottom), (p, bottom)

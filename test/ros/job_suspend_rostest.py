@@ -279,8 +279,8 @@ class JobSuspendTest(unittest.TestCase):
         for jid, j in sorted(o["joints"].items()):
             self.assertLessEqual(j["gap_m"], LONGEST_FLAW_M, "%s: %s" % (jid, j))
             self.assertLessEqual(j["double_m"], LONGEST_FLAW_M, "%s: %s" % (jid, j))
-        # the spray seam the suspension made: where the valve closed at the Suspend (the other seams are the
-        # sections' designed overlaps, 2 x cfg.spray.section_run_in)
+        # the spray seam the suspension made: where the valve closed at the Suspend (the other seams are where
+        # sections meet)
         closed_at = self.seen["spray"]["valve_closed_at_sim"]
         self.assertIsNotNone(closed_at, "the compressor recorded no valve closing after Suspend")
         seams = [x for x in o["spray_seams"] if x.get("sim_time") is not None]

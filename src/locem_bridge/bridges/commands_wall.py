@@ -223,7 +223,16 @@ class LaneSwitch(HookedWaiter):
     0.5 m/s on hardware; centimetres in a time-scaled simulation, where the arm moves faster in wall time). The
     decision is therefore taken on the TCP predicted ``age + LATENCY_SHARE x switch duration`` ahead along its
     measured velocity (both in wall time; the switch duration is a running average of the requests' own
-    durations), at most ``MAX_LEAD_S``."""
+    durations), at most ``MAX_LEAD_S``.
+
+    Step: the decision is only taken at the loop's waits, one ``update_s`` apart (a running average of the wall
+    time between them), so the output changes up to one step of travel after the TCP crossed a stretch's end
+    (6 cm at 0.5 m/s and time scale 10 with the loop's 10 ms; 3 mm on hardware). ``on_lead_steps`` and
+    ``off_lead_steps`` say how many steps further the prediction looks when switching on and off: 0 and 0, the
+    first wait past each end (on average half a step late at both: what sanding uses); 0.5 and 0.5, the wait
+    nearest each end (unbiased); 1 and 0, the last wait before the start and the first wait past the end (the
+    whole stretch worked for sure, on average half a step more at each end: what spraying uses, so two sections
+    that meet leave no bare strip between them whatever the time scale, with no run-in past their common end)."""
 
     #: share of a switch request's duration after which the output has changed (request out, answer back)
     LATENCY_SHARE = 0.5
@@ -231,9 +240,12 @@ class LaneSwitch(HookedWaiter):
     MAX_LEAD_S = 0.1
 
     def __init__(self, ctx: Waiter, arm: Arm, switch: Callable[[bool], None], a: Sequence[float], b: Sequence[float],
-                 f_on: float, f_off: float, clock: Callable[[], float] = time.time) -> None:
-        """``clock``: wall time in s, the clock of the arm state's ``stamp``."""
+                 f_on: float, f_off: float, clock: Callable[[], float] = time.time,
+                 on_lead_steps: float = 0.0, off_lead_steps: float = 0.0) -> None:
+        """``clock``: wall time in s, the clock of the arm state's ``stamp``; ``on_lead_steps``, ``off_lead_steps``:
+        see the class docstring."""
         super().__init__(ctx)
+        self._leads = (float(on_lead_steps), float(off_lead_steps))
         self._arm, self._raw_switch, self._clock = arm, switch, clock
         self._a = np.asarray(a[:3], dtype=float)
         self._ab = np.asarray(b[:3], dtype=float) - self._a
@@ -246,6 +258,8 @@ class LaneSwitch(HookedWaiter):
         self.switch_s = 0.0                                        # running average of a switch request (s)
         self._before: List[Callable[[bool], None]] = []
         self.held = False                                          # suspended: never switches on again
+        self.update_s = 0.0                                        # running average between two decisions (s)
+        self._last_update: Optional[float] = None
 
     def hold_off(self) -> Optional[np.ndarray]:
         """Suspension: the switch stays off from now on; returns the TCP predicted for the moment a switch
@@ -265,8 +279,19 @@ class LaneSwitch(HookedWaiter):
         took = max(0.0, self._clock() - t0)
         self.switch_s = took if self.switch_s == 0.0 else 0.7 * self.switch_s + 0.3 * took
 
-    def _predicted_tcp(self) -> Optional[np.ndarray]:
-        """The TCP position (arm base frame) expected when a switch requested now takes effect."""
+    def _decision_tcp(self) -> Optional[np.ndarray]:
+        """The TCP a decision taken now is judged on: :meth:`_predicted_tcp` the on or off lead (whichever
+        switch would come next) in loop steps further (see the class docstring); measures the step."""
+        now = self._clock()
+        if self._last_update is not None:
+            step = min(max(0.0, now - self._last_update), self.MAX_LEAD_S)
+            self.update_s = step if self.update_s == 0.0 else 0.8 * self.update_s + 0.2 * step
+        self._last_update = now
+        return self._predicted_tcp(self._leads[1 if self.on else 0] * self.update_s)
+
+    def _predicted_tcp(self, further: float = 0.0) -> Optional[np.ndarray]:
+        """The TCP position (arm base frame) expected when a switch requested now takes effect (``further`` s of
+        wall time after that)."""
         state = self._arm.cached_state()
         tcp = state.get("tcp")
         if not tcp:
@@ -280,11 +305,11 @@ class LaneSwitch(HookedWaiter):
             if self._last is not None:
                 self._velocity = (p - self._last[1]) / (stamp - self._last[0])
             self._last = (stamp, p)
-        lead = min(self.MAX_LEAD_S, max(0.0, self._clock() - stamp) + self.LATENCY_SHARE * self.switch_s)
+        lead = min(self.MAX_LEAD_S, max(0.0, self._clock() - stamp) + self.LATENCY_SHARE * self.switch_s + further)
         return p + self._velocity * lead
 
     def _update(self) -> None:
-        p = self._predicted_tcp()
+        p = self._decision_tcp()
         if p is None:
             return
         f = float((p - self._a).dot(self._ab)) / self._len2
@@ -299,20 +324,28 @@ class LaneSwitch(HookedWaiter):
         self._update()
 
 
+#: per tool, LaneSwitch's (on_lead_steps, off_lead_steps): the spray gun works each lane's whole stretch for sure
+#: (sections meet with no run-in: default site at time scale 1, thickness CV 0.087 with 2 cm run-ins, 0.039
+#: without); the sander switches at the first wait past each end (a pad over a frame's edge sands the frame)
+SWITCH_LEADS = {"spray_gun": (1.0, 0.0)}
+
+
 class RasterSwitch(LaneSwitch):
     """:class:`LaneSwitch` for a whole raster driven as one blended path: the tool is on while the (predicted)
     TCP is on the worked stretch of any lane (fraction 0..1 of the stretch, within ``reach`` of its line)."""
 
     def __init__(self, ctx: Waiter, arm: Arm, switch: Callable[[bool], None],
                  stretches: Sequence[Sequence[Sequence[float]]], reach: float,
-                 clock: Callable[[], float] = time.time) -> None:
-        super().__init__(ctx, arm, switch, stretches[0][0], stretches[0][1], 0.0, 1.0, clock)
+                 clock: Callable[[], float] = time.time, on_lead_steps: float = 0.0,
+                 off_lead_steps: float = 0.0) -> None:
+        super().__init__(ctx, arm, switch, stretches[0][0], stretches[0][1], 0.0, 1.0, clock, on_lead_steps,
+                         off_lead_steps)
         self._lines = [(np.asarray(a[:3], dtype=float), np.asarray(b[:3], dtype=float) - np.asarray(a[:3], dtype=float))
                        for a, b in stretches]
         self._reach = reach
 
     def _update(self) -> None:
-        p = self._predicted_tcp()
+        p = self._decision_tcp()
         if p is None:
             return
         want = False
@@ -800,7 +833,7 @@ class WallCommands:
                 pa, pb = self.to_arm(a, n), self.to_arm(b, n)
                 span = abs(s1 - s0)
                 lane = LaneSwitch(ctx, arm, lambda on: self._switch(tool, on), pa, pb,
-                                  runup / span, 1.0 - runup / span)
+                                  runup / span, 1.0 - runup / span, time.time, *SWITCH_LEADS.get(tool, (0.0, 0.0)))
                 stretch = (self.to_arm(o + uu * w0 + up * t + n * offset, n),
                            self.to_arm(o + uu * w1 + up * t + n * offset, n))
                 progress = RasterProgress(lane, arm, [stretch], [start_m], total_m, reach=0.05, hold_s=hold_s)
@@ -845,7 +878,8 @@ class WallCommands:
         arm.move_linear(ctx, self.to_arm(points[0], n), APPROACH_SPEED, 1.2)
         poses = [self.to_arm(p, n) for p in points[1:]]
         blends = [blend] * (len(poses) - 1) + [0.0]          # every turn blended, the path ends at rest
-        switch = RasterSwitch(ctx, arm, lambda on: self._switch(tool, on), stretches, reach=0.25 * spacing)
+        switch = RasterSwitch(ctx, arm, lambda on: self._switch(tool, on), stretches, 0.25 * spacing, time.time,
+                              *SWITCH_LEADS.get(tool, (0.0, 0.0)))
         progress = RasterProgress(switch, arm, stretches, starts, total_m, reach=0.25 * spacing, hold_s=hold_s)
         live = live if live is not None else {}
         live.update(switch=switch, progress=progress)

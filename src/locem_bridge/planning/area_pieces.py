@@ -17,7 +17,10 @@ An area's own end (``s = 0`` or ``s = width``) may also be *shared*: where anoth
 it (``shared_left`` / ``shared_right``: the heights along that end the neighbour covers), the two areas meet
 like two pieces of one area -- the lanes stop at the end, no run-in onto the neighbour, whose own lanes lay the
 coat on its side. An end shared over part of its height is split at the neighbour's top and bottom like a side
-beside a hole.
+beside a hole. The area's bottom may be shared too (``shared_bottom``: the stretches along it where another area
+of the wall ends just below, whose top lane lies on the common edge): a piece there sits on that area as on a
+piece of its own (its first lane one ``gap`` above the edge), and a bottom row shared over part of its width is
+split there like a run over a hole's top.
 
 The cut: the area is gridded at every hole edge (and every end of a shared stretch of the area's ends); each grid
 row's free cells form runs (whose sides are then all open -- within a row every hole spans the row's full height --
@@ -69,19 +72,23 @@ def _edges(lo: float, hi: float, cuts: Sequence[float]) -> List[float]:
 
 
 def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float = 0.0,
-                shared_left: Sequence[Stretch] = (), shared_right: Sequence[Stretch] = ()) -> List[Piece]:
+                shared_left: Sequence[Stretch] = (), shared_right: Sequence[Stretch] = (),
+                shared_bottom: Sequence[Stretch] = ()) -> List[Piece]:
     """The pieces of the area ``width x height`` minus ``holes`` (see the module docstring), bottom row first
     and left to right within a row. ``gap``: lane spacing between a piece and the piece it sits on (a piece's
     ``t0`` already includes it). A piece left with no height after the gap is dropped. ``shared_left`` /
     ``shared_right``: the stretches ``(t0, t1)`` of the area's end at ``s = 0`` / ``s = width`` where another
-    area adjoins it (a piece's side there is shared, not open)."""
+    area adjoins it (a piece's side there is shared, not open); ``shared_bottom``: the stretches ``(s0, s1)``
+    along the area's bottom where another area ends right below it (a piece there sits on it: ``on_piece``)."""
     if width <= 0 or height <= 0:
         raise ValueError("area must have a positive size, got %g x %g m" % (width, height))
     hs = [(max(0.0, a), min(width, b), max(0.0, c), min(height, d)) for a, b, c, d in holes]
     hs = [h for h in hs if h[1] - h[0] > _EPS and h[3] - h[2] > _EPS]
     ends = [[(max(0.0, c), min(height, d)) for c, d in side] for side in (shared_left, shared_right)]
     ends = [[e for e in side if e[1] - e[0] > _EPS] for side in ends]
-    S = _edges(0.0, width, [x for h in hs for x in h[:2]])
+    bottom = [(max(0.0, a), min(width, b)) for a, b in shared_bottom]
+    bottom = [e for e in bottom if e[1] - e[0] > _EPS]
+    S = _edges(0.0, width, [x for h in hs for x in h[:2]] + [x for e in bottom for x in e])
     T = _edges(0.0, height, [x for h in hs for x in h[2:]] + [x for side in ends for e in side for x in e])
 
     def free(i: int, j: int) -> bool:
@@ -107,19 +114,32 @@ def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float =
                 k += 1
             # the run i..k: split where what lies below changes
             def under(c: int) -> int:
-                return 0 if j == 0 else (1 if free(c, j - 1) else 2)   # 0 area bottom, 1 free, 2 hole
+                # 0 area bottom, 1 free (or another area right below), 2 hole, 3 a bottom row on another area
+                # too low for a lane of its own (a ghost: this row begins one gap above that area's edge)
+                if j == 0:
+                    sm = (S[c] + S[c + 1]) / 2.0
+                    return 1 if any(a < sm < b for a, b in bottom) else 0
+                if not free(c, j - 1):
+                    return 2
+                return 3 if any(c0 <= c <= c1 for c0, c1, g in below if g.t0 > g.t1) else 1
+
+            def ghost_t0(c0: int, c1: int) -> float:
+                return max(g.t0 for g0, g1, g in below if g.t0 > g.t1 and g0 <= c1 and c0 <= g1)
             a = i
             while a <= k:
                 b = a
                 while b + 1 <= k and under(b + 1) == under(a):
                     b += 1
-                sits = under(a) == 1
-                t0 = T[j] + (gap if sits else 0.0)
+                sits = under(a) in (1, 3)
+                t0 = ghost_t0(a, b) if under(a) == 3 else T[j] + (gap if sits else 0.0)
                 short = T[j + 1] - T[j] < 2.0 * gap - _EPS
                 piece = Piece(S[a], S[b + 1], t0, T[j + 1], open_left=(a == i and not (i == 0 and shared(0, j))),
                               open_right=(b == k and not (k == ncol - 1 and shared(1, j))), on_piece=sits)
                 merged = False
-                if sits:
+                if under(a) == 3 and piece.height <= _EPS:
+                    row.append((a, b, piece))                  # still below the first lane: a ghost again
+                    merged = True
+                elif sits and under(a) == 1:
                     for c0, c1, p in below:
                         same = (c0, c1) == (a, b) and (p.open_left, p.open_right) == (piece.open_left, piece.open_right)
                         # a strip on top of a piece that would be left shorter than a lane spacing after the gap:
@@ -144,6 +164,8 @@ def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float =
                 if not merged and piece.height > _EPS:
                     done.append(piece)
                     row.append((a, b, piece))
+                elif not merged and j == 0 and sits:
+                    row.append((a, b, piece))                  # a ghost (see under)
                 a = b + 1
             i = k + 1
         below = row
@@ -205,3 +227,43 @@ def shared_ends(area: Dict[str, Any], others: Sequence[Dict[str, Any]], toleranc
                 continue
             out[side].append((0.0 if c <= snap else c, height if d >= height - snap else d))
     return out
+
+
+def shared_bottom(area: Dict[str, Any], others: Sequence[Dict[str, Any]], tolerance: float,
+                  shortest: float = 0.0) -> List[Stretch]:
+    """The stretches ``(s0, s1)`` (area coordinates) of ``area``'s bottom where another area of the same wall, along
+    the same line, ends right below it (its top within ``tolerance`` of this bottom): the argument of
+    :func:`area_pieces` ``shared_bottom``. That area's top lane lies on the common edge, so this area's first lane
+    there goes one lane spacing above it -- one coat across the edge, not two lanes on it. Minus the lower
+    area's holes that reach its top (an opening there: nothing below to meet). A stretch no longer than
+    ``shortest`` (or ``tolerance``) is left open; an end within that of the area's end is moved there."""
+    o, u = [float(x) for x in area["origin"]], [float(x) for x in area["u"]]
+    width = float(area["width"])
+    snap = max(shortest, tolerance)
+    found: List[Stretch] = []
+    for b in others:
+        if b.get("id") == area.get("id") or b.get("wall") != area.get("wall"):
+            continue
+        e = sum(float(x) * y for x, y in zip(b["u"], u))
+        if abs(e) < 0.99:
+            continue
+        top = float(b["origin"][2]) + float(b["height"])
+        if abs(top - o[2]) > tolerance:
+            continue
+        p = sum((float(x) - y) * z for x, y, z in zip(b["origin"], o, u))
+        n0, n1 = sorted((p, p + e * float(b["width"])))
+        lo, hi = max(0.0, n0), min(width, n1)
+        if hi - lo <= tolerance:
+            continue
+        holes = []
+        for h in b.get("holes", []):
+            if float(h["t"][1]) >= float(b["height"]) - tolerance:
+                holes.append(tuple(sorted((p + e * float(h["s"][0]), p + e * float(h["s"][1])))))
+        found.extend(interval_minus(lo, hi, holes))
+    merged: List[List[float]] = []
+    for c, d in sorted(found):
+        if merged and c <= merged[-1][1] + _EPS:
+            merged[-1][1] = max(merged[-1][1], d)
+        else:
+            merged.append([c, d])
+    return [(0.0 if c <= snap else c, width if d >= width - snap else d) for c, d in merged if d - c > snap]

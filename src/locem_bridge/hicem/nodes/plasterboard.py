@@ -19,7 +19,7 @@ from typing import Any, Dict, List, Sequence, Tuple
 from py_trees.common import Status
 
 from ...common.geometry import wrap_angle
-from ...planning.area_pieces import area_pieces, shared_ends
+from ...planning.area_pieces import area_pieces, shared_bottom, shared_ends
 from ...planning.reach import RobotEnvelope, ToolEnvelope, Wall2D, WallReach, plan_area, plan_joint, wall_reach
 from ..errors import HicemError, PortError
 from ..interfaces import local_name
@@ -484,7 +484,9 @@ class GetAreaRaster(Leaf):
                    "lanes stop exactly at it, as two sections of one area meet, and run no edge_extension onto the "
                    "neighbour, whose own lanes coat its side: the two areas lay one coat across their common "
                    "edge (an end adjoined over part of its height is split there; "
-                   "locem_bridge.planning.area_pieces.shared_ends).")
+                   "locem_bridge.planning.area_pieces.shared_ends). So is the bottom where another area of the "
+                   "wall ends right below it (stacked areas): its lanes there begin one band_gap above the edge, "
+                   "on which the lower area's top lane lies (area_pieces.shared_bottom).")
     #: m, how far a pad kept ``hole_margin`` (its radius) off a hole reaches over the hole's edge (the frame's outer
     #: line): the wall right up to the line is sanded though the arm tracks a lane only to a millimetre or two (with
     #: the edge exactly on the line the last 1 cm of wall beside and above a door was left to chance: on door.yaml
@@ -501,7 +503,8 @@ class GetAreaRaster(Leaf):
                    "exactly in between)"),
         input_port("neighbours", BOOL, "true", "", "true: an end of the area that another stored area of the same "
                    "wall adjoins (within neighbour_tolerance, over part of the height or all of it) is shared: no "
-                   "edge_extension past it, the neighbour's lanes cover its side; overlapping areas are each "
+                   "edge_extension past it, the neighbour's lanes cover its side; a bottom another area ends right "
+                   "below (within neighbour_tolerance) begins one band_gap above the edge; overlapping areas are each "
                    "worked whole; false: every end of the area is open (each area on its own)"),
         input_port("neighbour_tolerance", FLOAT, "0.02", "m", "a neighbour whose end lies within this of the "
                    "area's end (a gap or an overlap) adjoins it; wider apart, both ends are open"),
@@ -578,13 +581,14 @@ class GetAreaRaster(Leaf):
         if tol < 0:
             raise PortError("%s: neighbour_tolerance must be >= 0 m, got %g" % (self.name, tol))
         shared: Any = shared_ends(a, hdh.features("area"), tol, gap) if self.get("neighbours") else ((), ())
+        stacked = shared_bottom(a, hdh.features("area"), tol, gap) if self.get("neighbours") else []
         sections: List[Dict[str, Any]] = []
         smallest = max(0.0, self.get("min_manual")) if reach is not None else 0.0
         # never above the band the tool reaches (a sliver the plan's manual parts leave beside a hole at the area's
         # end ran up to the wall's top: protective stop); below it by min_manual at most (above the area's origin)
         top = reach.t[1] - a["origin"][2] if reach is not None else math.inf
         bottom = reach.t[0] - a["origin"][2] - smallest if reach is not None else -math.inf
-        for piece in area_pieces(a["width"], a["height"], holes, gap, *shared):
+        for piece in area_pieces(a["width"], a["height"], holes, gap, *shared, shared_bottom=stacked):
             # a piece sitting on another begins one lane spacing above it: as manual work that strip is its own
             below = piece.t0 - (gap if piece.on_piece else 0.0)
             if reach is not None:
