@@ -251,6 +251,31 @@ def test_get_area_raster_cuts_narrower_sections_where_the_bases_end_and_leaves_t
     assert any("no free base pose" in m["reason"] for m in manual)
 
 
+def test_get_area_raster_runs_the_lanes_on_into_a_part_left_manual_where_a_free_base_reaches_that_too():
+    """Beside a column left manual (no free base pose reaches all of it) the worked section's lanes run on by
+    edge_extension, as at an open edge (else the fan's soft edge leaves its last centimetres thin: generated bay 41
+    sprayed 0.975 of its reachable part, 0.992 with it) -- only as far as a free base reaches."""
+    plan = {"wall": "wall_1", "work": "spray", "tool": [[0.3, 3.3]], "base": [[0.6, 2.9]], "t": [0.0, 2.5],
+            "reach": 0.3, "why": []}
+
+    def worked(ext):
+        rig = Rig('<GetAreaRaster area_id="wall_1_area_1" section_width="0.6" base_standoff="0.9" yaw_offset="0" '
+                  'min_manual="0.03" edge_extension="%s" plan="{p}" sections="{s}" count="{c}" manual="{m}"/>'
+                  % ext, cfg={"p": plan})
+        assert rig.tree.tick() == S
+        last = max(rig.bb.get("s"), key=lambda sec: sec["origin"][0])
+        a0, a1, base = last["origin"][0], last["origin"][0] + last["width"], last["approach"][0]
+        # from a free base that reaches both its ends, the run-on included
+        assert 0.6 - 1e-6 <= base <= 2.9 + 1e-6 and a1 - 0.3 - 1e-6 <= base <= a0 + 0.3 + 1e-6, last
+        manual = sorted(m["along"] for m in rig.bb.get("m") if m["along"][0] > 1.0)
+        return a1, manual
+    end, manual = worked(0.07)
+    assert end == pytest.approx(2.925 + 0.07)
+    assert manual[0] == pytest.approx([2.925, 3.3], abs=1e-6)       # the manual part's extent is unchanged
+    end, _manual = worked(0.3)                                      # no free base reaches 0.3 m on
+    assert end == pytest.approx(2.925)
+
+
 def test_node_needing_a_missing_handle_fails_clearly():
     lib = TreeLibrary()
     lib.load_string('<root BTCPP_format="4"><BehaviorTree ID="T"><CheckHealth/></BehaviorTree></root>')

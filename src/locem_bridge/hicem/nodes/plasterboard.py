@@ -651,14 +651,22 @@ class GetAreaRaster(Leaf):
                 mx, my = o[0] + u[0] * w / 2.0, o[1] + u[1] * w / 2.0
                 s0 = -ext if i == 0 and piece.open_left else 0.0     # along u, from the section's own start
                 s1 = w + ext if i == count - 1 and piece.open_right else w
-                o = [o[k] + u[k] * s0 for k in range(3)]
                 if reach is not None:      # the free base pose nearest the section's middle (planned)
                     if at is None:
                         manual.append({"along": [along, along + w],
                                        "height": [a["origin"][2] + below, a["origin"][2] + piece.t1],
                                        "reason": "no free base pose reaches all of it"})
                         continue
+                    # beside a part left manual the lanes run on into it as at an open edge (else the fan's soft
+                    # edge leaves the last centimetres of the robot's part thin), if a free base reaches that too
+                    e0 = -ext if i > 0 and cols[i - 1][2] is None else s0
+                    e1 = w + ext if i < count - 1 and cols[i + 1][2] is None else s1
+                    if (e0, e1) != (s0, s1):
+                        wider = reach.base_for(along0 + along + e0, along0 + along + e1, float(plan["reach"]))
+                        if wider is not None:
+                            s0, s1, at = e0, e1, wider
                     mx, my = wall.p0[0] + wall.u[0] * at, wall.p0[1] + wall.u[1] * at
+                o = [o[k] + u[k] * s0 for k in range(3)]
                 sides = ([piece.s0] if i == 0 else []) + ([piece.s1] if i == count - 1 else [])
                 for b in (range(bands) if i % 2 == 0 else reversed(range(bands))):
                     ob = list(o)
