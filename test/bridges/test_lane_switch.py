@@ -63,14 +63,15 @@ def test_the_output_changes_where_the_stretch_starts_and_ends():
     assert changes[1][1] == pytest.approx(0.8, abs=SPEED * PERIOD)
 
 
-def _phases(on_lead, off_lead, n=20):
+def _phases(lead, margin, n=20):
     """The switch positions' errors (m, + late along the travel) at n loop phases spread over one step."""
     on_err, off_err = [], []
     for k in range(n):
         def make(r, k=k):
             r.t0 -= k / n * PERIOD                         # the loop's phase against the crossing
-            return LaneSwitch(r, r, r.switch, [0, 0, 0.5], [1, 0, 0.5], 0.2, 0.8, r.clock, on_lead, off_lead)
+            return LaneSwitch(r, r, r.switch, [0, 0, 0.5], [1, 0, 0.5], 0.2, 0.8, r.clock, lead, margin)
         changes = _run(make)
+        assert [on for on, _x in changes] == [True, False], changes      # once on, once off: no chatter
         on_err.append(changes[0][1] - 0.2)
         off_err.append(changes[1][1] - 0.8)
     return on_err, off_err
@@ -79,12 +80,13 @@ def _phases(on_lead, off_lead, n=20):
 def test_the_step_leads_choose_which_wait_switches():
     """Over loop phases spread across one step (SPEED x PERIOD = 2 cm): with no lead the output changes at the first
     wait past each end (half a step late on average, what sanding keeps); with half a step, at the nearest wait
-    (unbiased, within half a step); the spray gun's leads (1 on, 0 off) switch on at the last wait before the start
-    and off at the first wait past the end: the whole stretch worked at every phase, at most a step more."""
+    (unbiased, within half a step); the spray gun's (half a step ahead, the stretch half a step wider) switches on
+    at the last wait before the start and off at the first wait past the end: the whole stretch worked at every
+    phase, at most a step more, and each switched once."""
     step, tol = SPEED * PERIOD, 0.002
     on_err, off_err = _phases(0.0, 0.0)
     assert min(on_err + off_err) >= -tol and float(np.mean(on_err)) >= 0.35 * step, (on_err, off_err)
-    on_err, off_err = _phases(0.5, 0.5)
+    on_err, off_err = _phases(0.5, 0.0)
     for errors in (on_err, off_err):
         assert max(abs(e) for e in errors) <= 0.5 * step + tol, errors
         assert abs(float(np.mean(errors))) <= 0.1 * step, errors

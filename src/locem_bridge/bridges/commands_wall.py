@@ -227,25 +227,29 @@ class LaneSwitch(HookedWaiter):
 
     Step: the decision is only taken at the loop's waits, one ``update_s`` apart (a running average of the wall
     time between them), so the output changes up to one step of travel after the TCP crossed a stretch's end
-    (6 cm at 0.5 m/s and time scale 10 with the loop's 10 ms; 3 mm on hardware). ``on_lead_steps`` and
-    ``off_lead_steps`` say how many steps further the prediction looks when switching on and off: 0 and 0, the
-    first wait past each end (on average half a step late at both: what sanding uses); 0.5 and 0.5, the wait
-    nearest each end (unbiased); 1 and 0, the last wait before the start and the first wait past the end (the
-    whole stretch worked for sure, on average half a step more at each end: what spraying uses, so two sections
-    that meet leave no bare strip between them whatever the time scale, with no run-in past their common end)."""
+    (6 cm at 0.5 m/s and time scale 10 with the loop's 10 ms; 3 mm on hardware). ``lead_steps`` and
+    ``margin_steps`` say how: the prediction looks ``lead_steps`` steps further and the stretch is widened by
+    ``margin_steps`` steps of travel (at most MAX_MARGIN_M) at both ends. 0 and 0: the first wait past each end
+    (on average half a step late at both: what sanding uses); 0.5 and 0: the wait nearest each end (unbiased);
+    0.5 and 0.5: the last wait before the start and the first past the end (the whole stretch worked for sure, on
+    average half a step more at each end: what spraying uses, so two sections that meet leave no bare strip
+    between them whatever the time scale, with no run-in past their common end). One predicted point is judged
+    against one interval for switching on and off alike, so the output never chatters."""
 
     #: share of a switch request's duration after which the output has changed (request out, answer back)
     LATENCY_SHARE = 0.5
     #: longest prediction (s of wall time); a stalled state poll is not extrapolated further
     MAX_LEAD_S = 0.1
+    #: m, widest margin_steps widening (a loaded machine's long steps do not spray far past the stretch)
+    MAX_MARGIN_M = 0.04
 
     def __init__(self, ctx: Waiter, arm: Arm, switch: Callable[[bool], None], a: Sequence[float], b: Sequence[float],
                  f_on: float, f_off: float, clock: Callable[[], float] = time.time,
-                 on_lead_steps: float = 0.0, off_lead_steps: float = 0.0) -> None:
-        """``clock``: wall time in s, the clock of the arm state's ``stamp``; ``on_lead_steps``, ``off_lead_steps``:
+                 lead_steps: float = 0.0, margin_steps: float = 0.0) -> None:
+        """``clock``: wall time in s, the clock of the arm state's ``stamp``; ``lead_steps``, ``margin_steps``:
         see the class docstring."""
         super().__init__(ctx)
-        self._leads = (float(on_lead_steps), float(off_lead_steps))
+        self._lead_steps, self._margin_steps = float(lead_steps), float(margin_steps)
         self._arm, self._raw_switch, self._clock = arm, switch, clock
         self._a = np.asarray(a[:3], dtype=float)
         self._ab = np.asarray(b[:3], dtype=float) - self._a
@@ -280,14 +284,19 @@ class LaneSwitch(HookedWaiter):
         self.switch_s = took if self.switch_s == 0.0 else 0.7 * self.switch_s + 0.3 * took
 
     def _decision_tcp(self) -> Optional[np.ndarray]:
-        """The TCP a decision taken now is judged on: :meth:`_predicted_tcp` the on or off lead (whichever
-        switch would come next) in loop steps further (see the class docstring); measures the step."""
+        """The TCP a decision taken now is judged on: :meth:`_predicted_tcp` ``lead_steps`` loop steps further
+        (see the class docstring); measures the step."""
         now = self._clock()
         if self._last_update is not None:
             step = min(max(0.0, now - self._last_update), self.MAX_LEAD_S)
             self.update_s = step if self.update_s == 0.0 else 0.8 * self.update_s + 0.2 * step
         self._last_update = now
-        return self._predicted_tcp(self._leads[1 if self.on else 0] * self.update_s)
+        return self._predicted_tcp(self._lead_steps * self.update_s)
+
+    def _margin(self, length: float) -> float:
+        """The widening of a stretch ``length`` m long at each end, as a fraction of it (``margin_steps``)."""
+        m = min(self.MAX_MARGIN_M, self._margin_steps * float(np.linalg.norm(self._velocity)) * self.update_s)
+        return m / max(length, 1e-9)
 
     def _predicted_tcp(self, further: float = 0.0) -> Optional[np.ndarray]:
         """The TCP position (arm base frame) expected when a switch requested now takes effect (``further`` s of
@@ -313,7 +322,8 @@ class LaneSwitch(HookedWaiter):
         if p is None:
             return
         f = float((p - self._a).dot(self._ab)) / self._len2
-        want = self._f_on <= f <= self._f_off and not self.held
+        m = self._margin(math.sqrt(self._len2))
+        want = self._f_on - m <= f <= self._f_off + m and not self.held
         if want != self.on:
             self._switch(want)
             self.on = want
@@ -324,10 +334,10 @@ class LaneSwitch(HookedWaiter):
         self._update()
 
 
-#: per tool, LaneSwitch's (on_lead_steps, off_lead_steps): the spray gun works each lane's whole stretch for sure
+#: per tool, LaneSwitch's (lead_steps, margin_steps): the spray gun works each lane's whole stretch for sure
 #: (sections meet with no run-in: default site at time scale 1, thickness CV 0.087 with 2 cm run-ins, 0.039
 #: without); the sander switches at the first wait past each end (a pad over a frame's edge sands the frame)
-SWITCH_LEADS = {"spray_gun": (1.0, 0.0)}
+SWITCH_LEADS = {"spray_gun": (0.5, 0.5)}
 
 
 class RasterSwitch(LaneSwitch):
@@ -336,10 +346,10 @@ class RasterSwitch(LaneSwitch):
 
     def __init__(self, ctx: Waiter, arm: Arm, switch: Callable[[bool], None],
                  stretches: Sequence[Sequence[Sequence[float]]], reach: float,
-                 clock: Callable[[], float] = time.time, on_lead_steps: float = 0.0,
-                 off_lead_steps: float = 0.0) -> None:
-        super().__init__(ctx, arm, switch, stretches[0][0], stretches[0][1], 0.0, 1.0, clock, on_lead_steps,
-                         off_lead_steps)
+                 clock: Callable[[], float] = time.time, lead_steps: float = 0.0,
+                 margin_steps: float = 0.0) -> None:
+        super().__init__(ctx, arm, switch, stretches[0][0], stretches[0][1], 0.0, 1.0, clock, lead_steps,
+                         margin_steps)
         self._lines = [(np.asarray(a[:3], dtype=float), np.asarray(b[:3], dtype=float) - np.asarray(a[:3], dtype=float))
                        for a, b in stretches]
         self._reach = reach
@@ -351,7 +361,8 @@ class RasterSwitch(LaneSwitch):
         want = False
         for a, ab in self._lines:
             f = float((p - a).dot(ab)) / max(float(ab.dot(ab)), 1e-12)
-            if 0.0 <= f <= 1.0 and float(np.linalg.norm(p - a - ab * f)) <= self._reach:
+            m = self._margin(float(np.linalg.norm(ab)))
+            if -m <= f <= 1.0 + m and float(np.linalg.norm(p - a - ab * f)) <= self._reach:
                 want = not self.held
                 break
         if want != self.on:
