@@ -338,6 +338,7 @@ class LaneSwitch(HookedWaiter):
 #: (sections meet with no run-in: default site at time scale 1, thickness CV 0.087 with 2 cm run-ins, 0.039
 #: without); the sander switches at the first wait past each end (a pad over a frame's edge sands the frame)
 SWITCH_LEADS = {"spray_gun": (0.5, 0.5)}
+NO_LEADS = (0.0, 0.0)
 
 
 class RasterSwitch(LaneSwitch):
@@ -844,7 +845,7 @@ class WallCommands:
                 pa, pb = self.to_arm(a, n), self.to_arm(b, n)
                 span = abs(s1 - s0)
                 lane = LaneSwitch(ctx, arm, lambda on: self._switch(tool, on), pa, pb,
-                                  runup / span, 1.0 - runup / span, time.time, *SWITCH_LEADS.get(tool, (0.0, 0.0)))
+                                  runup / span, 1.0 - runup / span, time.time, *SWITCH_LEADS.get(tool, NO_LEADS))
                 stretch = (self.to_arm(o + uu * w0 + up * t + n * offset, n),
                            self.to_arm(o + uu * w1 + up * t + n * offset, n))
                 progress = RasterProgress(lane, arm, [stretch], [start_m], total_m, reach=0.05, hold_s=hold_s)
@@ -890,7 +891,7 @@ class WallCommands:
         poses = [self.to_arm(p, n) for p in points[1:]]
         blends = [blend] * (len(poses) - 1) + [0.0]          # every turn blended, the path ends at rest
         switch = RasterSwitch(ctx, arm, lambda on: self._switch(tool, on), stretches, 0.25 * spacing, time.time,
-                              *SWITCH_LEADS.get(tool, (0.0, 0.0)))
+                              *SWITCH_LEADS.get(tool, NO_LEADS))
         progress = RasterProgress(switch, arm, stretches, starts, total_m, reach=0.25 * spacing, hold_s=hold_s)
         live = live if live is not None else {}
         live.update(switch=switch, progress=progress)

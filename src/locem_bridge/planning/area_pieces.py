@@ -130,16 +130,17 @@ def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float =
                 b = a
                 while b + 1 <= k and under(b + 1) == under(a):
                     b += 1
-                sits = under(a) in (1, 3)
-                t0 = ghost_t0(a, b) if under(a) == 3 else T[j] + (gap if sits else 0.0)
+                kind = under(a)
+                sits = kind in (1, 3)
+                t0 = ghost_t0(a, b) if kind == 3 else T[j] + (gap if sits else 0.0)
                 short = T[j + 1] - T[j] < 2.0 * gap - _EPS
                 piece = Piece(S[a], S[b + 1], t0, T[j + 1], open_left=(a == i and not (i == 0 and shared(0, j))),
                               open_right=(b == k and not (k == ncol - 1 and shared(1, j))), on_piece=sits)
                 merged = False
-                if under(a) == 3 and piece.height <= _EPS:
+                if kind == 3 and piece.height <= _EPS:
                     row.append((a, b, piece))                  # still below the first lane: a ghost again
                     merged = True
-                elif sits and under(a) == 1:
+                elif kind == 1:
                     for c0, c1, p in below:
                         same = (c0, c1) == (a, b) and (p.open_left, p.open_right) == (piece.open_left, piece.open_right)
                         # a strip on top of a piece that would be left shorter than a lane spacing after the gap:
@@ -214,19 +215,19 @@ def shared_ends(area: Dict[str, Any], others: Sequence[Dict[str, Any]], toleranc
                 if h0 <= probe <= h1:
                     holes.append((c0 + float(h["t"][0]), c0 + float(h["t"][1])))
             ends[side].extend(interval_minus(lo, hi, holes))
-    out: Tuple[List[Stretch], List[Stretch]] = ([], [])
-    for side in (0, 1):
-        merged: List[List[float]] = []
-        for c, d in sorted(ends[side]):
-            if merged and c <= merged[-1][1] + _EPS:
-                merged[-1][1] = max(merged[-1][1], d)
-            else:
-                merged.append([c, d])
-        for c, d in merged:
-            if d - c <= snap:
-                continue
-            out[side].append((0.0 if c <= snap else c, height if d >= height - snap else d))
-    return out
+    return _snapped(ends[0], height, snap), _snapped(ends[1], height, snap)
+
+
+def _snapped(stretches: Sequence[Stretch], length: float, snap: float) -> List[Stretch]:
+    """``stretches`` of an edge ``length`` long merged where they touch or overlap; a stretch no longer than
+    ``snap`` dropped, an end within ``snap`` of the edge's ends moved there."""
+    merged: List[List[float]] = []
+    for c, d in sorted(stretches):
+        if merged and c <= merged[-1][1] + _EPS:
+            merged[-1][1] = max(merged[-1][1], d)
+        else:
+            merged.append([c, d])
+    return [(0.0 if c <= snap else c, length if d >= length - snap else d) for c, d in merged if d - c > snap]
 
 
 def shared_bottom(area: Dict[str, Any], others: Sequence[Dict[str, Any]], tolerance: float,
@@ -260,10 +261,4 @@ def shared_bottom(area: Dict[str, Any], others: Sequence[Dict[str, Any]], tolera
             if float(h["t"][1]) >= float(b["height"]) - tolerance:
                 holes.append(tuple(sorted((p + e * float(h["s"][0]), p + e * float(h["s"][1])))))
         found.extend(interval_minus(lo, hi, holes))
-    merged: List[List[float]] = []
-    for c, d in sorted(found):
-        if merged and c <= merged[-1][1] + _EPS:
-            merged[-1][1] = max(merged[-1][1], d)
-        else:
-            merged.append([c, d])
-    return [(0.0 if c <= snap else c, width if d >= width - snap else d) for c, d in merged if d - c > snap]
+    return _snapped(found, width, snap)

@@ -580,8 +580,9 @@ class GetAreaRaster(Leaf):
         tol = self.get("neighbour_tolerance")
         if tol < 0:
             raise PortError("%s: neighbour_tolerance must be >= 0 m, got %g" % (self.name, tol))
-        shared: Any = shared_ends(a, hdh.features("area"), tol, gap) if self.get("neighbours") else ((), ())
-        stacked = shared_bottom(a, hdh.features("area"), tol, gap) if self.get("neighbours") else []
+        others = hdh.features("area") if self.get("neighbours") else []
+        shared: Any = shared_ends(a, others, tol, gap)
+        stacked = shared_bottom(a, others, tol, gap)
         sections: List[Dict[str, Any]] = []
         smallest = max(0.0, self.get("min_manual")) if reach is not None else 0.0
         # never above the band the tool reaches (a sliver the plan's manual parts leave beside a hole at the area's
