@@ -235,9 +235,13 @@ class ToolChangerRig:
 
 class WorksiteRig:
     """Every stand-in the wall commands need, on one sim clock: UR controller (child process), compressor
-    (Modbus server), four drives (virtual CAN) and the PyBullet world measuring the outcome."""
+    (Modbus server), four drives (virtual CAN) and the PyBullet world measuring the outcome.
 
-    def __init__(self, robot, site_path=SHORT_WALL, time_scale=4.0, overrides=None):
+    ``arm_in_process``: the UR controller runs in this process, as in the worksite stand-in of a launch, and the
+    world sees every control cycle (where the tool switched along the path, to the controller's 2 ms); in a child
+    process the world reads the arm at its own steps (50 Hz: 8 cm of travel at 0.4 m/s and time scale 10)."""
+
+    def __init__(self, robot, site_path=SHORT_WALL, time_scale=4.0, overrides=None, arm_in_process=False):
         import copy
         import uuid
         from locem_bridge.sim.clock import SimClock
@@ -263,8 +267,16 @@ class WorksiteRig:
         self.address = self.robot["arm"]["controller"]["host"]
         # model ur10 / ur5: the kinematics of the URDF the world draws (robot.arm.description), so both agree
         model = "ur5" if str(robot["arm"].get("model", "")).startswith("ur5") else "ur10"
-        self.standin = StandInProcess(self.address, time_scale=time_scale, model=model,
-                                      q0=robot["arm"]["named_poses"]["home"]).start()
+        if arm_in_process:
+            from locem_bridge.sim.arm_source import UrArmSource
+            from locem_bridge.sim.ur import UrControllerStandIn
+            self.standin = UrControllerStandIn(self.address, time_scale=time_scale, model=model,
+                                               q0=robot["arm"]["named_poses"]["home"]).start()
+            arm_source = UrArmSource(self.standin)
+        else:
+            self.standin = StandInProcess(self.address, time_scale=time_scale, model=model,
+                                          q0=robot["arm"]["named_poses"]["home"]).start()
+            arm_source = StandInArmSource(self.standin)
         self.model = CompressorModel(self.robot["compressor"], self.clock.now)
         self.server = CompressorServer(self.model, "127.0.0.1", self.robot["compressor"]["port"],
                                        self.robot["compressor"]["device_id"])
@@ -273,7 +285,7 @@ class WorksiteRig:
                                max_wheel_speed=self.robot["base"]["limits"]["max_wheel_speed"])
         self.drives.start()
         self.world = World(copy.deepcopy(self.site), {"robot": self.robot}, self.clock,
-                           arm=StandInArmSource(self.standin), drives=self.drives, compressor=self.model, gui=False)
+                           arm=arm_source, drives=self.drives, compressor=self.model, gui=False)
         self.changer = self.changer_server = None
         if "tool_changer" in self.robot:          # the tool changer stand-in, its rack on the world's arm
             from locem_bridge.sim.modbus.tool_changer import ToolChangerModel, WorldRack, tool_changer_server
@@ -320,4 +332,7 @@ class WorksiteRig:
         self.world.close()
         self.drives.stop()
         self.server.stop()
-        self.standin.close()
+        if hasattr(self.standin, "close"):
+            self.standin.close()
+        else:
+            self.standin.stop()

@@ -158,3 +158,51 @@ def test_raster_progress_reports_the_length_worked_never_ahead_of_the_tool_and_e
     assert rig.reports[-1][2] == "raster 1.600 of 1.600 m"          # the tool off: no "if LOCEM stops" part
     during = [t for t, _p, text in rig.reports if 1.0 < float(text.split()[1]) < 1.3]
     assert len(during) >= 2 and max(b - a for a, b in zip(during, during[1:])) <= RasterProgress.PERIOD_S + 2 * PERIOD
+
+
+class PathRig(Rig):
+    """A TCP moving at SPEED along a serpentine: lane 1 along +x at y = 0 from x = -0.2 to 1.2, 0.1 m across to
+    y = 0.1, lane 2 back along -x to x = -0.2."""
+
+    POINTS = np.array([[-0.2, 0.0, 0.5], [1.2, 0.0, 0.5], [1.2, 0.1, 0.5], [-0.2, 0.1, 0.5]])
+
+    def at(self, t):
+        d = SPEED * (t - self.t0)
+        for a, b in zip(self.POINTS, self.POINTS[1:]):
+            seg = float(np.linalg.norm(b - a))
+            if d <= seg:
+                return a + (b - a) * d / seg
+            d -= seg
+        return self.POINTS[-1]
+
+    def x(self, t):                     # distance along the path
+        return SPEED * (t - self.t0)
+
+    def cached_state(self):
+        stamp = self.clock.t - AGE
+        return {"tcp": list(self.at(stamp)) + [0.0, 0.0, 0.0], "stamp": stamp}
+
+
+def test_along_a_path_the_output_changes_at_each_stretchs_ends_whatever_the_loop_phase():
+    """RasterSwitch given the path: the waits a switching point falls into are cut there, so over 20 loop phases
+    the output goes on EARLY_S of travel before each stretch starts and off as much after it ends (within 2 mm,
+    not one loop step: SPEED x PERIOD = 2 cm), the second lane (after the turn) as exactly as the first, each
+    switched once."""
+    # stretches in distance along the path: lane 1 x 0.0..0.3 and 0.6..0.9; lane 2 (from 1.5 + 0.1 on) x 0.9..0.3
+    stretches = [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5]),
+                 ([0.9, 0.1, 0.5], [0.3, 0.1, 0.5])]
+    ends = [(0.2, 0.5), (0.8, 1.1), (1.4 + 0.1 + 0.3, 1.4 + 0.1 + 0.9)]
+    early = SPEED * RasterSwitch.EARLY_S
+    for k in range(20):
+        rig = PathRig()
+        rig.t0 -= k / 20 * PERIOD
+        lead, margin = SWITCH_LEADS["spray_gun"]
+        sw = RasterSwitch(rig, rig, rig.switch, stretches, reach=0.05, clock=rig.clock, lead_steps=lead,
+                          margin_steps=margin, path=PathRig.POINTS)
+        sw.switch_s = REQUEST
+        while rig.x(rig.clock.t) < 2.8:
+            sw.sleep(PERIOD)
+        assert [on for on, _d in rig.changes] == [True, False] * 3, rig.changes
+        for (start, end), (_on, d_on), (_off, d_off) in zip(ends, rig.changes[::2], rig.changes[1::2]):
+            assert d_on == pytest.approx(start - early, abs=0.002), (k, rig.changes)
+            assert d_off == pytest.approx(end + early, abs=0.002), (k, rig.changes)

@@ -250,7 +250,7 @@ def work_areas_on_site(site: str, work: str, areas: Sequence[str], time_scale: f
     from locem_bridge.bridges.robot import build_robot
     from locem_bridge.locem.core import LocemCore
     tree_id, tool = {"spray": ("SPRAY_AREA", "spray_gun"), "sand": ("SAND_AREA", "sander")}[work]
-    rig = WorksiteRig(load_robot_config(ROBOT_YAML), site_path=site, time_scale=time_scale)
+    rig = WorksiteRig(load_robot_config(ROBOT_YAML), site_path=site, time_scale=time_scale, arm_in_process=True)
     built = core = None
     try:
         built = build_robot(rig.robot, site=rig.site_path, initial_pose=tuple(rig.world.base_pose()))

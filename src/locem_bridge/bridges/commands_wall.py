@@ -45,6 +45,7 @@ STRAIGHT_APPROACH_ANGLE = 0.6  # rad, tool re-orientation up to which a wall app
 LANE_ACCEL = 4.0               # m/s^2, raster lanes (short run-up: 3 cm at 0.5 m/s)
 RUNUP_MARGIN = 0.01            # m, constant-speed travel before the tool switches on
 PATH_BLEND = 0.03              # m, blend radius of the turns between raster lanes (one blended path)
+LEAD_IN = 0.3                  # m, a raster path's lead-in beside its first lane (see WallCommands._raster_path)
 SKIP_RESOLUTION = 0.001        # m, a lane with less than this left after SPRAY_AREA skip= is not worked again
 LIFT_OFF = 0.03                # m, how far a suspended sander lifts off the wall
 
@@ -223,25 +224,33 @@ class LaneSwitch(HookedWaiter):
     0.5 m/s on hardware; centimetres in a time-scaled simulation, where the arm moves faster in wall time). The
     decision is therefore taken on the TCP predicted ``age + LATENCY_SHARE x switch duration`` ahead along its
     measured velocity (both in wall time; the switch duration is a running average of the requests' own
-    durations), at most ``MAX_LEAD_S``.
+    durations), at most ``MAX_LEAD_S``. Age and velocity go by when each sample was taken (the state's
+    ``sample_time``, from the controller's clock), not by when the poll's answer arrived: on a busy machine that
+    varies by tens of milliseconds from poll to poll, and a velocity from it by several times.
 
-    Step: the decision is only taken at the loop's waits, one ``update_s`` apart (a running average of the wall
-    time between them), so the output changes up to one step of travel after the TCP crossed a stretch's end
-    (6 cm at 0.5 m/s and time scale 10 with the loop's 10 ms; 3 mm on hardware). ``lead_steps`` and
-    ``margin_steps`` say how: the prediction looks ``lead_steps`` steps further and the stretch is widened by
-    ``margin_steps`` steps of travel (at most MAX_MARGIN_M) at both ends. 0 and 0: the first wait past each end
+    Step: the decision is only taken at the loop's waits, one step apart, so the output changes up to one step of
+    travel after the TCP crossed a stretch's end (6 cm at 0.5 m/s and time scale 10 with the loop's 10 ms; 3 mm on
+    hardware). The step is measured (``update_s``: it follows a longer step at once and a shorter one slowly, so a
+    loaded machine's irregular waits are not underestimated) and its travel (``step_m``, at most MAX_STEP_M) is
+    what ``lead_steps`` and ``margin_steps`` count in: the prediction looks ``lead_steps`` steps of travel further
+    and the stretch is widened by ``margin_steps`` of them at both ends. 0 and 0: the first wait past each end
     (on average half a step late at both: what sanding uses); 0.5 and 0: the wait nearest each end (unbiased);
     0.5 and 0.5: the last wait before the start and the first past the end (the whole stretch worked for sure, on
     average half a step more at each end: what spraying uses, so two sections that meet leave no bare strip
-    between them whatever the time scale, with no run-in past their common end). One predicted point is judged
-    against one interval for switching on and off alike, so the output never chatters."""
+    between them whatever the time scale, with no run-in past their common end). Both count the same capped
+    travel, so a cap never moves the switching off ahead of the end. One predicted point is judged against one
+    interval for switching on and off alike, so the output never chatters.
+
+    The first switch request of a lane has no running average to go by: :meth:`prime` measures one (a request
+    to switch off, which the output already is) before the motion starts."""
 
     #: share of a switch request's duration after which the output has changed (request out, answer back)
     LATENCY_SHARE = 0.5
     #: longest prediction (s of wall time); a stalled state poll is not extrapolated further
     MAX_LEAD_S = 0.1
-    #: m, widest margin_steps widening (a loaded machine's long steps do not spray far past the stretch)
-    MAX_MARGIN_M = 0.04
+    #: m, the longest step of travel lead_steps and margin_steps count in (a stalled loop does not switch on far
+    #: ahead of a stretch)
+    MAX_STEP_M = 0.08
 
     def __init__(self, ctx: Waiter, arm: Arm, switch: Callable[[bool], None], a: Sequence[float], b: Sequence[float],
                  f_on: float, f_off: float, clock: Callable[[], float] = time.time,
@@ -276,45 +285,70 @@ class LaneSwitch(HookedWaiter):
         self._before.append(callback)
 
     def _switch(self, on: bool) -> None:
-        t0 = self._clock()
         for callback in self._before:
             callback(on)
+        self._timed_switch(on)
+
+    def _timed_switch(self, on: bool) -> None:
+        t0 = self._clock()
         self._raw_switch(on)
         took = max(0.0, self._clock() - t0)
         self.switch_s = took if self.switch_s == 0.0 else 0.7 * self.switch_s + 0.3 * took
 
+    def prime(self) -> None:
+        """Before the motion, with the output off: one request to switch it off, timed, so the first switching on
+        is compensated for the request's duration too."""
+        if not self.on:
+            self._timed_switch(False)
+
     def _decision_tcp(self) -> Optional[np.ndarray]:
-        """The TCP a decision taken now is judged on: :meth:`_predicted_tcp` ``lead_steps`` loop steps further
+        """The TCP a decision taken now is judged on: :meth:`_predicted_tcp` ``lead_steps`` steps of travel further
         (see the class docstring); measures the step."""
+        self._measure_step()
+        p = self._predicted_tcp()
+        speed = float(np.linalg.norm(self._velocity))
+        if p is None or speed <= 1e-9:
+            return p
+        return p + self._velocity / speed * (self._lead_steps * self.step_m())
+
+    def _measure_step(self) -> None:
+        """One more decision: the wall time since the last one goes into ``update_s``."""
         now = self._clock()
         if self._last_update is not None:
             step = min(max(0.0, now - self._last_update), self.MAX_LEAD_S)
-            self.update_s = step if self.update_s == 0.0 else 0.8 * self.update_s + 0.2 * step
+            self.update_s = step if step > self.update_s else 0.8 * self.update_s + 0.2 * step
         self._last_update = now
-        return self._predicted_tcp(self._lead_steps * self.update_s)
+
+    def step_m(self) -> float:
+        """The travel of one loop step (m) at the measured speed, at most MAX_STEP_M."""
+        return min(self.MAX_STEP_M, float(np.linalg.norm(self._velocity)) * self.update_s)
 
     def _margin(self, length: float) -> float:
         """The widening of a stretch ``length`` m long at each end, as a fraction of it (``margin_steps``)."""
-        m = min(self.MAX_MARGIN_M, self._margin_steps * float(np.linalg.norm(self._velocity)) * self.update_s)
-        return m / max(length, 1e-9)
+        return self._margin_steps * self.step_m() / max(length, 1e-9)
 
-    def _predicted_tcp(self, further: float = 0.0) -> Optional[np.ndarray]:
-        """The TCP position (arm base frame) expected when a switch requested now takes effect (``further`` s of
-        wall time after that)."""
+    def _sample(self) -> Optional[Tuple[np.ndarray, Optional[float]]]:
+        """The arm's latest TCP position (arm base frame) and when it was taken (wall time; None: unknown)."""
         state = self._arm.cached_state()
         tcp = state.get("tcp")
         if not tcp:
             return None
-        p = np.asarray(tcp[:3], dtype=float)
-        stamp = state.get("stamp")
+        stamp = state.get("sample_time", state.get("stamp"))
+        return np.asarray(tcp[:3], dtype=float), (float(stamp) if stamp is not None else None)
+
+    def _predicted_tcp(self) -> Optional[np.ndarray]:
+        """The TCP position (arm base frame) expected when a switch requested now takes effect."""
+        sample = self._sample()
+        if sample is None:
+            return None
+        p, stamp = sample
         if stamp is None:
             return p
-        stamp = float(stamp)
         if self._last is None or stamp > self._last[0]:       # a new sample
             if self._last is not None:
                 self._velocity = (p - self._last[1]) / (stamp - self._last[0])
             self._last = (stamp, p)
-        lead = min(self.MAX_LEAD_S, max(0.0, self._clock() - stamp) + self.LATENCY_SHARE * self.switch_s + further)
+        lead = min(self.MAX_LEAD_S, max(0.0, self._clock() - stamp) + self.LATENCY_SHARE * self.switch_s)
         return p + self._velocity * lead
 
     def _update(self) -> None:
@@ -336,26 +370,146 @@ class LaneSwitch(HookedWaiter):
 
 #: per tool, LaneSwitch's (lead_steps, margin_steps): the spray gun works each lane's whole stretch for sure
 #: (sections meet with no run-in: default site at time scale 1, thickness CV 0.087 with 2 cm run-ins, 0.039
-#: without); the sander switches at the first wait past each end (a pad over a frame's edge sands the frame)
+#: without), and along a raster path it is switched by the path (RasterSwitch's path, cut waits); the sander
+#: switches at the first wait past each end (a pad over a frame's edge sands the frame)
 SWITCH_LEADS = {"spray_gun": (0.5, 0.5)}
 NO_LEADS = (0.0, 0.0)
 
 
 class RasterSwitch(LaneSwitch):
     """:class:`LaneSwitch` for a whole raster driven as one blended path: the tool is on while the (predicted)
-    TCP is on the worked stretch of any lane (fraction 0..1 of the stretch, within ``reach`` of its line)."""
+    TCP is on the worked stretch of any lane.
+
+    Given the ``path`` (its waypoints from its start, arm base frame), the decision goes along it: the TCP's
+    position is its distance travelled along the path (projected onto the nearest segment, searched forward from
+    the last one), its speed the change of that distance between samples, and the prediction runs on along the
+    path, so a TCP still in the turn into a lane is judged on where the turn takes it, not on a straight line
+    through its current direction (which at a time scale of 10, a turn and its run-up passed in one or two
+    waits, pointed off the lane and switched on late). Two speeds are kept, one that follows a rise at once and a
+    fall slowly, one the other way round: switching on goes by the higher (the blend of a turn cuts the corner, so
+    the distance along the waypoints grows more slowly there than the TCP moves), switching off by the lower (a
+    stalled controller's catch-up looks fast): an error then sprays a little more, never leaves a gap. And the
+    switching point is not left to the motion loop's next wait: a wait it falls into is cut there (:meth:`sleep`),
+    so the output changes ``EARLY_S`` of travel before each stretch and after it (what a cut wait may oversleep),
+    at any time scale; the loop step (``lead_steps``, ``margin_steps``) does not come into it.
+
+    Without a path: the predicted TCP's fraction 0..1 of a stretch, within ``reach`` of its line, judged at the
+    loop's waits as :class:`LaneSwitch` does."""
+
+    #: s of wall time: the output goes on this long before the TCP reaches a stretch and off this long after it
+    #: passed its end (a cut wait's oversleeping; 1.5 mm at 0.5 m/s, 1.5 cm at time scale 10)
+    EARLY_S = 0.003
+    #: s, the shortest cut wait
+    MIN_WAIT_S = 0.0005
+    #: m, a switching point this close counts as reached (a cut wait ends on it up to rounding)
+    REACHED_M = 1e-6
 
     def __init__(self, ctx: Waiter, arm: Arm, switch: Callable[[bool], None],
                  stretches: Sequence[Sequence[Sequence[float]]], reach: float,
                  clock: Callable[[], float] = time.time, lead_steps: float = 0.0,
-                 margin_steps: float = 0.0) -> None:
+                 margin_steps: float = 0.0, path: Optional[Sequence[Sequence[float]]] = None) -> None:
         super().__init__(ctx, arm, switch, stretches[0][0], stretches[0][1], 0.0, 1.0, clock, lead_steps,
                          margin_steps)
         self._lines = [(np.asarray(a[:3], dtype=float), np.asarray(b[:3], dtype=float) - np.asarray(a[:3], dtype=float))
                        for a, b in stretches]
         self._reach = reach
+        self._points: Optional[np.ndarray] = None
+        if path is not None and len(path) >= 2:
+            pts = np.asarray([q[:3] for q in path], dtype=float)
+            lengths = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+            self._points = pts
+            self._lengths = lengths
+            self._cum = np.concatenate([[0.0], np.cumsum(lengths)])
+            self._segment = 0                                        # the segment the TCP was last found on
+            self._arc: Optional[Tuple[float, float]] = None           # (sample time, distance along the path)
+            self._speeds = (0.0, 0.0)                                 # m/s of wall time along the path: high, low
+            self._current = 0                                         # the stretch the output is on for
+            self._due: Optional[float] = None                         # wall time of the next switching point
+            self._intervals = []
+            for a, ab in self._lines:
+                mid = a + 0.5 * ab
+                j = int(np.argmin([self._distance(mid, k) for k in range(len(lengths))]))
+                self._intervals.append(tuple(sorted((self._along(a, j), self._along(a + ab, j)))))
+
+    def _distance(self, p: np.ndarray, k: int) -> float:
+        a, d = self._points[k], self._points[k + 1] - self._points[k]
+        f = min(1.0, max(0.0, float((p - a).dot(d)) / max(float(d.dot(d)), 1e-12)))
+        return float(np.linalg.norm(p - a - d * f))
+
+    def _along(self, p: np.ndarray, k: int) -> float:
+        a, d = self._points[k], self._points[k + 1] - self._points[k]
+        f = min(1.0, max(0.0, float((p - a).dot(d)) / max(float(d.dot(d)), 1e-12)))
+        return float(self._cum[k] + f * self._lengths[k])
+
+    def _path_position(self) -> Optional[Tuple[float, float]]:
+        """(distance along the path, sample time) of the latest TCP sample; updates the speed along the path."""
+        sample = self._sample()
+        if sample is None:
+            return None
+        p, stamp = sample
+        t = stamp if stamp is not None else self._clock()
+        last = min(len(self._lengths), self._segment + 4)
+        k = min(range(self._segment, last), key=lambda i: self._distance(p, i))
+        self._segment = k
+        s = self._along(p, k)
+        if self._arc is None or t > self._arc[0]:
+            if self._arc is not None:
+                v = max(0.0, (s - self._arc[1]) / (t - self._arc[0]))
+                hi, lo = self._speeds
+                self._speeds = (v if v > hi else 0.8 * hi + 0.2 * v, v if v < lo or lo == 0.0 else 0.8 * lo + 0.2 * v)
+            self._arc = (t, s)
+        self._predicted_tcp()                  # keeps the 3-D velocity too (hold_off's prediction)
+        return s, t
+
+    def sleep(self, seconds: float) -> None:
+        """Along a path: a wait that the next switching point falls into is cut there, so the output changes
+        at that point, not up to one loop step later (5 cm at 0.5 m/s and time scale 10)."""
+        end = self._clock() + seconds
+        while self._points is not None:
+            now, due = self._clock(), self._due
+            if due is None or due >= end or now >= end:
+                break
+            self._ctx.sleep(max(due - now, self.MIN_WAIT_S))
+            self._after_wait()
+        left = end - self._clock()
+        if left > 0.0:
+            self._ctx.sleep(left)
+        self._after_wait()
 
     def _update(self) -> None:
+        if self._points is None:
+            self._update_by_lines()
+            return
+        where = self._path_position()
+        if where is None:
+            return
+        s, t = where
+        now = self._clock()
+        speed = self._speeds[1] if self.on else self._speeds[0]
+        lead = min(self.MAX_LEAD_S, max(0.0, now - t) + self.LATENCY_SHARE * self.switch_s)
+        s_pred = s + speed * lead
+        early = speed * self.EARLY_S               # on this much before each stretch, off this much after it
+        if self.on:
+            want = not self.held and s_pred < self._intervals[self._current][1] + early - self.REACHED_M
+        else:
+            hits = [i for i, (a, b) in enumerate(self._intervals) if a - early - self.REACHED_M <= s_pred <= b]
+            want = not self.held and bool(hits)
+            if want:
+                self._current = hits[0]
+        if want != self.on:
+            self._switch(want)
+            self.on = want
+        # the next switching point, in wall time from now
+        self._due = None
+        if speed > 1e-6 and not self.held:
+            if self.on:
+                ahead = self._intervals[self._current][1] + early - s_pred
+            else:
+                ahead = min((a - early - s_pred for a, _b in self._intervals if a - early > s_pred), default=-1.0)
+            if ahead > self.REACHED_M:
+                self._due = now + ahead / speed
+
+    def _update_by_lines(self) -> None:
         p = self._decision_tcp()
         if p is None:
             return
@@ -846,6 +1000,7 @@ class WallCommands:
                 span = abs(s1 - s0)
                 lane = LaneSwitch(ctx, arm, lambda on: self._switch(tool, on), pa, pb,
                                   runup / span, 1.0 - runup / span, time.time, *SWITCH_LEADS.get(tool, NO_LEADS))
+                lane.prime()
                 stretch = (self.to_arm(o + uu * w0 + up * t + n * offset, n),
                            self.to_arm(o + uu * w1 + up * t + n * offset, n))
                 progress = RasterProgress(lane, arm, [stretch], [start_m], total_m, reach=0.05, hold_s=hold_s)
@@ -872,10 +1027,18 @@ class WallCommands:
                      live: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
         """The serpentine as ONE blended controller path (MOVE_PATH semantics): each lane's ends, run-up
         included, are waypoints; the turns between lanes are rounded (blend within the run-up, so the worked
-        stretches are straight and at speed); the tool is switched by position (:class:`RasterSwitch`)."""
+        stretches are straight and at speed); the tool is switched by position (:class:`RasterSwitch`).
+
+        The path starts with a lead-in: ``LEAD_IN`` m (at most the lane's length) against the first lane's
+        direction, half a lane spacing beside it (towards the next lane; towards the previous one when it is the
+        last), then a turn into the first lane like every other. So the first lane too is entered at speed while
+        LOCEM watches the arm: a path starts moving while its request is still being answered, which takes tens of
+        milliseconds (centimetres of travel at a time scale of 10, more on a busy machine), and an arm starting
+        from rest right before the stretch had often passed its start before the first decision."""
         arm = self._need("arm")
         spacing = abs(heights[1] - heights[0])
         blend = min(PATH_BLEND, 0.45 * spacing)
+        lead_blend = min(PATH_BLEND, 0.45 * spacing / 2.0)
         runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN + blend
         points, stretches, starts = [], [], []
         for k, t, w0, w1, start_m in lanes:
@@ -886,12 +1049,20 @@ class WallCommands:
             stretches.append((self.to_arm(o + uu * w0 + up * t + n * offset, n),
                               self.to_arm(o + uu * w1 + up * t + n * offset, n)))
             starts.append(start_m)
+        k0, _t, w0, w1, _s = lanes[0]
+        sign = 1.0 if k0 % 2 == 0 else -1.0
+        beside = up * (spacing / 2.0) * (1.0 if k0 + 1 < len(heights) else -1.0)
+        lead = min(LEAD_IN, abs(w1 - w0) + 2.0 * runup)
+        points = [points[0] + beside + uu * sign * lead, points[0] + beside] + points
         self._approach(ctx, self.to_arm(points[0] + n * 0.05, n))
         arm.move_linear(ctx, self.to_arm(points[0], n), APPROACH_SPEED, 1.2)
         poses = [self.to_arm(p, n) for p in points[1:]]
-        blends = [blend] * (len(poses) - 1) + [0.0]          # every turn blended, the path ends at rest
+        # every turn blended (the lead-in's two with the half spacing's radius), the path ends at rest
+        blends = [lead_blend, lead_blend] + [blend] * (len(poses) - 3) + [0.0]
         switch = RasterSwitch(ctx, arm, lambda on: self._switch(tool, on), stretches, 0.25 * spacing, time.time,
-                              *SWITCH_LEADS.get(tool, NO_LEADS))
+                              *SWITCH_LEADS.get(tool, NO_LEADS),
+                              path=[self.to_arm(points[0], n)] + poses if tool in SWITCH_LEADS else None)
+        switch.prime()
         progress = RasterProgress(switch, arm, stretches, starts, total_m, reach=0.25 * spacing, hold_s=hold_s)
         live = live if live is not None else {}
         live.update(switch=switch, progress=progress)

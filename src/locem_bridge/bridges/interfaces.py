@@ -208,8 +208,9 @@ class Arm(Backend):
     @abc.abstractmethod
     def cached_state(self) -> Dict[str, Any]:
         """The latest polled state, never blocking: ``q`` (rad), ``qd`` (rad/s), ``tcp`` (pose), ``stamp`` (wall
-        time ``time.time()`` of the sample, s); ``{}`` before the first poll. Read by the TCP-triggered tool
-        switch of the wall commands and by ``joint_states``."""
+        time ``time.time()`` the poll's answer arrived at, s), optionally ``sample_time`` (wall time the sample
+        was taken at, from the controller's own clock: :mod:`locem_bridge.common.sample_clock`); ``{}`` before the
+        first poll. Read by the TCP-triggered tool switch of the wall commands and by ``joint_states``."""
 
     @abc.abstractmethod
     def joint_positions(self) -> List[float]:

@@ -53,6 +53,7 @@ from .config import need
 from .errors import BadRequest, DeviceFault, LinkDown, MotionTimeout, NotConnected, SafetyStop
 from locem_bridge.common.geometry import angle_between, rotvec_to_matrix
 from locem_bridge.common.paths import child_env
+from locem_bridge.common.sample_clock import SampleClock
 from .geometry import distance
 from .interfaces import Arm, Health, Waiter
 
@@ -100,6 +101,7 @@ class UrRtdeArm(Arm):
         self._replies: "queue.Queue[Dict[str, Any]]" = queue.Queue()
         self._ids = 0
         self._state: Dict[str, Any] = {}
+        self._sample_clock = SampleClock()
         self._state_lock = threading.Lock()
         self._safety: Optional[str] = None           # latched safety stop (text), cleared only by reset()
         self._link_up = threading.Event()
@@ -214,7 +216,10 @@ class UrRtdeArm(Arm):
             raise LinkDown("UR controller %s: RTDE connection lost" % self.host, device="arm")
         with self._state_lock:
             self._state = st
-            self._state["stamp"] = time.time()
+            self._state["stamp"] = now = time.time()
+            if "timestamp" in st:                 # the controller's clock: when the sample was taken
+                self._sample_clock.add(st["timestamp"], now)
+                self._state["sample_time"] = self._sample_clock.wall(st["timestamp"])
         fm = self._force
         if fm is not None and fm.get("recording"):
             fm["samples"].append(-float(sum(a * b for a, b in zip(st["tcp_force"][:3], fm["axis"]))))

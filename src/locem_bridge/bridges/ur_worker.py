@@ -72,12 +72,14 @@ def _ops(h: Dict[str, Any], watchdog: float = 0.0) -> Dict[str, Callable[..., An
         return result
 
     def state() -> Dict[str, Any]:
-        return {"q": list(r.getActualQ()), "qd": list(r.getActualQd()), "tcp": list(r.getActualTCPPose()),
+        # the controller's timestamp right before the TCP pose: a package arriving in between would stamp it late
+        return {"timestamp": float(r.getTimestamp()), "tcp": list(r.getActualTCPPose()), "q": list(r.getActualQ()),
+                "qd": list(r.getActualQd()),
                 "safety_mode": int(r.getSafetyMode()), "safety_bits": int(r.getSafetyStatusBits()),
                 "robot_mode": int(r.getRobotMode()), "runtime_state": int(r.getRuntimeState()),
                 "do_bits": int(r.getActualDigitalOutputBits()), "progress": int(c.getAsyncOperationProgress()),
                 "receive_connected": bool(r.isConnected()), "control_connected": bool(c.isConnected()),
-                "program_running": bool(c.isProgramRunning()), "timestamp": float(r.getTimestamp()),
+                "program_running": bool(c.isProgramRunning()),
                 "tcp_force": list(r.getActualTCPForce())}
 
     def dash_cmd(name: str) -> str:

@@ -115,7 +115,7 @@ class World:
         self.mounted_tool: Optional[str] = None
         self.steps = 0
         # arm samples (joint positions, tool process on at that moment) from the controller's step listener
-        self._samples: Deque[Tuple[List[float], bool]] = deque(maxlen=2000)
+        self._samples: Deque[Tuple[List[float], bool, float]] = deque(maxlen=2000)
         self._last_sample: Optional[List[float]] = None
         # map <- UR controller base as (rotation, origin), set by _place_robot (from _build on), read by
         # arm_base_pose and, on the controller's thread, wall_contact
@@ -127,6 +127,7 @@ class World:
             robot["arm"]["named_poses"].get("home", [0.0] * 6))
         self._wheel_prev = list(drives.wheel_angles()) if drives is not None else None
         self._tcp_prev: Optional[np.ndarray] = None
+        self._tcp_prev_t = 0.0                           # sim time of _tcp_prev
         self._dirty = True
         try:
             self._build()
@@ -519,8 +520,11 @@ class World:
     # -- stepping ----------------------------------------------------------------------------------------------
     def _on_arm_step(self, q: Sequence[float]) -> None:
         """Controller step listener (the controller's thread): queue the joint sample together with whether the
-        tool's process is on at this moment, so a valve or output switched between two world steps takes effect
-        at the right place along the path (a world step spans many controller cycles, the more so when time-scaled)."""
+        tool's process is on at this moment and the sim time, so a valve or output switched between two world steps
+        takes effect at the right place along the path (a world step spans many controller cycles, the more so when
+        time-scaled) and each stretch of the path gets the time the tool took over it (a busy machine's controller
+        cycles are not evenly spread over a world step: a stretch passed in one late cycle got only its share of
+        the step, a thin stripe of spray across the lane)."""
         q = [float(x) for x in q]
         last = self._samples[-1][0] if self._samples else self._last_sample
         if last is not None and max(abs(a - b) for a, b in zip(last, q)) <= 1e-9:
@@ -530,14 +534,13 @@ class World:
             on = self.tool_active()
         except Exception:                                # a stand-in shutting down: judged at the step instead
             on = False
-        self._samples.append((q, on))
+        self._samples.append((q, on, self.clock.now()))
 
     def step(self) -> None:
         """Advance the world to ``clock()`` (see the module docstring)."""
         with self._lock:
             now = self.clock.now()
             t_prev = self._t
-            dt = max(0.0, now - t_prev)
             self._t = now
             self.steps += 1
             moved = False
@@ -565,40 +568,40 @@ class World:
                     self._tcp_prev = None            # the TCP moved with the mount: no painting along that jump
                     moved = True
             active = self.tool_active()
-            qs: List[Tuple[List[float], bool]] = []
+            qs: List[Tuple[List[float], bool, float]] = []
             while self._samples:
                 qs.append(self._samples.popleft())
             if self.arm_source is not None:
                 q_now = [float(x) for x in self.arm_source.joint_positions()]
                 if not qs or max(abs(a - b) for a, b in zip(qs[-1][0], q_now)) > 1e-9:
-                    qs.append((q_now, active))
+                    qs.append((q_now, active, now))
             if qs and max(abs(a - b) for a, b in zip(qs[-1][0], self._q)) <= 1e-9 and len(qs) == 1:
                 qs = []
             if not (moved or qs or self._dirty or active):
-                return                                   # idle: nothing changed, nothing to measure
+                self._tcp_prev_t = now                   # idle: nothing changed, nothing to measure
+                return
             self._dirty = False
             if moved:
                 self._place_robot()
             if not qs:
-                qs = [(self._q, active)]
+                qs = [(self._q, active, now)]
             elif self.mounted_tool is None:
                 qs = [qs[-1]]                            # nothing to measure along the way
-            # thin out dense controller steps: keep every sample that moved the TCP >= 2 mm
+            # thin out dense controller steps: keep every sample that moved the TCP >= 2 mm; a segment lasts from
+            # the previous kept sample's time to its own (thinned-out samples' time goes to the next segment)
             n = len(qs)
-            pending_dt = 0.0                             # time of thinned-out samples goes to the next segment
-            for i, (q, on) in enumerate(qs):
+            for i, (q, on, t) in enumerate(qs):
                 self._q = q
                 for j, qv in zip(self.arm_joints, q):
                     pb.resetJointState(self.arm_body, j, qv, physicsClientId=self._cid)
                 if self.mounted_tool is not None:
-                    pending_dt += dt / n
                     pos, z = self._tcp()
                     if i < n - 1 and self._tcp_prev is not None and np.linalg.norm(pos - self._tcp_prev) < 0.002:
                         continue
                     if self._tcp_prev is not None:
-                        self.outcome.record(self.mounted_tool, on, self._tcp_prev, pos, z, pending_dt)
-                    pending_dt = 0.0
-                    self._tcp_prev = pos
+                        self.outcome.record(self.mounted_tool, on, self._tcp_prev, pos, z,
+                                            max(0.0, t - self._tcp_prev_t))
+                    self._tcp_prev, self._tcp_prev_t = pos, t
             if self.mounted_tool is not None:
                 self._place_tool()
             self._check_collisions()
