@@ -20,6 +20,7 @@ then the area again) needs no COMPRESSOR_ON first.
 """
 
 import math
+import threading
 import time
 from functools import lru_cache
 from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
@@ -271,14 +272,17 @@ class LaneSwitch(HookedWaiter):
         self.switch_s = 0.0                                        # running average of a switch request (s)
         self._before: List[Callable[[bool], None]] = []
         self.held = False                                          # suspended: never switches on again
+        self._decision = threading.RLock()                         # one decision at a time, hold_off between
         self.update_s = 0.0                                        # running average between two decisions (s)
         self._last_update: Optional[float] = None
 
     def hold_off(self) -> Optional[np.ndarray]:
-        """Suspension: the switch stays off from now on; returns the TCP predicted for the moment a switch
-        request made now takes effect (where the tool stops working), None without a TCP."""
-        self.held = True
-        return self._predicted_tcp()
+        """Suspension (from another thread): the switch stays off from now on (a decision under way ends first,
+        so none switches on afterwards); returns the TCP predicted for the moment a switch request made now takes
+        effect (where the tool stops working), None without a TCP."""
+        with self._decision:
+            self.held = True
+            return self._predicted_tcp()
 
     def before_switch(self, callback: Callable[[bool], None]) -> None:
         """Run ``callback(on)`` right before every switch request (e.g. a progress report as the valve opens)."""
@@ -365,7 +369,8 @@ class LaneSwitch(HookedWaiter):
                 self.switched_on_at = f
 
     def _after_wait(self) -> None:
-        self._update()
+        with self._decision:
+            self._update()
 
 
 #: per tool, LaneSwitch's (lead_steps, margin_steps): the spray gun works each lane's whole stretch for sure
@@ -382,13 +387,12 @@ class RasterSwitch(LaneSwitch):
 
     Given the ``path`` (its waypoints from its start, arm base frame), the decision goes along it: the TCP's
     position is its distance travelled along the path (projected onto the nearest segment, searched forward from
-    the last one), its speed the change of that distance between samples, and the prediction runs on along the
-    path, so a TCP still in the turn into a lane is judged on where the turn takes it, not on a straight line
+    the last one), its speed the TCP's speed between samples, and the prediction runs on along the path, so a TCP still in the turn into a lane is judged on where the turn takes it, not on a straight line
     through its current direction (which at a time scale of 10, a turn and its run-up passed in one or two
     waits, pointed off the lane and switched on late). Two speeds are kept, one that follows a rise at once and a
-    fall slowly, one the other way round: switching on goes by the higher (the blend of a turn cuts the corner, so
-    the distance along the waypoints grows more slowly there than the TCP moves), switching off by the lower (a
-    stalled controller's catch-up looks fast): an error then sprays a little more, never leaves a gap. And the
+    fall slowly, one the other way round: switching on goes by the higher, switching off by the lower (a stalled
+    controller's catch-up looks fast): an error then sprays a little more, never leaves a gap. A stretch switched
+    off at its end is not switched on again. And the
     switching point is not left to the motion loop's next wait: a wait it falls into is cut there (:meth:`sleep`),
     so the output changes ``EARLY_S`` of travel before each stretch and after it (what a cut wait may oversleep),
     at any time scale; the loop step (``lead_steps``, ``margin_steps``) does not come into it.
@@ -421,9 +425,10 @@ class RasterSwitch(LaneSwitch):
             self._lengths = lengths
             self._cum = np.concatenate([[0.0], np.cumsum(lengths)])
             self._segment = 0                                        # the segment the TCP was last found on
-            self._arc: Optional[Tuple[float, float]] = None           # (sample time, distance along the path)
-            self._speeds = (0.0, 0.0)                                 # m/s of wall time along the path: high, low
+            self._arc: Optional[Tuple[float, np.ndarray]] = None      # (sample time, TCP) of the last sample
+            self._speeds = (0.0, 0.0)                                 # m/s of wall time: high, low
             self._current = 0                                         # the stretch the output is on for
+            self._next = 0                                            # the first stretch not yet worked
             self._due: Optional[float] = None                         # wall time of the next switching point
             self._intervals = []
             for a, ab in self._lines:
@@ -454,10 +459,10 @@ class RasterSwitch(LaneSwitch):
         s = self._along(p, k)
         if self._arc is None or t > self._arc[0]:
             if self._arc is not None:
-                v = max(0.0, (s - self._arc[1]) / (t - self._arc[0]))
+                v = float(np.linalg.norm(p - self._arc[1])) / (t - self._arc[0])
                 hi, lo = self._speeds
                 self._speeds = (v if v > hi else 0.8 * hi + 0.2 * v, v if v < lo or lo == 0.0 else 0.8 * lo + 0.2 * v)
-            self._arc = (t, s)
+            self._arc = (t, p)
         self._predicted_tcp()                  # keeps the 3-D velocity too (hold_off's prediction)
         return s, t
 
@@ -480,6 +485,7 @@ class RasterSwitch(LaneSwitch):
         if self._points is None:
             self._update_by_lines()
             return
+        self._due = None
         where = self._path_position()
         if where is None:
             return
@@ -492,20 +498,23 @@ class RasterSwitch(LaneSwitch):
         if self.on:
             want = not self.held and s_pred < self._intervals[self._current][1] + early - self.REACHED_M
         else:
-            hits = [i for i, (a, b) in enumerate(self._intervals) if a - early - self.REACHED_M <= s_pred <= b]
+            hits = [i for i in range(self._next, len(self._intervals))
+                    if self._intervals[i][0] - early - self.REACHED_M <= s_pred <= self._intervals[i][1]]
             want = not self.held and bool(hits)
             if want:
                 self._current = hits[0]
         if want != self.on:
             self._switch(want)
             self.on = want
+            if not want:
+                self._next = self._current + 1      # a stretch switched off at its end is never switched on again
         # the next switching point, in wall time from now
-        self._due = None
         if speed > 1e-6 and not self.held:
             if self.on:
                 ahead = self._intervals[self._current][1] + early - s_pred
             else:
-                ahead = min((a - early - s_pred for a, _b in self._intervals if a - early > s_pred), default=-1.0)
+                ahead = min((a - early - s_pred for a, _b in self._intervals[self._next:] if a - early > s_pred),
+                            default=-1.0)
             if ahead > self.REACHED_M:
                 self._due = now + ahead / speed
 
@@ -1029,12 +1038,14 @@ class WallCommands:
         included, are waypoints; the turns between lanes are rounded (blend within the run-up, so the worked
         stretches are straight and at speed); the tool is switched by position (:class:`RasterSwitch`).
 
-        The path starts with a lead-in: ``LEAD_IN`` m (at most the lane's length) against the first lane's
-        direction, half a lane spacing beside it (towards the next lane; towards the previous one when it is the
-        last), then a turn into the first lane like every other. So the first lane too is entered at speed while
-        LOCEM watches the arm: a path starts moving while its request is still being answered, which takes tens of
-        milliseconds (centimetres of travel at a time scale of 10, more on a busy machine), and an arm starting
-        from rest right before the stretch had often passed its start before the first decision."""
+        For the spray gun (switched along the path) the path starts with a lead-in: ``LEAD_IN`` m (at most the
+        lane's length) against the first lane's direction, half a lane spacing beside it (towards the next lane;
+        towards the previous one when it is the last), then a turn into the first lane like every other. So the
+        first lane too is entered at speed while LOCEM watches the arm: a path starts moving while its request is
+        still being answered, which takes tens of milliseconds (centimetres of travel at a time scale of 10, more on
+        a busy machine), and an arm starting from rest right before the stretch had often passed its start before
+        the first decision. (The sander, in contact with the wall, has none: it would rub the wall with its motor
+        off.)"""
         arm = self._need("arm")
         spacing = abs(heights[1] - heights[0])
         blend = min(PATH_BLEND, 0.45 * spacing)
@@ -1049,19 +1060,21 @@ class WallCommands:
             stretches.append((self.to_arm(o + uu * w0 + up * t + n * offset, n),
                               self.to_arm(o + uu * w1 + up * t + n * offset, n)))
             starts.append(start_m)
-        k0, _t, w0, w1, _s = lanes[0]
-        sign = 1.0 if k0 % 2 == 0 else -1.0
-        beside = up * (spacing / 2.0) * (1.0 if k0 + 1 < len(heights) else -1.0)
-        lead = min(LEAD_IN, abs(w1 - w0) + 2.0 * runup)
-        points = [points[0] + beside + uu * sign * lead, points[0] + beside] + points
+        by_path = tool in SWITCH_LEADS                   # switched along the path (RasterSwitch), with a lead-in
+        if by_path:
+            k0, _t, w0, w1, _s = lanes[0]
+            sign = 1.0 if k0 % 2 == 0 else -1.0
+            beside = up * (spacing / 2.0) * (1.0 if k0 + 1 < len(heights) else -1.0)
+            lead = min(LEAD_IN, abs(w1 - w0) + 2.0 * runup)
+            points = [points[0] + beside + uu * sign * lead, points[0] + beside] + points
         self._approach(ctx, self.to_arm(points[0] + n * 0.05, n))
         arm.move_linear(ctx, self.to_arm(points[0], n), APPROACH_SPEED, 1.2)
         poses = [self.to_arm(p, n) for p in points[1:]]
         # every turn blended (the lead-in's two with the half spacing's radius), the path ends at rest
-        blends = [lead_blend, lead_blend] + [blend] * (len(poses) - 3) + [0.0]
+        blends = ([lead_blend, lead_blend] if by_path else []) + [blend] * (len(poses) - (3 if by_path else 1)) + [0.0]
         switch = RasterSwitch(ctx, arm, lambda on: self._switch(tool, on), stretches, 0.25 * spacing, time.time,
                               *SWITCH_LEADS.get(tool, NO_LEADS),
-                              path=[self.to_arm(points[0], n)] + poses if tool in SWITCH_LEADS else None)
+                              path=[self.to_arm(points[0], n)] + poses if by_path else None)
         switch.prime()
         progress = RasterProgress(switch, arm, stretches, starts, total_m, reach=0.25 * spacing, hold_s=hold_s)
         live = live if live is not None else {}
