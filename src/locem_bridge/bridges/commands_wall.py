@@ -387,13 +387,14 @@ class RasterSwitch(LaneSwitch):
 
     Given the ``path`` (its waypoints from its start, arm base frame), the decision goes along it: the TCP's
     position is its distance travelled along the path (projected onto the nearest segment, searched forward from
-    the last one), its speed the TCP's speed between samples, and the prediction runs on along the path, so a TCP still in the turn into a lane is judged on where the turn takes it, not on a straight line
-    through its current direction (which at a time scale of 10, a turn and its run-up passed in one or two
-    waits, pointed off the lane and switched on late). Two speeds are kept, one that follows a rise at once and a
-    fall slowly, one the other way round: switching on goes by the higher, switching off by the lower (a stalled
-    controller's catch-up looks fast): an error then sprays a little more, never leaves a gap. A stretch switched
-    off at its end is not switched on again. And the
-    switching point is not left to the motion loop's next wait: a wait it falls into is cut there (:meth:`sleep`),
+    the last one), its speed the TCP's speed between samples, and the prediction runs on along the path, so a TCP
+    still in the turn into a lane is judged on where the turn takes it, not on a straight line through its current
+    direction (which at a time scale of 10, a turn and its run-up passed in one or two waits, pointed off the lane
+    and switched on late). Two speeds are kept, one that follows a rise at once and a fall slowly, one the other
+    way round: switching on goes by the higher, switching off by the lower (a stalled controller's catch-up looks
+    fast): an error then sprays a little more, never leaves a gap. A stretch switched off at its end is not
+    switched on again. And the switching point is not left to the motion loop's next wait: a wait it falls into
+    is cut there (:meth:`sleep`),
     so the output changes ``EARLY_S`` of travel before each stretch and after it (what a cut wait may oversleep),
     at any time scale; the loop step (``lead_steps``, ``margin_steps``) does not come into it.
 
@@ -425,7 +426,6 @@ class RasterSwitch(LaneSwitch):
             self._lengths = lengths
             self._cum = np.concatenate([[0.0], np.cumsum(lengths)])
             self._segment = 0                                        # the segment the TCP was last found on
-            self._arc: Optional[Tuple[float, np.ndarray]] = None      # (sample time, TCP) of the last sample
             self._speeds = (0.0, 0.0)                                 # m/s of wall time: high, low
             self._current = 0                                         # the stretch the output is on for
             self._next = 0                                            # the first stretch not yet worked
@@ -436,15 +436,17 @@ class RasterSwitch(LaneSwitch):
                 j = int(np.argmin([self._distance(mid, k) for k in range(len(lengths))]))
                 self._intervals.append(tuple(sorted((self._along(a, j), self._along(a + ab, j)))))
 
-    def _distance(self, p: np.ndarray, k: int) -> float:
+    def _project(self, p: np.ndarray, k: int) -> Tuple[float, float]:
+        """(distance along the path, distance from it) of ``p`` projected onto path segment ``k``."""
         a, d = self._points[k], self._points[k + 1] - self._points[k]
         f = min(1.0, max(0.0, float((p - a).dot(d)) / max(float(d.dot(d)), 1e-12)))
-        return float(np.linalg.norm(p - a - d * f))
+        return float(self._cum[k] + f * self._lengths[k]), float(np.linalg.norm(p - a - d * f))
+
+    def _distance(self, p: np.ndarray, k: int) -> float:
+        return self._project(p, k)[1]
 
     def _along(self, p: np.ndarray, k: int) -> float:
-        a, d = self._points[k], self._points[k + 1] - self._points[k]
-        f = min(1.0, max(0.0, float((p - a).dot(d)) / max(float(d.dot(d)), 1e-12)))
-        return float(self._cum[k] + f * self._lengths[k])
+        return self._project(p, k)[0]
 
     def _path_position(self) -> Optional[Tuple[float, float]]:
         """(distance along the path, sample time) of the latest TCP sample; updates the speed along the path."""
@@ -457,13 +459,13 @@ class RasterSwitch(LaneSwitch):
         k = min(range(self._segment, last), key=lambda i: self._distance(p, i))
         self._segment = k
         s = self._along(p, k)
-        if self._arc is None or t > self._arc[0]:
-            if self._arc is not None:
-                v = float(np.linalg.norm(p - self._arc[1])) / (t - self._arc[0])
+        if self._last is None or t > self._last[0]:           # a new sample (its 3-D velocity: hold_off's too)
+            if self._last is not None:
+                self._velocity = (p - self._last[1]) / (t - self._last[0])
+                v = float(np.linalg.norm(self._velocity))
                 hi, lo = self._speeds
                 self._speeds = (v if v > hi else 0.8 * hi + 0.2 * v, v if v < lo or lo == 0.0 else 0.8 * lo + 0.2 * v)
-            self._arc = (t, p)
-        self._predicted_tcp()                  # keeps the 3-D velocity too (hold_off's prediction)
+            self._last = (t, p)
         return s, t
 
     def sleep(self, seconds: float) -> None:
