@@ -208,13 +208,33 @@ def test_at_time_scale_10_every_lane_is_sprayed_from_its_first_centimetre_to_its
     """The whole stretch of every lane, the FIRST included, is crossed by the spray axis with the valve open: at
     time scale 10 a lane passes in a few tens of milliseconds of wall time, about as long as the path request takes
     to be answered; a raster path that started from rest right before its first lane had passed 10-15 cm of that
-    lane before LOCEM's first decision (the lead-in beside the first lane lets LOCEM watch the arm from before)."""
+    lane before LOCEM's first decision (the lead-in beside the first lane lets LOCEM watch the arm from before).
+    The same holds for a raster resumed part way along its last lane (a path of that one lane, with its lead-in)."""
     from locem_bridge.bridges.commands_wall import WallCommands
     from locem_bridge.bridges.robot import build_robot
     from locem_bridge.sim.outcome import PASS_GRID
     rig = WorksiteRig(robot, time_scale=10.0, arm_in_process=True)
     built = build_robot(rig.robot, site=rig.site_path, initial_pose=tuple(rig.world.base_pose()))
     built.start()
+
+    def sprayed_whole(z: float, height: float, skip: float = 0.0) -> None:
+        """SPRAY_AREA over 0.6 m of wall_1 from x 2.0 at height z; every lane left after ``skip`` is crossed."""
+        r = run(core, "SPRAY_AREA 2.0 3.6 %.2f 1 0 0 0.6 %.2f %s spacing=0.1 standoff=0.3 speed=0.4 pressure=3.5 "
+                      "run_in=0 skip=%.2f" % (z, height, NORMAL, skip))
+        assert r.success, r.message
+        time.sleep(0.2)
+        m = rig.world.outcome.maps["wall_1"]
+        s0, t0, _d = m.wall.to_wall_coords([2.0, 3.6, z])
+        for k, h, w0, w1, _start in WallCommands._raster_lanes(WallCommands._lane_heights(height, 0.1), 0.6, 0.0,
+                                                               skip):
+            a, b = sorted(m.wall.to_wall_coords([2.0 + w, 3.6, z])[0] for w in (w0, w1))
+            cols = np.arange(int(math.ceil((a + 0.01) / PASS_GRID)), int((b - 0.01) / PASS_GRID))
+            row = int((t0 + h) / PASS_GRID)
+            crossed = m.passes[row - 1:row + 2, cols].max(axis=0)      # the lane's line, +-1 cell across it
+            missed = np.abs((cols[crossed == 0] + 0.5) * PASS_GRID - s0)
+            assert missed.size == 0, "z %.2f lane %d: stretch points never sprayed at %s m from the area's start" % (
+                z, k, np.round(missed[[0, -1]], 3))
+
     try:
         for command_set in built.command_sets:
             core.install(command_set)
@@ -223,21 +243,8 @@ def test_at_time_scale_10_every_lane_is_sprayed_from_its_first_centimetre_to_its
         rig.world.mount_tool("spray_gun")
         assert run(core, "MOUNT_TOOL spray_gun").success
         assert run(core, "GOTO 2.4 2.5 1.5708").success
-        r = run(core, "SPRAY_AREA 2.0 3.6 0.9 1 0 0 0.6 0.4 %s spacing=0.1 standoff=0.3 speed=0.4 pressure=3.5 "
-                      "run_in=0" % NORMAL)
-        assert r.success, r.message
-        time.sleep(0.2)
-        m = rig.world.outcome.maps["wall_1"]
-        s0, t0, _d = m.wall.to_wall_coords([2.0, 3.6, 0.9])
-        s1, _t, _d = m.wall.to_wall_coords([2.6, 3.6, 0.9])
-        lo, hi = sorted((s0, s1))
-        cols = np.arange(int(math.ceil((lo + 0.01) / PASS_GRID)), int((hi - 0.01) / PASS_GRID))
-        for k, h in enumerate(WallCommands._lane_heights(0.4, 0.1)):
-            row = int((t0 + h) / PASS_GRID)
-            crossed = m.passes[row - 1:row + 2, cols].max(axis=0)      # the lane's line, +-1 cell across it
-            missed = (cols[crossed == 0] + 0.5) * PASS_GRID - lo
-            assert missed.size == 0, "lane %d: stretch points never sprayed at %s m from its start" % (
-                k, np.round(missed[[0, -1]], 3))
+        sprayed_whole(0.9, 0.4)                       # five lanes
+        sprayed_whole(0.5, 0.2, skip=1.3)             # resumed 0.1 m into the last of three lanes
     finally:
         built.close()
         rig.close()
