@@ -6,7 +6,8 @@ Checked, from report.json and from the devices while the job runs:
 
 - the job ran to its end and taping, spraying and sanding each succeeded;
 - on the parts the robot was to work (``outcome.reachable`` and each joint's ``coverage_reachable``): every robot
-  joint taped >= 0.99, spray >= 0.98 with thickness CV <= 0.15, sand >= 0.98;
+  joint taped >= 0.99, spray >= 0.98 with thickness CV <= 0.15 (``outcome.reachable``'s CV is the worst wall's),
+  sand >= 0.98;
 - no collision (``outcome.collisions``) and no protective stop: the UR controller's own safety mode (read over RTDE
   by this node all through the job, the real ur_rtde client) never left NORMAL, no LOCEM command failed on a
   protective stop (/locem/status), the operator was never asked to reset one (``safety_stop`` prompt);
