@@ -340,7 +340,7 @@ class AreaPlan:
 def plan_area(area: Mapping[str, Any], wall: Wall2D, reach: WallReach, min_manual: float = 0.0) -> AreaPlan:
     """Cut an area (SCAN shape) into what ``reach`` can work and what is manual. A manual strip narrower than
     ``min_manual`` is not reported: the tool's footprint past the worked part's edge (a spray fan, a pad) covers
-    it."""
+    it; at the area's ends such a strip is worked with the part beside it."""
     rel = np.array(area["origin"][:2], dtype=float) - wall.p0
     s0 = float(rel @ wall.u)
     t0 = float(area["origin"][2])
@@ -349,6 +349,15 @@ def plan_area(area: Mapping[str, Any], wall: Wall2D, reach: WallReach, min_manua
     manual: List[Dict[str, Any]] = []
     parts: List[Tuple[float, float, float, float]] = []
     along = _clip(s0, s0 + w, reach.tool)
+    if along and min_manual > 0:
+        # a strip narrower than min_manual at an end of the area (e.g. an area drawn to a wall's end the scan puts
+        # a few millimetres inside it) is worked with its neighbour, not left out: else the worked part stops short
+        # of the end and its lanes run on neither past it nor past the strip (on bay 99 a 0.4 mm strip at a corner
+        # left the fan's soft edge, 2 cm of wall_1, under the target thickness)
+        if along[0][0] - s0 < min_manual:
+            along[0] = (s0, along[0][1])
+        if s0 + w - along[-1][1] < min_manual:
+            along[-1] = (along[-1][0], s0 + w)
     if hi - lo > 1e-9:
         parts = [(a - s0, b - s0, lo - t0, hi - t0) for a, b in along]
     for a, b in interval_minus(s0, s0 + w, along):
