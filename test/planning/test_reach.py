@@ -71,27 +71,34 @@ def test_an_area_into_a_corner_is_cut_where_the_robot_stops_and_the_rest_is_manu
     assert all(a[1] == pytest.approx(b[0]) for a, b in zip(along, along[1:]))
 
 
-def test_an_area_a_few_millimetres_past_what_the_tool_reaches_is_worked_to_its_ends_with_its_lanes_open(envelope):
-    """An area drawn to a wall's end that the scan puts a few millimetres inside it (bay 99's wall_1: 0.4 mm): the
-    strip narrower than min_manual is worked with the part beside it. Else the worked part and its manual bands
-    above and below began 0.4 mm in, the sliver beside them closed the raster's end, its lanes ran on past
-    neither, and the fan's soft edge left 2 cm of the robot's part under the target thickness."""
+def test_an_area_drawn_a_few_millimetres_past_a_wall_end_is_worked_to_its_ends_with_its_lanes_open(envelope):
+    """An area drawn to a wall's ends that the scan puts a few millimetres inside them (bay 99's wall_1: 0.4 mm),
+    where the tool works right up to the wall's ends: the strip past each end is worked with the part beside it.
+    Else the worked part and its manual bands began 0.4 mm in, the sliver beside them closed the raster's
+    end, its lanes ran on past neither, and the fan's soft edge left 2 cm of the robot's part under the target
+    thickness. A strip inside the wall, where the tool is kept off something, stays out."""
     from locem_bridge.planning.area_pieces import area_pieces
+    from locem_bridge.planning.reach import WallReach
     w1, r, scan = _reach(90, envelope, "spray")
-    lo, hi = r.tool[0]
+    free = WallReach(w1.id, "spray", [(0.0, w1.length)], [(0.0, w1.length)], r.t)     # a wall with free ends
     area = dict(scan["areas"][0])
-    area["origin"] = list(w1.point(lo - 0.004, 0.0)) + [0.0]        # 4 mm before the worked part's start
-    area["width"] = hi - lo + 0.006                                 # 2 mm past its end
-    area["height"] = r.t[1] + 0.3                                   # above the tool's band: a manual band on top
-    plan = plan_area(area, w1, r, min_manual=0.03)
+    area["origin"] = list(w1.point(-0.004, 0.0)) + [0.0]            # 4 mm before the wall's start
+    area["width"] = w1.length + 0.006                               # 2 mm past its end
+    area["height"] = r.t[1] + 0.3                                   # past the tool's band: manual bands
+    plan = plan_area(area, w1, free, min_manual=0.03)
     (s0, s1, _t0, _t1), = plan.parts
     assert (s0, s1) == (pytest.approx(0.0), pytest.approx(area["width"]))
-    assert [m["along"] for m in plan.manual] == [[pytest.approx(0.0), pytest.approx(area["width"])]] * len(plan.manual)
+    assert plan.manual and all(m["along"] == [pytest.approx(0.0), pytest.approx(area["width"])]
+                               for m in plan.manual)        # the bands below and above the tool's, end to end
     holes = [(m["along"][0], m["along"][1], m["height"][0], m["height"][1]) for m in plan.manual]
     pieces = [p for p in area_pieces(area["width"], area["height"], holes) if p.width > 1e-6]
     assert len(pieces) == 1 and pieces[0].open_left and pieces[0].open_right
-    # without the tolerance the slivers stay (min_manual 0: every strip is reported)
-    assert len(plan_area(area, w1, r, min_manual=0.0).manual) > len(plan.manual)
+    # where the tool stops inside the wall (the square corner's clearance) the strip before it stays out
+    lo, _hi = r.tool[0]
+    area["origin"] = list(w1.point(lo - 0.004, 0.0)) + [0.0]
+    area["width"] = 1.0
+    (s0, _s1, _t0, _t1), = plan_area(area, w1, r, min_manual=0.03).parts
+    assert s0 == pytest.approx(0.004)
 
 
 def test_a_joint_too_close_to_a_sharp_corner_is_manual_and_a_horizontal_one_is_cut_there(envelope):

@@ -340,7 +340,7 @@ class AreaPlan:
 def plan_area(area: Mapping[str, Any], wall: Wall2D, reach: WallReach, min_manual: float = 0.0) -> AreaPlan:
     """Cut an area (SCAN shape) into what ``reach`` can work and what is manual. A manual strip narrower than
     ``min_manual`` is not reported: the tool's footprint past the worked part's edge (a spray fan, a pad) covers
-    it; at the area's ends such a strip is worked with the part beside it."""
+    it; such a strip of the area past a wall's end the tool works up to is worked with the part beside it."""
     rel = np.array(area["origin"][:2], dtype=float) - wall.p0
     s0 = float(rel @ wall.u)
     t0 = float(area["origin"][2])
@@ -349,14 +349,17 @@ def plan_area(area: Mapping[str, Any], wall: Wall2D, reach: WallReach, min_manua
     manual: List[Dict[str, Any]] = []
     parts: List[Tuple[float, float, float, float]] = []
     along = _clip(s0, s0 + w, reach.tool)
-    if along and min_manual > 0:
-        # a strip narrower than min_manual at an end of the area (e.g. an area drawn to a wall's end the scan puts
-        # a few millimetres inside it) is worked with its neighbour, not left out: else the worked part stops short
-        # of the end and its lanes run on neither past it nor past the strip (on bay 99 a 0.4 mm strip at a corner
-        # left the fan's soft edge, 2 cm of wall_1, under the target thickness)
-        if along[0][0] - s0 < min_manual:
+    if along:
+        # an area drawn to a wall's end that the scan puts a little inside it (scan noise): where the tool works
+        # right up to the wall's end, the strip of the area past it (narrower than min_manual) is worked with the
+        # part beside it, so the part's end is the area's and its lanes run on past it. Else the part stopped short
+        # of the area's end and, that strip too narrow to list, its lanes ran on past neither (on bay 99 a 0.4 mm
+        # strip at a corner left the fan's soft edge, 2 cm of wall_1, under the target thickness). A strip inside
+        # the wall stays out: the tool is kept off what stops it there by the clearance, not by a tolerance.
+        end = wall.length
+        if along[0][0] <= 1e-9 and 0.0 < -s0 < min_manual:
             along[0] = (s0, along[0][1])
-        if s0 + w - along[-1][1] < min_manual:
+        if along[-1][1] >= end - 1e-9 and 0.0 < s0 + w - end < min_manual:
             along[-1] = (along[-1][0], s0 + w)
     if hi - lo > 1e-9:
         parts = [(a - s0, b - s0, lo - t0, hi - t0) for a, b in along]
