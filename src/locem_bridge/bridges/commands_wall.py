@@ -995,11 +995,10 @@ class WallCommands:
             return {"length_m": 0.0, "lanes": 0, "skipped_m": round(min(skip, total_m), 4),
                     "duration_s": round(time.monotonic() - start, 3)}
         runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN
-        # one blended path when the arm has them: always for a tool switched along the path (one lane, or a
-        # resume into the last, gets its lead-in too), else for two lanes or more
-        if arm.supports(Arm.PATH) and (len(lanes) > 1 or tool in SWITCH_LEADS):
-            out = self._raster_path(ctx, tool, o, uu, up, n, heights, lanes, total_m, speed, offset, hold_s, live,
-                                    spacing=spacing)
+        # one blended path when the arm has them: always for a tool switched along the path (a resume into the
+        # last lane gets its lead-in too), else for two lanes or more
+        if arm.supports(Arm.PATH) and len(heights) > 1 and (len(lanes) > 1 or tool in SWITCH_LEADS):
+            out = self._raster_path(ctx, tool, o, uu, up, n, heights, lanes, total_m, speed, offset, hold_s, live)
         else:
             s1 = 0.0
             for i, (k, t, w0, w1, start_m) in enumerate(lanes):
@@ -1038,22 +1037,22 @@ class WallCommands:
     def _raster_path(self, ctx: Any, tool: str, o: np.ndarray, uu: np.ndarray, up: np.ndarray, n: np.ndarray,
                      heights: Sequence[float], lanes: Sequence[Tuple[int, float, float, float, float]],
                      total_m: float, speed: float, offset: float, hold_s: float = 0.0,
-                     live: Optional[Dict[str, Any]] = None, spacing: float = 0.0) -> Dict[str, Any]:
+                     live: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
         """The serpentine as ONE blended controller path (MOVE_PATH semantics): each lane's ends, run-up
         included, are waypoints; the turns between lanes are rounded (blend within the run-up, so the worked
         stretches are straight and at speed); the tool is switched by position (:class:`RasterSwitch`).
 
         For the spray gun (switched along the path) the path starts with a lead-in: ``LEAD_IN`` m (at most the
         lane's length) against the first lane's direction, half a lane spacing beside it (towards the next lane;
-        towards the previous one when it is the last of several), then a turn into the first lane like every other.
-        A raster of one lane, or what is left of one after a resume, is such a path too. So the
+        towards the previous one when it is the last), then a turn into the first lane like every other (also when
+        a resume left the last lane alone). So the
         first lane too is entered at speed while LOCEM watches the arm: a path starts moving while its request is
         still being answered, which takes tens of milliseconds (centimetres of travel at a time scale of 10, more on
         a busy machine), and an arm starting from rest right before the stretch had often passed its start before
         the first decision. (The sander, in contact with the wall, has none: it would rub the wall with its motor
         off.)"""
         arm = self._need("arm")
-        spacing = abs(heights[1] - heights[0]) if len(heights) > 1 else spacing   # the lanes' own, else the asked
+        spacing = abs(heights[1] - heights[0])
         blend = min(PATH_BLEND, 0.45 * spacing)
         lead_blend = min(PATH_BLEND, 0.45 * spacing / 2.0)
         runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN + blend
@@ -1070,7 +1069,7 @@ class WallCommands:
         if by_path:
             k0, _t, w0, w1, _s = lanes[0]
             sign = 1.0 if k0 % 2 == 0 else -1.0
-            beside = up * (spacing / 2.0) * (1.0 if k0 + 1 < len(heights) or k0 == 0 else -1.0)
+            beside = up * (spacing / 2.0) * (1.0 if k0 + 1 < len(heights) else -1.0)
             lead = min(LEAD_IN, abs(w1 - w0) + 2.0 * runup)
             points = [points[0] + beside + uu * sign * lead, points[0] + beside] + points
         self._approach(ctx, self.to_arm(points[0] + n * 0.05, n))
