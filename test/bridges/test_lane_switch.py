@@ -206,3 +206,76 @@ def test_along_a_path_the_output_changes_at_each_stretchs_ends_whatever_the_loop
         for (start, end), (_on, d_on), (_off, d_off) in zip(ends, rig.changes[::2], rig.changes[1::2]):
             assert d_on == pytest.approx(start - early, abs=0.002), (k, rig.changes)
             assert d_off == pytest.approx(end + early, abs=0.002), (k, rig.changes)
+
+
+def test_on_a_path_the_point_reached_should_locem_die_goes_through_the_turn_into_the_next_lanes():
+    """A raster that is one controller path (``gaps_m``): should LOCEM die, the arm goes on along the path and the
+    valve stays open for ``hold`` s, so the point each report gives runs on through the turn into the next
+    stretches -- where the TCP truly is ``hold`` s after the sample, never beyond it. Speeds from the controller's
+    sample times, over several samples: the poll answers' arrival stamps jitter by up to 15 ms here (a busy
+    machine) and the controller's stamps by one 8 ms cycle, which made the slowest speed between two samples a
+    fraction of the true one and the point fall far behind the spray. Within 20 % of the true travel here."""
+    from locem_bridge.bridges.commands_wall import RasterProgress
+    from locem_bridge.common.raster_progress import parse_progress_text
+
+    rng = np.random.default_rng(7)
+
+    class Ctx(PathRig):
+        def __init__(self):
+            super().__init__()
+            self.reports = []
+
+        def on_cancel(self, callback):
+            pass
+
+        def report(self, progress, text=""):
+            self.reports.append((self.clock.t, progress, text))
+
+        def cached_state(self):
+            taken = self.clock.t - AGE
+            # the controller's stamp may be one 8 ms cycle older than the pose read after it; the poll's arrival
+            # time up to 15 ms late
+            return {"tcp": list(self.at(taken)) + [0.0, 0.0, 0.0], "sample_time": taken - 0.008 * int(rng.integers(2)),
+                    "stamp": taken + float(rng.uniform(0.0, 0.015))}
+
+    # along the path (distance d from its start): stretch A d 0.2..0.5, B 0.8..1.1 (lane 1), C 1.55..2.4 (lane 2,
+    # starting 5 cm after the turn: the last speeds before it are partly across the lane)
+    stretches = [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5]),
+                 ([1.15, 0.1, 0.5], [0.3, 0.1, 0.5])]
+    gaps = [0.3, 0.3 + 0.1 + 0.05]
+
+    def truth(d):                                   # raster metres worked when the TCP is d along the path
+        return (min(max(d - 0.2, 0.0), 0.3) + min(max(d - 0.8, 0.0), 0.3) + min(max(d - 1.55, 0.0), 0.85))
+
+    hold = 0.5                                      # s: 1.0 m of travel at SPEED
+    rig = Ctx()
+    switch = RasterSwitch(rig, rig, rig.switch, stretches, reach=0.05, clock=rig.clock, path=PathRig.POINTS)
+    switch.switch_s = REQUEST
+    progress = RasterProgress(switch, rig, stretches, [0.0, 0.3, 0.6], 1.45, reach=0.05, hold_s=hold,
+                              clock=rig.clock, gaps_m=gaps)
+    while rig.x(rig.clock.t) < 2.8:
+        progress.sleep(PERIOD)
+    progress.finish()
+    checked = 0
+    for t, _p, text in rig.reports:
+        done, _total, if_stopped = parse_progress_text(text)
+        if "if LOCEM stops now" not in text or done <= 0.0:
+            continue                                # the tool off (a stretch's end): nothing sprays on
+        sampled = rig.x(t - AGE)                    # the TCP sample the report was made from
+        assert if_stopped <= truth(rig.x(t + hold)) + 1e-3, (text, sampled)        # never ahead of the spray
+        assert if_stopped >= truth(sampled + 0.8 * SPEED * hold) - 1e-3, (text, sampled)  # not far behind it
+        checked += 1
+    assert checked >= 10
+    parsed = [parse_progress_text(text) for _t, _p, text in rig.reports]
+    beyond = [if_stopped for done, _total, if_stopped in parsed if 0.3 < done < 0.6]
+    assert beyond and max(beyond) > 0.65, beyond    # from lane 1's second stretch into lane 2, past the turn
+
+
+def test_a_raster_progress_needs_one_gap_between_each_two_stretches():
+    from locem_bridge.bridges.commands_wall import RasterProgress
+    rig = PathRig()
+    switch = RasterSwitch(rig, rig, rig.switch, [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5])],
+                          reach=0.05, clock=rig.clock)
+    with pytest.raises(ValueError, match="1 gaps for 2 stretches|gaps for 2 stretches"):
+        RasterProgress(switch, rig, [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5])], [0.0, 0.3],
+                       0.6, reach=0.05, gaps_m=[0.3, 0.2])

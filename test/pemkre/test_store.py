@@ -34,6 +34,24 @@ def test_same_answers_from_every_backend_with_bindings(kind, tmp_path):
 
 
 @pytest.mark.parametrize("kind", ["journal", "oxigraph"])
+def test_prefixes_work_as_declarations_in_the_text_too_as_pyoxigraph_0_4_needs_them(kind, tmp_path, monkeypatch):
+    """pyoxigraph 0.4 (the last line for Python 3.8, Noetic's on Ubuntu 20.04) takes no ``prefixes=`` argument:
+    the store then puts PREFIX declarations in front of the query text. Same answers; a query's own declaration
+    of a prefix still wins over the map's."""
+    from locem_bridge.pemkre import oxigraph_store
+    monkeypatch.setattr(oxigraph_store, "_PREFIXES_ARGUMENT", False)
+    store = _open(kind, str(tmp_path / "s"))
+    store.apply(ChangeSet(add=[(URIRef(EX + "a"), URIRef(EX + "name"), Literal("x"), G_WORLD),
+                               (URIRef("urn:other:a"), URIRef("urn:other:name"), Literal("y"), G_WORLD)]))
+    q = store.prepare("SELECT ?n WHERE { ?s ex:name ?n }", "names", P)
+    assert q.compiled.startswith("PREFIX ex: <%s>\n" % EX)
+    assert [r["n"] for r in store.select(q)] == [Literal("x")]
+    own = store.prepare("PREFIX ex: <urn:other:>\nSELECT ?n WHERE { ?s ex:name ?n }", "own", P)
+    assert [r["n"] for r in store.select(own)] == [Literal("y")]
+    assert store.ask(store.prepare("ASK { ex:a ex:name ?n }", "ask", P), {"n": Literal("x")})
+
+
+@pytest.mark.parametrize("kind", ["journal", "oxigraph"])
 def test_persists_and_locks(kind, tmp_path):
     path = str(tmp_path / "db")
     s = _open(kind, path)

@@ -549,19 +549,31 @@ class RasterProgress(HookedWaiter):
 
     ``hold_s``: how long the spray goes on for sure should LOCEM die now (the compressor's watchdog keeps the valve
     open for its timeout less one poll; the arm's controller goes on along its path meanwhile). While the tool is
-    on, each report adds the point the TCP reaches in that time at its measured speed along the stretch (at most
-    the stretch's end): where a retry after LOCEM's death can go on without a gap."""
+    on, each report adds the point the TCP reaches in that time at its measured speed: where a retry after LOCEM's
+    death can go on without a gap. ``gaps_m``: for a raster that is one controller path, the path's length from
+    each stretch's end to the next one's start (run-outs and turn; blends make the true path shorter, so the point
+    is never ahead); the point then goes on into the following stretches, as the arm and the open valve do. Without
+    it (one move per stretch: the arm stops at the stretch's end) the point is at most the stretch's end.
+
+    Speeds come from the controller's own sample times (``sample_time``) when the arm gives them: the times the
+    poll answers arrived at jitter on a busy machine, and the slowest of a few jittered speeds was a fraction of
+    the true one (a retry then sprayed again what the arm had sprayed on its way after LOCEM died)."""
 
     #: s of wall time between two reports while the tool is on (20 Hz); sooner when the point the spray reaches
     #: should LOCEM die moved more than JUMP_M (the first speed measured on a stretch)
     PERIOD_S = 0.05
+    #: s of TCP samples the speed is measured over (several arm polls at 50 Hz)
+    TRACK_S = 0.1
+    #: s added to that span: at least the error of a sample's stamp (one RTDE cycle: 2 ms at 500 Hz, 8 ms at 125 Hz)
+    STAMP_SLACK_S = 0.01
 
     def __init__(self, switch: LaneSwitch, arm: Arm, stretches: Sequence[Sequence[Sequence[float]]],
                  starts_m: Sequence[float], total_m: float, reach: float, hold_s: float = 0.0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, gaps_m: Optional[Sequence[float]] = None) -> None:
         """``stretches``: each worked stretch's start and end (arm base frame), ``starts_m`` where each begins in
         metres of the raster, ``total_m`` the raster's whole worked length; ``reach``: distance from a stretch's
-        line within which the TCP counts as on it."""
+        line within which the TCP counts as on it; ``gaps_m``: path length between stretch i's end and stretch
+        i+1's start (one controller path), None when the arm stops at each stretch's end."""
         super().__init__(switch)
         self._switch, self._arm, self._clock = switch, arm, clock
         self._lines = [(np.asarray(a[:3], dtype=float), np.asarray(b[:3], dtype=float) - np.asarray(a[:3], dtype=float))
@@ -576,26 +588,40 @@ class RasterProgress(HookedWaiter):
         self._reported_ahead = 0.0
         self.done_m = self._starts[0] if self._starts else 0.0
         self._hold_s = max(0.0, hold_s)
+        if gaps_m is not None and len(gaps_m) != max(0, len(self._lines) - 1):
+            raise ValueError("RasterProgress: %d gaps for %d stretches (one between each two)"
+                             % (len(gaps_m), len(self._lines)))
+        self._gaps = [max(0.0, float(g)) for g in gaps_m] if gaps_m is not None else None
         self.if_stopped_m: Optional[float] = None         # None while the tool is off
-        self._sample: Optional[Tuple[float, np.ndarray]] = None    # (stamp, position) of the last TCP sample
-        self._velocities: List[np.ndarray] = []           # m/s, between the last few samples
+        self._track: List[Tuple[float, np.ndarray]] = []  # (stamp, position) of the TCP samples of TRACK_S
         # report just before the switch opens the valve (its request on the way): a LOCEM killed right after the
         # valve opened has already told where the spray will get to
         switch.before_switch(self._before_switch)
 
     def _sample_tcp(self) -> Optional[np.ndarray]:
-        """The measured TCP position; keeps its velocity over the last few new samples (run-up included)."""
+        """The measured TCP position; keeps the new samples of the last ``TRACK_S`` for the TCP's speed."""
         state = self._arm.cached_state()
         tcp = state.get("tcp")
         if not tcp:
             return None
         p = np.asarray(tcp[:3], dtype=float)
-        stamp = float(state["stamp"]) if state.get("stamp") is not None else self._clock()
-        if self._sample is not None and stamp > self._sample[0]:
-            self._velocities = (self._velocities + [(p - self._sample[1]) / (stamp - self._sample[0])])[-3:]
-        if self._sample is None or stamp > self._sample[0]:
-            self._sample = (stamp, p)
+        taken = state.get("sample_time", state.get("stamp"))
+        stamp = float(taken) if taken is not None else self._clock()
+        if not self._track or stamp > self._track[-1][0]:
+            self._track = [(t, q) for t, q in self._track if t >= stamp - self.TRACK_S] + [(stamp, p)]
         return p
+
+    def _speed(self) -> float:
+        """The TCP's speed along its path (m/s): the path travelled over the samples of the last ``TRACK_S``
+        divided by their time span and ``STAMP_SLACK_S``. One sample's stamp may be a control cycle off its
+        position (the controller's clock and the pose are read one after the other); over a span of several
+        samples that error is a small part, where the speed between two samples 20 ms apart was off by half and
+        more, and the slack keeps it from making the speed too high. A run-up counts as its mean speed, below the
+        speed reached: the point given should LOCEM die stays behind the spray."""
+        if len(self._track) < 2 or self._track[-1][0] - self._track[0][0] <= 0.0:
+            return 0.0
+        path = sum(float(np.linalg.norm(b[1] - a[1])) for a, b in zip(self._track, self._track[1:]))
+        return path / (self._track[-1][0] - self._track[0][0] + self.STAMP_SLACK_S)
 
     def _on_stretch(self, p: np.ndarray) -> Optional[Tuple[int, float]]:
         """(stretch index, fraction 0..1 along it) of the TCP ``p`` while the tool is on (before a stretch's start
@@ -612,16 +638,32 @@ class RasterProgress(HookedWaiter):
         self._lane = lane
         length = float(np.linalg.norm(self._lines[lane][1]))
         self._advance(self._starts[lane] + min(1.0, max(0.0, f)) * length)
-        ahead = self._reach_if_stopped(lane, self._starts[lane] + f * length)
-        self.if_stopped_m = max(min(ahead, self._end_of(lane)), self.done_m, self.if_stopped_m or 0.0)
+        ahead = self._reach_if_stopped(lane, f * length)
+        self.if_stopped_m = max(ahead, self.done_m, self.if_stopped_m or 0.0)
 
-    def _reach_if_stopped(self, lane: int, metres: float) -> float:
-        """The raster point the TCP passes ``hold_s`` from now at its slowest recent speed along the stretch (at
-        most the stretch's end)."""
-        ab = self._lines[lane][1]
-        direction = ab / max(float(np.linalg.norm(ab)), 1e-12)
-        speed = max(0.0, min(float(v.dot(direction)) for v in self._velocities)) if self._velocities else 0.0
-        return min(metres + speed * self._hold_s, self._end_of(lane)) if speed > 0 else metres
+    def _reach_if_stopped(self, lane: int, along: float) -> float:
+        """The raster point the TCP passes ``hold_s`` from now at its recent speed (:meth:`_speed`), from
+        ``along`` m into stretch ``lane``: at most the stretch's end, or on a path (``gaps_m``) through the turns
+        into the next stretches. The speed is the TCP's along its path, not along the stretch: right after a turn
+        the last samples run partly across the lane, at the path's speed all the same."""
+        length = float(np.linalg.norm(self._lines[lane][1]))
+        speed = self._speed()
+        travel = speed * self._hold_s
+        if along < 0.0:                   # before the stretch: the tool reaches its start first
+            travel, along = max(0.0, travel + along), 0.0
+        along = min(along, length)
+        if self._gaps is None or travel <= length - along:
+            return self._starts[lane] + min(along + travel, length)
+        travel -= length - along
+        for i in range(lane + 1, len(self._lines)):
+            travel -= self._gaps[i - 1]
+            if travel <= 0.0:
+                return self._end_of(i - 1)
+            stretch = float(np.linalg.norm(self._lines[i][1]))
+            if travel <= stretch:
+                return self._starts[i] + travel
+            travel -= stretch
+        return self._end_of(len(self._lines) - 1)
 
     def _before_switch(self, on: bool) -> None:
         p = self._sample_tcp()
@@ -1056,15 +1098,20 @@ class WallCommands:
         blend = min(PATH_BLEND, 0.45 * spacing)
         lead_blend = min(PATH_BLEND, 0.45 * spacing / 2.0)
         runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN + blend
-        points, stretches, starts = [], [], []
+        points, stretches, starts, ends = [], [], [], []
         for k, t, w0, w1, start_m in lanes:
             sign = 1.0 if k % 2 == 0 else -1.0
             a = o + uu * (w0 - sign * runup) + up * t + n * offset
             b = o + uu * (w1 + sign * runup) + up * t + n * offset
             points += [a, b]
-            stretches.append((self.to_arm(o + uu * w0 + up * t + n * offset, n),
-                              self.to_arm(o + uu * w1 + up * t + n * offset, n)))
+            ends.append((o + uu * w0 + up * t + n * offset, o + uu * w1 + up * t + n * offset))
+            stretches.append((self.to_arm(ends[-1][0], n), self.to_arm(ends[-1][1], n)))
             starts.append(start_m)
+        # the path from each stretch's end to the next one's start: run-out, turn, run-up (unblended: the arm's
+        # blended path is shorter, so the point RasterProgress gives should LOCEM die is never ahead of the spray)
+        gaps = [float(np.linalg.norm(points[2 * i + 1] - ends[i][1])
+                      + np.linalg.norm(points[2 * i + 2] - points[2 * i + 1])
+                      + np.linalg.norm(ends[i + 1][0] - points[2 * i + 2])) for i in range(len(lanes) - 1)]
         by_path = tool in SWITCH_LEADS                   # switched along the path (RasterSwitch), with a lead-in
         if by_path:
             k0, _t, w0, w1, _s = lanes[0]
@@ -1081,7 +1128,8 @@ class WallCommands:
                               *SWITCH_LEADS.get(tool, NO_LEADS),
                               path=[self.to_arm(points[0], n)] + poses if by_path else None)
         switch.prime()
-        progress = RasterProgress(switch, arm, stretches, starts, total_m, reach=0.25 * spacing, hold_s=hold_s)
+        progress = RasterProgress(switch, arm, stretches, starts, total_m, reach=0.25 * spacing, hold_s=hold_s,
+                                  gaps_m=gaps)
         live = live if live is not None else {}
         live.update(switch=switch, progress=progress)
         try:

@@ -27,6 +27,15 @@ _VAR_RE = re.compile(r"[?$]([A-Za-z_][A-Za-z0-9_]*)")
 
 _OX_CACHE: Dict[str, "ox.NamedNode"] = {}
 
+#: pyoxigraph takes a query's prefixes as an argument from 0.5 on; 0.4 (the last line with wheels for Python 3.8,
+#: Noetic's Python on Ubuntu 20.04) gets them as PREFIX declarations in front of the text
+_PREFIXES_ARGUMENT = tuple(int(v) for v in re.findall(r"\d+", ox.__version__)[:2]) >= (0, 5)
+
+
+def with_prefixes(text: str, prefixes: Mapping[str, str]) -> str:
+    """``text`` after one ``PREFIX`` declaration per entry (the text's own declarations come later and win)."""
+    return "".join("PREFIX %s: <%s>\n" % (k, v) for k, v in prefixes.items()) + text
+
 
 def to_ox(term: Node):
     """rdflib term -> pyoxigraph term (blank node ids kept)."""
@@ -132,7 +141,8 @@ class OxigraphStore(TripleStore):
         except Exception as exc:
             raise QueryError("query %s does not parse: %s" % (name, str(exc).splitlines()[0][:300]), name) from None
         variables = tuple(dict.fromkeys(_VAR_RE.findall(text)))
-        return PreparedQuery(name=name, text=text, kind=kind, variables=variables, compiled=prefix_map,
+        compiled = prefix_map if _PREFIXES_ARGUMENT else with_prefixes(text, prefix_map)
+        return PreparedQuery(name=name, text=text, kind=kind, variables=variables, compiled=compiled,
                              projected=projected_variables(text, prefix_map, variables) if kind == "SELECT" else ())
 
     def run(self, query: PreparedQuery, bindings: Optional[Mapping[str, Node]] = None) -> QueryResult:
@@ -141,8 +151,11 @@ class OxigraphStore(TripleStore):
         if bindings:
             subs = {ox.Variable(k): to_ox(v) for k, v in bindings.items() if v is not None}
         try:
-            res = self._store.query(query.text, prefixes=query.compiled, use_default_graph_as_union=True,
-                                    substitutions=subs)
+            if _PREFIXES_ARGUMENT:
+                res = self._store.query(query.text, prefixes=query.compiled, use_default_graph_as_union=True,
+                                        substitutions=subs)
+            else:
+                res = self._store.query(query.compiled, use_default_graph_as_union=True, substitutions=subs)
             if isinstance(res, ox.QueryBoolean):
                 return QueryResult(kind="ASK", boolean=bool(res))
             if isinstance(res, ox.QuerySolutions):
