@@ -17,6 +17,9 @@ and finds the process that was running when the store was last used. Then, from 
   A report may carry a *request id* (any text, unique per report): it is stored with the status in the same
   atomic change, so the same report sent again -- a client retrying after PEMKRE died before answering -- is
   answered as already applied and changes nothing, also after a restart. ``start_process`` takes one too.
+  The change is conditional on the status it was read with (:attr:`ChangeSet.expect`): when another engine on the
+  same store moved the task on in between, the report raises
+  :class:`~locem_bridge.pemkre.errors.StoreConflict` and writes nothing.
 * :meth:`ProcessEngine.query` runs a predefined query of the ontology with values passed as bindings.
 
 Every state change is one atomic :meth:`TripleStore.apply` holding the asserted triples and the inferred triples
@@ -793,7 +796,8 @@ class ProcessEngine:
             if sp is None:
                 raise UnknownTaskError("no task <%s> is known; task IRIs come from next_action" % t)
             state = self._state(sp)  # type: ignore[arg-type]
-            current = self.model.status_name.get(self._v(t, _P_status), "")
+            current_iri = self._v(t, _P_status)
+            current = self.model.status_name.get(current_iri, "")
             if state.status != "running" or state.task != t or current not in ("issued", "in_progress"):
                 raise TaskStateError("task <%s> is not running (its status is %s, its process <%s> is %s, the "
                                      "process's current task is %s); only the current issued/in_progress task "
@@ -806,6 +810,9 @@ class ProcessEngine:
             assert tt is not None
             now = self.clock()
             cs = ChangeSet()
+            # conditional: the status read above must still be there when the change is written, so two writers
+            # sharing a store (two PEMKRE clients of one SPARQL server) cannot both move this task on
+            cs.expect.append((t, _P_status, current_iri, G_LOG))  # type: ignore[arg-type]
             self._replace(cs, t, _P_status, self.model.status_iri[status])
             effects_applied, world_changed = 0, 0
             # a template step: its parent task (the node's task) takes its status along; the node's effects
