@@ -1,0 +1,474 @@
+"""PEMKRE's store on a remote SPARQL 1.1 server, behind :class:`~locem_bridge.pemkre.store.TripleStore`.
+
+Any server that speaks the W3C SPARQL 1.1 Protocol (query and update over HTTP) will do: Oxigraph
+(``oxigraph serve --location DIR``: query ``http://HOST:7878/query``, update ``http://HOST:7878/update``; the tests
+run one), Apache Jena Fuseki (``/DATASET/query``, ``/DATASET/update``), GraphDB (``/repositories/REPO``,
+``/repositories/REPO/statements``), Virtuoso (``/sparql`` for both, with update rights). Any number of PEMKRE
+clients may share one server; ``persistent`` is True (the server keeps the data).
+
+**The default graph is the union of the named graphs**, as on the embedded stores (PEMKRE writes only named
+graphs). Standard SPARQL has no "union default graph" switch, so each query names its dataset in the request with
+the protocol's ``default-graph-uri`` parameters, one per named graph the store knows (RDF-merged into the default
+graph by the server), and the same list as ``named-graph-uri`` so ``GRAPH ?g`` patterns keep working. The graphs
+known are PEMKRE's own (:data:`~locem_bridge.pemkre.store.ASSERTED_GRAPHS`, the inferred graphs, ``G_META``), those
+found on the server when the store is opened, and those this client writes; a graph another client creates later
+is seen after :meth:`SparqlStore.refresh_graphs`. The query text is not rewritten for this. A server already set up
+to serve the union as its default graph (``oxigraph serve --union-default-graph``, Fuseki's
+``tdb2:unionDefaultGraph``) may be used with ``union_default_graph=True``, which sends no dataset at all.
+
+**Values** (bindings) join the prepared query as a ``VALUES`` block of N-Triples terms placed at the start of its
+WHERE group (:func:`~locem_bridge.pemkre.sparql_text.values_position`), never as spliced text.
+
+**Writes.** :meth:`SparqlStore.apply` is ONE update request, ``DELETE DATA {..} ; INSERT DATA {..}``, which servers
+that run one request as one transaction (Oxigraph does; so do Fuseki/TDB2 and GraphDB) apply all or nothing. A
+conditional change (:attr:`~locem_bridge.pemkre.store.ChangeSet.expect`) is one ``DELETE {..} INSERT {..} WHERE
+{..}`` request whose WHERE holds the expected quads: the server checks and writes in one transaction, so of two
+writers expecting the same status exactly one wins. The protocol does not say whether a WHERE matched, so every
+write also inserts a *claim token* (a triple naming a fresh ``urn:uuid:`` in the bookkeeping graph
+:data:`G_CLAIMS`, which queries, :meth:`~SparqlStore.quads` and :meth:`~SparqlStore.count` never see), and a
+conditional write reads its token back: present, the change was applied; absent,
+:class:`~locem_bridge.pemkre.errors.StoreConflict` names the expected quad that was not there. The token also
+answers the worst case of a remote write, the answer lost on the way back: the store asks the server whether the
+token is there and reports ``applied`` True or False, or ``None`` when it cannot be asked (then
+:meth:`SparqlStore.was_applied` asks later). A write is never sent twice by the store; the engine decides. Tokens
+of applied writes are deleted by the next write of this client (in the same request) and on :meth:`close`.
+
+Failures are one line naming the endpoint: :class:`~locem_bridge.pemkre.errors.StoreUnavailable` (refused,
+unknown host, timeout, connection lost; reads are retried with backoff first, see
+:class:`~locem_bridge.pemkre.sparql_http.RetryPolicy`), :class:`~locem_bridge.pemkre.errors.StoreError` for an
+HTTP error answer (with the server's message) or an answer that is not SPARQL (an HTML page, broken JSON),
+:class:`~locem_bridge.pemkre.errors.QueryError` when the server refuses a query. Opening the store checks it
+(``check=True``): the query endpoint must answer SPARQL, and a probe written through the update endpoint must show
+through the query endpoint (both URLs name the same dataset).
+"""
+import json
+import os
+import re
+import socket
+import threading
+import uuid
+from dataclasses import dataclass
+from typing import Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Set, Tuple
+
+from rdflib import BNode, Graph, Literal, URIRef
+from rdflib.namespace import XSD
+from rdflib.term import Node
+
+from .errors import InvalidParameterError, QueryError, StoreError, StoreUnavailable
+from .oxigraph_store import _VAR_RE, query_kind
+from .sparql_http import Answer, Endpoint, HttpStatusError, RetryPolicy
+from .sparql_text import iri_text, json_rows, term_text, values_block, values_position
+from .store import (ASSERTED_GRAPHS, G_META, INFERRED_GRAPHS, ChangeSet, PreparedQuery, Quad, QueryResult, Triple,
+                    TripleStore, conflict_error)
+from .vocab import GRAPHS, META
+
+#: Bookkeeping graph of the write claim tokens (see the module docstring); outside the union default graph.
+G_CLAIMS = GRAPHS.claims
+#: ``<urn:uuid:..> meta:writeClaim "client"``: one claim token.
+P_WRITE_CLAIM = META.writeClaim
+
+_ACCEPT_RESULTS = "application/sparql-results+json"
+_ACCEPT_GRAPH = "application/n-triples"
+_JSON_TYPES = ("application/sparql-results+json", "application/json")
+
+
+@dataclass(frozen=True)
+class _Compiled:
+    """A prepared query as it is sent: prologue + text, and where a VALUES block goes (None: at the end)."""
+
+    text: str
+    values_at: Optional[int]
+
+
+class SparqlStore(TripleStore):
+    """A :class:`TripleStore` on a SPARQL 1.1 server (see the module docstring). ``close()`` drops the connection;
+    the data stays on the server."""
+
+    persistent = True
+
+    def __init__(self, query_url: str, update_url: str, timeout_s: float = 10.0,
+                 retry: RetryPolicy = RetryPolicy(), union_default_graph: bool = False, check: bool = True,
+                 chunk_triples: int = 5000) -> None:
+        self.query_endpoint = Endpoint(query_url, "query", timeout_s, retry)
+        self.update_endpoint = Endpoint(update_url, "update", timeout_s, retry)
+        self.union_default_graph = union_default_graph
+        self.chunk_triples = max(1, int(chunk_triples))
+        self.client = "%s pid %d" % (socket.gethostname(), os.getpid())
+        self._graphs: Set[URIRef] = set(ASSERTED_GRAPHS) | set(INFERRED_GRAPHS) | {G_META}
+        self._dataset: List[Tuple[str, str]] = []
+        self._done_tokens: List[str] = []  # claims of applied writes, deleted by the next write
+        #: tokens of writes whose answer was lost and whose fate is not known yet (see was_applied)
+        self.unknown_writes: List[str] = []
+        self._lock = threading.RLock()
+        self._closed = False
+        self._refresh_dataset()
+        if check:
+            self.check()
+
+    # ---------------------------------------------------------------- opening
+    def check(self) -> None:
+        """Make sure the endpoints are a SPARQL 1.1 server holding one dataset: the query endpoint answers an ASK
+        in SPARQL JSON, a probe written through the update endpoint is seen through the query endpoint (then
+        removed); learn the named graphs on the server."""
+        self._ask_text("ASK { }", "the check at opening")
+        token = self._new_token()
+        self._update("INSERT DATA { %s }" % self._claim_text(token), "the write probe at opening")
+        if not self._token_stored(token):
+            raise StoreError("%s accepted a write that %s does not show: do both URLs name the same dataset?"
+                             % (self.update_endpoint.name, self.query_endpoint.name))
+        self._done_tokens.append(token)
+        self.refresh_graphs()
+
+    def refresh_graphs(self) -> List[URIRef]:
+        """Ask the server for its named graphs and make them part of the union default graph; returns them."""
+        doc = self._select_doc("SELECT DISTINCT ?g WHERE { GRAPH ?g { } }", "the list of named graphs", dataset=False)
+        _, rows = json_rows(doc, self.query_endpoint.name)
+        found = [r["g"] for r in rows if isinstance(r.get("g"), URIRef) and r["g"] != G_CLAIMS]
+        with self._lock:
+            self._graphs.update(found)  # type: ignore[arg-type]
+            self._refresh_dataset()
+        return sorted(found)  # type: ignore[arg-type]
+
+    def _refresh_dataset(self) -> None:
+        if self.union_default_graph:
+            self._dataset = []
+            return
+        graphs = sorted(str(g) for g in self._graphs)
+        self._dataset = [("default-graph-uri", g) for g in graphs] + [("named-graph-uri", g) for g in graphs]
+
+    def _know_graphs(self, graphs: Iterable[URIRef]) -> None:
+        new = [g for g in graphs if g not in self._graphs and g != G_CLAIMS]
+        if new:
+            with self._lock:
+                self._graphs.update(new)
+                self._refresh_dataset()
+
+    # ---------------------------------------------------------------- queries
+    def prepare(self, text: str, name: str, prefixes: Mapping[str, str]) -> PreparedQuery:
+        try:
+            kind = query_kind(text)
+        except QueryError as exc:
+            raise QueryError("query %s: %s" % (name, exc), name) from None
+        prefix_map = {k: str(v) for k, v in prefixes.items()}
+        from rdflib.plugins.sparql import prepareQuery
+
+        try:
+            parsed = prepareQuery(text, initNs=prefix_map)
+        except Exception as exc:
+            raise QueryError("query %s does not parse: %s" % (name, str(exc).splitlines()[0][:300]), name) from None
+        variables = tuple(dict.fromkeys(_VAR_RE.findall(text)))
+        projected: Tuple[str, ...] = ()
+        if kind == "SELECT":
+            pv = parsed.algebra.get("PV")
+            projected = tuple(str(v) for v in pv) if pv is not None else variables
+        try:
+            prologue = "".join("PREFIX %s: %s\n" % (k, iri_text(v)) for k, v in prefix_map.items())
+        except InvalidParameterError as exc:
+            raise QueryError("query %s: a prefix is unusable: %s" % (name, exc), name) from None
+        full = prologue + text
+        return PreparedQuery(name=name, text=text, kind=kind, variables=variables, projected=projected,
+                             compiled=_Compiled(full, values_position(full, kind)))
+
+    def run(self, query: PreparedQuery, bindings: Optional[Mapping[str, Node]] = None) -> QueryResult:
+        self._check_bindings(query, bindings)
+        compiled = query.compiled
+        if not isinstance(compiled, _Compiled):
+            raise QueryError("query %s was not prepared by this store" % query.name, query.name)
+        text = compiled.text
+        if bindings and any(v is not None for v in bindings.values()):
+            try:
+                block = values_block(bindings)
+            except InvalidParameterError as exc:
+                raise QueryError("query %s: %s" % (query.name, exc), query.name) from None
+            if compiled.values_at is None:
+                text = "%s\n%s" % (text, block)
+            else:
+                text = "%s %s %s" % (text[:compiled.values_at], block, text[compiled.values_at:])
+        graph_form = query.kind in ("CONSTRUCT", "DESCRIBE")
+        what = "query %s" % query.name
+        try:
+            answer = self.query_endpoint.post([("query", text)] + self._dataset,
+                                              _ACCEPT_GRAPH if graph_form else _ACCEPT_RESULTS)
+        except HttpStatusError as exc:
+            if 400 <= exc.status < 500:
+                raise QueryError("query %s failed on the server: %s" % (query.name, exc), query.name) from None
+            raise
+        if graph_form:
+            triples = self._graph_answer(answer, what)
+            return QueryResult(kind="CONSTRUCT", variables=["subject", "predicate", "object"],
+                               rows=[{"subject": s, "predicate": p, "object": o} for s, p, o in triples])
+        doc = self._json_answer(answer, what)
+        if query.kind == "ASK":
+            return QueryResult(kind="ASK", boolean=self._boolean(doc, what))
+        names, rows = json_rows(doc, "%s (%s)" % (self.query_endpoint.name, what))
+        return QueryResult(kind="SELECT", variables=names, rows=rows)
+
+    # ---------------------------------------------------------------- reads
+    def quads(self, s: Optional[Node] = None, p: Optional[Node] = None, o: Optional[Node] = None,
+              graphs: Optional[Sequence[URIRef]] = None) -> Iterator[Quad]:
+        pattern, filters, wanted = [], [], {}
+        for name, term in (("s", s), ("p", p), ("o", o)):
+            if term is None:
+                pattern.append("?" + name)
+            elif isinstance(term, BNode):
+                # a server's blank node cannot be named in a query: match any, keep those with this label
+                pattern.append("?" + name)
+                wanted[name] = term
+            else:
+                pattern.append(term_text(term))
+        if graphs is None:
+            head = ""
+            filters.append("FILTER(?g != %s)" % term_text(G_CLAIMS))
+        else:
+            if not graphs:
+                return iter(())
+            head = "VALUES ?g { %s } " % " ".join(term_text(g) for g in graphs)
+        text = "SELECT ?s ?p ?o ?g WHERE { %sGRAPH ?g { %s } %s }" % (head, " ".join(pattern), " ".join(filters))
+        doc = self._select_doc(text, "a quad lookup", dataset=False)
+        _, rows = json_rows(doc, self.query_endpoint.name)
+        out: List[Quad] = []
+        for r in rows:
+            if any(r.get(k) != v for k, v in wanted.items()):
+                continue
+            out.append((s if s is not None else r["s"], p if p is not None else r["p"],
+                        o if o is not None else r["o"], r["g"]))  # type: ignore[arg-type]
+        return iter(out)
+
+    def count(self, graph: Optional[URIRef] = None) -> int:
+        if graph is None:
+            text = "SELECT (COUNT(*) AS ?n) WHERE { GRAPH ?g { ?s ?p ?o } FILTER(?g != %s) }" % term_text(G_CLAIMS)
+        else:
+            text = "SELECT (COUNT(*) AS ?n) WHERE { GRAPH %s { ?s ?p ?o } }" % term_text(graph)
+        doc = self._select_doc(text, "a count", dataset=False)
+        _, rows = json_rows(doc, self.query_endpoint.name)
+        try:
+            return int(rows[0]["n"])  # type: ignore[call-overload]
+        except (IndexError, KeyError, ValueError):
+            raise StoreError("%s: a COUNT query answered %r, not a number" % (self.query_endpoint.name, rows)) \
+                from None
+
+    # ---------------------------------------------------------------- writes
+    def apply(self, changes: ChangeSet) -> None:
+        if not changes:
+            return
+        for q in list(changes.remove) + list(changes.add) + list(changes.expect):
+            if any(isinstance(t, BNode) for t in q[:3]):
+                raise StoreError("blank nodes cannot be written through apply(): %r" % (q,))
+        try:
+            removes = " ".join(self._quad_text(q) for q in changes.remove)
+            adds = " ".join(self._quad_text(q) for q in changes.add)
+            expects = " ".join(self._quad_text(q) for q in changes.expect)
+        except InvalidParameterError as exc:
+            raise StoreError("cannot write this change (nothing was written): %s" % exc) from None
+        token = self._new_token()
+        with self._lock:
+            ops = self._cleanup_ops()
+            if not changes.expect:
+                if removes:
+                    ops.append("DELETE DATA { %s }" % removes)
+                ops.append("INSERT DATA { %s %s }" % (adds, self._claim_text(token)))
+            else:
+                ops.append("%sINSERT { %s %s } WHERE { %s }" % ("DELETE { %s } " % removes if removes else "", adds,
+                                                               self._claim_text(token), expects))
+            cleaned = list(self._done_tokens)
+            self._send_write(" ;\n".join(ops), token, "a change of %d removals and %d additions"
+                             % (len(changes.remove), len(changes.add)))
+            self._done_tokens = [t for t in self._done_tokens if t not in cleaned]
+            self._know_graphs(q[3] for q in changes.add)
+            if changes.expect and not self._token_stored(token):
+                self._raise_conflict(changes)
+            self._done_tokens.append(token)
+
+    def replace_graph(self, graph: URIRef, triples: Iterable[Triple]) -> None:
+        """``DROP SILENT GRAPH`` and the first chunk in one request, further chunks of ``chunk_triples`` each.
+        Triples that share a blank node stay in one request (a blank node label names a node in one request)."""
+        g = term_text(graph)
+        try:
+            chunks = [" ".join("%s %s %s ." % (term_text(s, True), term_text(p), term_text(o, True))
+                               for s, p, o in chunk) for chunk in _chunks_keeping_blank_nodes(triples,
+                                                                                               self.chunk_triples)]
+        except InvalidParameterError as exc:
+            raise StoreError("cannot replace graph %s: %s" % (graph, exc)) from None
+        self._know_graphs([graph])
+        with self._lock:
+            first = "DROP SILENT GRAPH %s" % g
+            if chunks:
+                first += " ;\nINSERT DATA { GRAPH %s { %s } }" % (g, chunks[0])
+            self._update(first, "replacing graph %s" % graph)
+            for i, body in enumerate(chunks[1:], 2):
+                self._update("INSERT DATA { GRAPH %s { %s } }" % (g, body),
+                             "replacing graph %s (part %d of %d)" % (graph, i, len(chunks)))
+
+    def was_applied(self, token: str) -> bool:
+        """Was the write with claim ``token`` applied? (asks the server; for a
+        :class:`~locem_bridge.pemkre.errors.StoreUnavailable` with ``applied=None``)"""
+        found = self._token_stored(token)
+        with self._lock:
+            if token in self.unknown_writes:
+                self.unknown_writes.remove(token)
+            if found:
+                self._done_tokens.append(token)
+        return found
+
+    def close(self) -> None:
+        """Delete the claim tokens of applied writes (one request, not retried) and drop the connection."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            with self._lock:
+                ops = self._cleanup_ops()
+                if ops:
+                    try:
+                        self.update_endpoint.post([("update", ops[0])], "*/*", write=True)
+                    except StoreError:
+                        pass  # a leftover token is harmless (outside every query); the store is closing anyway
+                    self._done_tokens = []
+        finally:
+            self.query_endpoint.close()
+            self.update_endpoint.close()
+
+    # ---------------------------------------------------------------- internals
+    @staticmethod
+    def _quad_text(q: Quad) -> str:
+        return "GRAPH %s { %s %s %s }" % (term_text(q[3]), term_text(q[0]), term_text(q[1]), term_text(q[2]))
+
+    @staticmethod
+    def _new_token() -> str:
+        return "urn:uuid:%s" % uuid.uuid4()
+
+    def _claim_text(self, token: str) -> str:
+        return "GRAPH %s { <%s> %s %s }" % (term_text(G_CLAIMS), token, term_text(P_WRITE_CLAIM),
+                                            term_text(Literal(self.client)))
+
+    def _cleanup_ops(self) -> List[str]:
+        if not self._done_tokens:
+            return []
+        return ["DELETE DATA { %s }" % " ".join(self._claim_text(t) for t in self._done_tokens)]
+
+    def _token_stored(self, token: str) -> bool:
+        return self._ask_text("ASK { GRAPH %s { <%s> %s ?c } }" % (term_text(G_CLAIMS), token,
+                                                                     term_text(P_WRITE_CLAIM)),
+                              "reading back a write claim")
+
+    def _send_write(self, text: str, token: str, what: str) -> None:
+        """Send one write; when its answer is lost, learn from the token whether it was applied."""
+        try:
+            self._update(text, what)
+        except StoreUnavailable as exc:
+            if exc.applied is not None:
+                raise
+            try:
+                applied = self._token_stored(token)
+            except StoreError as again:
+                self.unknown_writes.append(token)
+                raise StoreUnavailable("%s; the server cannot be asked whether it was applied either (%s); "
+                                       "was_applied(%r) tells later" % (exc, again, token), exc.endpoint,
+                                       exc.reason, applied=None, token=token) from None
+            if not applied:
+                raise StoreUnavailable("%s; asked again, the server does not have it: nothing was written"
+                                       % str(exc).replace("; whether it was applied is unknown", ""),
+                                       exc.endpoint, exc.reason, applied=False, token=token) from None
+            # written: only the answer was lost, which is no failure of the change
+
+    def _update(self, text: str, what: str) -> None:
+        try:
+            self.update_endpoint.post([("update", text)], "*/*", write=True)
+        except HttpStatusError as exc:
+            raise HttpStatusError("%s was refused (nothing was written): %s" % (what, exc), exc.status) from None
+
+    def _raise_conflict(self, changes: ChangeSet) -> None:
+        for q in changes.expect:
+            if not any(True for _ in self.quads(q[0], q[1], q[2], (q[3],))):
+                raise conflict_error(self, q)
+        raise conflict_error(self, changes.expect[0], " (it was missing when the change was tried and is back now)")
+
+    def _select_doc(self, text: str, what: str, dataset: bool = True) -> object:
+        answer = self.query_endpoint.post([("query", text)] + (self._dataset if dataset else []), _ACCEPT_RESULTS)
+        return self._json_answer(answer, what)
+
+    def _ask_text(self, text: str, what: str) -> bool:
+        answer = self.query_endpoint.post([("query", text)], _ACCEPT_RESULTS)
+        return self._boolean(self._json_answer(answer, what), what)
+
+    def _json_answer(self, answer: Answer, what: str) -> object:
+        where = self.query_endpoint.name
+        if answer.media_type not in _JSON_TYPES:
+            raise StoreError("%s answered %s with %s, not SPARQL results JSON%s" % (
+                where, what, _describe(answer), ": is this the query URL of a SPARQL 1.1 server?"))
+        try:
+            return json.loads(answer.body.decode("utf-8"))
+        except (UnicodeDecodeError, ValueError) as exc:
+            raise StoreError("%s answered %s with broken JSON (%s), not SPARQL results" % (where, what, exc)) \
+                from None
+
+    def _boolean(self, doc: object, what: str) -> bool:
+        value = doc.get("boolean") if isinstance(doc, dict) else None
+        if not isinstance(value, bool):
+            raise StoreError("%s answered %s with JSON that is not a SPARQL ASK result (no boolean)"
+                             % (self.query_endpoint.name, what))
+        return value
+
+    def _graph_answer(self, answer: Answer, what: str) -> List[Triple]:
+        where = self.query_endpoint.name
+        if answer.media_type not in ("application/n-triples", "text/plain"):
+            raise StoreError("%s answered %s with %s, not N-Triples" % (where, what, _describe(answer)))
+        g = Graph()
+        try:
+            g.parse(data=answer.text(), format="nt")
+        except Exception as exc:
+            raise StoreError("%s answered %s with N-Triples that do not parse: %s"
+                             % (where, what, str(exc).splitlines()[0][:200])) from None
+        out: List[Triple] = []
+        for s, p, o in g:
+            if isinstance(o, Literal) and o.datatype == XSD.string:
+                o = Literal(str(o))
+            out.append((s, p, o))
+        return out
+
+
+def _describe(answer: Answer) -> str:
+    """What an unexpected answer is, in a few words: an HTML page (with its title), or its media type."""
+    text = answer.text()
+    if answer.media_type == "text/html" or text.lstrip()[:15].lower().startswith(("<!doctype html", "<html")):
+        m = re.search(r"(?is)<title[^>]*>(.*?)</title>", text)
+        return "an HTML page%s" % (" (%r)" % " ".join(m.group(1).split())[:80] if m else "")
+    return "%s (HTTP %d)" % (answer.media_type or "no content type", answer.status)
+
+
+def _chunks_keeping_blank_nodes(triples: Iterable[Triple], size: int) -> List[List[Triple]]:
+    """``triples`` in chunks of about ``size``; all triples that are connected through blank nodes in one chunk."""
+    items = list(triples)
+    parent: Dict[BNode, BNode] = {}
+
+    def find(b: BNode) -> BNode:
+        root = b
+        while parent.setdefault(root, root) != root:
+            root = parent[root]
+        while parent[b] != root:
+            parent[b], b = root, parent[b]
+        return root
+
+    for s, _, o in items:
+        if isinstance(s, BNode) and isinstance(o, BNode):
+            a, b = find(s), find(o)
+            if a != b:
+                parent[a] = b
+    groups: Dict[object, List[Triple]] = {}
+    plain: List[Triple] = []
+    for t in items:
+        b = t[0] if isinstance(t[0], BNode) else t[2] if isinstance(t[2], BNode) else None
+        if b is None:
+            plain.append(t)
+        else:
+            groups.setdefault(find(b), []).append(t)
+    chunks: List[List[Triple]] = []
+    current: List[Triple] = []
+    for group in list(groups.values()) + [[t] for t in plain]:
+        if current and len(current) + len(group) > size:
+            chunks.append(current)
+            current = []
+        current.extend(group)
+    if current:
+        chunks.append(current)
+    return chunks
