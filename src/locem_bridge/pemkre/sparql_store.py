@@ -20,18 +20,27 @@ to serve the union as its default graph (``oxigraph serve --union-default-graph`
 WHERE group (:func:`~locem_bridge.pemkre.sparql_text.values_position`), never as spliced text.
 
 **Writes.** :meth:`SparqlStore.apply` is ONE update request, ``DELETE DATA {..} ; INSERT DATA {..}``, which servers
-that run one request as one transaction (Oxigraph does; so do Fuseki/TDB2 and GraphDB) apply all or nothing. A
-conditional change (:attr:`~locem_bridge.pemkre.store.ChangeSet.expect`) is one ``DELETE {..} INSERT {..} WHERE
-{..}`` request whose WHERE holds the expected quads: the server checks and writes in one transaction, so of two
-writers expecting the same status exactly one wins. The protocol does not say whether a WHERE matched, so every
-write also inserts a *claim token* (a triple naming a fresh ``urn:uuid:`` in the bookkeeping graph
-:data:`G_CLAIMS`, which queries, :meth:`~SparqlStore.quads` and :meth:`~SparqlStore.count` never see), and a
-conditional write reads its token back: present, the change was applied; absent,
-:class:`~locem_bridge.pemkre.errors.StoreConflict` names the expected quad that was not there. The token also
-answers the worst case of a remote write, the answer lost on the way back: the store asks the server whether the
-token is there and reports ``applied`` True or False, or ``None`` when it cannot be asked (then
-:meth:`SparqlStore.was_applied` asks later). A write is never sent twice by the store; the engine decides. Tokens
-of applied writes are deleted by the next write of this client (in the same request) and on :meth:`close`.
+that run one request as one transaction (Oxigraph does; so do Fuseki/TDB2 and GraphDB) apply all or nothing. Every
+write also inserts a *token* (a triple naming a fresh ``urn:uuid:`` in the bookkeeping graph :data:`G_CLAIMS`,
+which queries, :meth:`~SparqlStore.quads` and :meth:`~SparqlStore.count` never see): when the answer to a write is
+lost on the way back, the store asks the server whether the token is there and reports ``applied`` True or False
+in :class:`~locem_bridge.pemkre.errors.StoreUnavailable`, or ``None`` when it cannot ask (then
+:meth:`SparqlStore.was_applied` asks later). The store never sends a write twice; the engine decides. Tokens of
+applied writes are deleted by the next write of this client (in the same request) and on :meth:`close`.
+
+**Conditional changes** (:attr:`~locem_bridge.pemkre.store.ChangeSet.expect`): one transaction per request is not
+enough, because a server's update transactions need not be serializable. Oxigraph's are snapshot-isolated: two
+concurrent ``DELETE {old} INSERT {new} WHERE {old}`` requests both see ``old`` and both write (measured: two
+writers racing on one status both won). So a conditional change first *claims* the expected quads: one request
+inserts a claim (token, the hash of the expected quads, the server's ``NOW()``) only WHERE the expected quads are
+there, then the client reads every live claim on them. Alone, it writes the change as ``DELETE {..} INSERT {..}
+WHERE {expected}`` together with removing its claim, in one request, and reads its token back; with rivals, every
+claimant withdraws and tries again after a random pause (at most ``claim_attempts`` times). Exactly one writer can
+win: a winner's claim is visible from before its read until its change is committed, so a second writer either
+sees it (and steps back) or reads after the change (and its own conditional write finds the quads changed). The
+loser gets :class:`~locem_bridge.pemkre.errors.StoreConflict` naming the expected quad that was not there. A claim
+older than ``claim_ttl_s`` (a client that died between claim and write) no longer counts. Cost: four requests for
+a conditional change (claim, read claims, write, read token), one for any other change.
 
 Failures are one line naming the endpoint: :class:`~locem_bridge.pemkre.errors.StoreUnavailable` (refused,
 unknown host, timeout, connection lost; reads are retried with backoff first, see
@@ -41,10 +50,13 @@ HTTP error answer (with the server's message) or an answer that is not SPARQL (a
 (``check=True``): the query endpoint must answer SPARQL, and a probe written through the update endpoint must show
 through the query endpoint (both URLs name the same dataset).
 """
+import hashlib
 import json
 import os
+import random
 import re
 import socket
+import time
 import threading
 import uuid
 from dataclasses import dataclass
@@ -54,7 +66,7 @@ from rdflib import BNode, Graph, Literal, URIRef
 from rdflib.namespace import XSD
 from rdflib.term import Node
 
-from .errors import InvalidParameterError, QueryError, StoreError, StoreUnavailable
+from .errors import InvalidParameterError, QueryError, StoreConflict, StoreError, StoreUnavailable
 from .oxigraph_store import _VAR_RE, query_kind
 from .sparql_http import Answer, Endpoint, HttpStatusError, RetryPolicy
 from .sparql_text import iri_text, json_rows, term_text, values_block, values_position
@@ -66,6 +78,10 @@ from .vocab import GRAPHS, META
 G_CLAIMS = GRAPHS.claims
 #: ``<urn:uuid:..> meta:writeClaim "client"``: one claim token.
 P_WRITE_CLAIM = META.writeClaim
+#: a conditional change's claim: ``<token> meta:claimOn <urn:pemkre-claim:HASH of the expected quads>``
+P_CLAIM_ON = META.claimOn
+#: ... and ``<token> meta:claimAt NOW()`` (the server's clock; claims older than ``claim_ttl_s`` are dead)
+P_CLAIM_AT = META.claimAt
 
 _ACCEPT_RESULTS = "application/sparql-results+json"
 _ACCEPT_GRAPH = "application/n-triples"
@@ -88,11 +104,14 @@ class SparqlStore(TripleStore):
 
     def __init__(self, query_url: str, update_url: str, timeout_s: float = 10.0,
                  retry: RetryPolicy = RetryPolicy(), union_default_graph: bool = False, check: bool = True,
-                 chunk_triples: int = 5000) -> None:
+                 chunk_triples: int = 5000, claim_ttl_s: float = 30.0, claim_attempts: int = 12) -> None:
         self.query_endpoint = Endpoint(query_url, "query", timeout_s, retry)
         self.update_endpoint = Endpoint(update_url, "update", timeout_s, retry)
         self.union_default_graph = union_default_graph
         self.chunk_triples = max(1, int(chunk_triples))
+        self.claim_ttl_s = float(claim_ttl_s)
+        self.claim_attempts = max(1, int(claim_attempts))
+        self._pause = time.sleep
         self.client = "%s pid %d" % (socket.gethostname(), os.getpid())
         self._graphs: Set[URIRef] = set(ASSERTED_GRAPHS) | set(INFERRED_GRAPHS) | {G_META}
         self._dataset: List[Tuple[str, str]] = []
@@ -192,7 +211,7 @@ class SparqlStore(TripleStore):
         except HttpStatusError as exc:
             if 400 <= exc.status < 500:
                 raise QueryError("query %s failed on the server: %s" % (query.name, exc), query.name) from None
-            raise
+            raise HttpStatusError("query %s: %s" % (query.name, exc), exc.status) from None
         if graph_form:
             triples = self._graph_answer(answer, what)
             return QueryResult(kind="CONSTRUCT", variables=["subject", "predicate", "object"],
@@ -260,24 +279,72 @@ class SparqlStore(TripleStore):
             expects = " ".join(self._quad_text(q) for q in changes.expect)
         except InvalidParameterError as exc:
             raise StoreError("cannot write this change (nothing was written): %s" % exc) from None
-        token = self._new_token()
         with self._lock:
-            ops = self._cleanup_ops()
-            if not changes.expect:
+            if changes.expect:
+                self._apply_conditional(changes, removes, adds, expects)
+            else:
+                token = self._new_token()
+                ops = self._cleanup_ops()
                 if removes:
                     ops.append("DELETE DATA { %s }" % removes)
                 ops.append("INSERT DATA { %s %s }" % (adds, self._claim_text(token)))
-            else:
-                ops.append("%sINSERT { %s %s } WHERE { %s }" % ("DELETE { %s } " % removes if removes else "", adds,
-                                                               self._claim_text(token), expects))
-            cleaned = list(self._done_tokens)
-            self._send_write(" ;\n".join(ops), token, "a change of %d removals and %d additions"
-                             % (len(changes.remove), len(changes.add)))
-            self._done_tokens = [t for t in self._done_tokens if t not in cleaned]
+                self._write(ops, token, "a change of %d removals and %d additions"
+                            % (len(changes.remove), len(changes.add)))
+                self._done_tokens.append(token)
             self._know_graphs(q[3] for q in changes.add)
-            if changes.expect and not self._token_stored(token):
+
+    def _apply_conditional(self, changes: ChangeSet, removes: str, adds: str, expects: str) -> None:
+        """Claim the expected quads, write if the claim is the only live one, else withdraw and try again (see the
+        module docstring: a server's update transaction need not be serializable, Oxigraph's is not)."""
+        key = URIRef("urn:pemkre-claim:" + hashlib.sha256(
+            "\n".join(sorted(self._quad_text(q) for q in changes.expect)).encode("utf-8")).hexdigest())
+        what = "a conditional change of %d removals and %d additions" % (len(changes.remove), len(changes.add))
+        rivals: List[str] = []
+        for attempt in range(1, self.claim_attempts + 1):
+            claim = self._new_token()
+            self._write(self._cleanup_ops() + [
+                "INSERT { %s GRAPH %s { <%s> %s %s ; %s ?now } } WHERE { %s BIND(NOW() AS ?now) }"
+                % (self._claim_text(claim), term_text(G_CLAIMS), claim, term_text(P_CLAIM_ON), term_text(key),
+                   term_text(P_CLAIM_AT), expects)], claim, "claiming " + what)
+            live = self._live_claims(key)
+            if claim not in live:
                 self._raise_conflict(changes)
-            self._done_tokens.append(token)
+            rivals = [c for c in live if c != claim]
+            if not rivals:
+                token = self._new_token()
+                ops = [self._delete_tokens_text([claim]),
+                       "%sINSERT { %s %s } WHERE { %s }" % ("DELETE { %s } " % removes if removes else "", adds,
+                                                           self._claim_text(token), expects)]
+                self._write(ops, token, what)
+                if not self._token_stored(token):
+                    self._raise_conflict(changes)
+                self._done_tokens.append(token)
+                return
+            # another writer claimed the same quads at the same time: both step back, each tries again after a
+            # random pause (one of them will find itself alone; the other then finds the quads changed)
+            self._update(self._delete_tokens_text([claim]), "withdrawing a claim")
+            self._pause(random.uniform(0.002, 0.02) * attempt)
+        s, p, o, g = changes.expect[0]
+        raise StoreConflict("conflict: %s %s %s in graph %s stays claimed by another writer (%s) after %d attempts; "
+                            "nothing was written" % (s.n3(), p.n3(), o.n3(), g.n3(), ", ".join(rivals[:3]),
+                                                     self.claim_attempts), changes.expect[0])
+
+    def _live_claims(self, key: URIRef) -> List[str]:
+        """Tokens of the claims on ``key`` younger than ``claim_ttl_s`` (by the server's clock)."""
+        doc = self._select_doc("SELECT ?t ?at (NOW() AS ?now) WHERE { GRAPH %s { ?t %s %s ; %s ?at } }"
+                               % (term_text(G_CLAIMS), term_text(P_CLAIM_ON), term_text(key),
+                                  term_text(P_CLAIM_AT)), "the claims of a conditional change", dataset=False)
+        _, rows = json_rows(doc, self.query_endpoint.name)
+        out = []
+        for r in rows:
+            at, now = r.get("at"), r.get("now")
+            try:
+                age = (now.toPython() - at.toPython()).total_seconds()  # type: ignore[union-attr]
+            except Exception:  # a server whose NOW() we cannot read: every claim counts
+                age = 0.0
+            if age < self.claim_ttl_s:
+                out.append(str(r["t"]))
+        return out
 
     def replace_graph(self, graph: URIRef, triples: Iterable[Triple]) -> None:
         """``DROP SILENT GRAPH`` and the first chunk in one request, further chunks of ``chunk_triples`` each.
@@ -323,7 +390,6 @@ class SparqlStore(TripleStore):
                         self.update_endpoint.post([("update", ops[0])], "*/*", write=True)
                     except StoreError:
                         pass  # a leftover token is harmless (outside every query); the store is closing anyway
-                    self._done_tokens = []
         finally:
             self.query_endpoint.close()
             self.update_endpoint.close()
@@ -342,19 +408,28 @@ class SparqlStore(TripleStore):
                                             term_text(Literal(self.client)))
 
     def _cleanup_ops(self) -> List[str]:
+        """The operation deleting the tokens of applied writes, to lead the next write (then forgotten here)."""
         if not self._done_tokens:
             return []
-        return ["DELETE DATA { %s }" % " ".join(self._claim_text(t) for t in self._done_tokens)]
+        ops = [self._delete_tokens_text(self._done_tokens)]
+        self._done_tokens = []
+        return ops
+
+    @staticmethod
+    def _delete_tokens_text(tokens: Sequence[str]) -> str:
+        return "DELETE { GRAPH %s { ?t ?p ?o } } WHERE { VALUES ?t { %s } GRAPH %s { ?t ?p ?o } }" % (
+            term_text(G_CLAIMS), " ".join("<%s>" % t for t in tokens), term_text(G_CLAIMS))
 
     def _token_stored(self, token: str) -> bool:
         return self._ask_text("ASK { GRAPH %s { <%s> %s ?c } }" % (term_text(G_CLAIMS), token,
                                                                      term_text(P_WRITE_CLAIM)),
                               "reading back a write claim")
 
-    def _send_write(self, text: str, token: str, what: str) -> None:
-        """Send one write; when its answer is lost, learn from the token whether it was applied."""
+    def _write(self, ops: List[str], token: str, what: str) -> None:
+        """Send ``ops`` as one update request; when its answer is lost, learn from ``token`` whether it was
+        applied (a token of an applied write is left for the next write to delete)."""
         try:
-            self._update(text, what)
+            self._update(" ;\n".join(ops), what)
         except StoreUnavailable as exc:
             if exc.applied is not None:
                 raise
