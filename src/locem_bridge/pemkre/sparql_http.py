@@ -110,10 +110,12 @@ class Endpoint:
         if not isinstance(url, str) or not url.strip():
             raise StoreError("SPARQL %s endpoint: no URL given (e.g. http://127.0.0.1:7878/%s)" % (role, role))
         parts = urlsplit(url.strip())
+        if parts.scheme not in ("http", "https"):
+            self.name = "SPARQL %s endpoint %s" % (role, re.sub(r"//[^/@]*@", "//", url.strip()))
+            raise StoreError("%s: not an http:// or https:// URL (%s)" % (
+                self.name, "scheme %r" % parts.scheme if parts.scheme else "no scheme"))
         shown = _without_credentials(parts)
         self.name = "SPARQL %s endpoint %s" % (role, shown)
-        if parts.scheme not in ("http", "https"):
-            raise StoreError("%s: not an http:// or https:// URL (scheme %r)" % (self.name, parts.scheme or ""))
         try:
             port = parts.port
         except ValueError:

@@ -366,6 +366,17 @@ class SparqlStore(TripleStore):
                 self._update("INSERT DATA { GRAPH %s { %s } }" % (g, body),
                              "replacing graph %s (part %d of %d)" % (graph, i, len(chunks)))
 
+    def drop_pemkre_graphs(self) -> List[URIRef]:
+        """Drop every named graph under PEMKRE's graph namespace (one request; other graphs stay): a fresh
+        store on a server that may hold other data too. Returns the graphs dropped."""
+        graphs = sorted(g for g in set(self.refresh_graphs()) | self._graphs | {G_CLAIMS}
+                        if str(g).startswith(str(GRAPHS)))
+        with self._lock:
+            self._done_tokens = []
+            self._update(" ;\n".join("DROP SILENT GRAPH %s" % term_text(g) for g in graphs),
+                         "dropping PEMKRE's graphs")
+        return graphs
+
     def was_applied(self, token: str) -> bool:
         """Was the write with claim ``token`` applied? (asks the server; for a
         :class:`~locem_bridge.pemkre.errors.StoreUnavailable` with ``applied=None``)"""

@@ -1,0 +1,296 @@
+"""What only a remote store can get wrong, against a real ``oxigraph serve`` and tiny fake servers: bad endpoints
+(wrong scheme, nothing listening, an HTML page, HTTP 500, no answer) each give one line naming the endpoint; a
+query the server refuses; the server killed and restarted (reads reconnect, the data is still there); a write
+whose answer is lost (the claim token tells whether it was applied); the engine on the server."""
+import http.server
+import threading
+import time
+import urllib.request
+
+import pytest
+from oxigraph_server import OxigraphServer, free_port
+from pemkre_testkit import FakeClock, json_dumps, run_process, scan_result
+from rdflib import Literal, URIRef
+
+from locem_bridge.pemkre import PLB, PPR, ProcessEngine
+from locem_bridge.pemkre.errors import QueryError, StoreConflict, StoreError, StoreUnavailable, TaskStateError
+from locem_bridge.pemkre.sparql_http import RetryPolicy
+from locem_bridge.pemkre.sparql_store import SparqlStore
+from locem_bridge.pemkre.store import G_WORLD, ChangeSet
+from locem_bridge.pemkre.vocab import SITE
+
+EX = "https://ex.example/"
+A, P = URIRef(EX + "a"), URIRef(EX + "p")
+QUICK = RetryPolicy(attempts=2, first_delay_s=0.01, max_delay_s=0.01)
+
+
+class FakeServer:
+    """An HTTP server on a free loopback port whose every POST is answered by ``handle(handler, body)``."""
+
+    def __init__(self, handle):
+        outer = self
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            def do_POST(self):
+                body = self.rfile.read(int(self.headers.get("Content-Length") or 0))
+                outer.requests += 1
+                handle(self, body)
+
+            def log_message(self, *args):
+                pass
+
+        self.requests = 0
+        self.httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        self.url = "http://127.0.0.1:%d/sparql" % self.httpd.server_address[1]
+        self.thread = threading.Thread(target=self.httpd.serve_forever, args=(0.05,), daemon=True)
+        self.thread.start()
+
+    def close(self):
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+
+@pytest.fixture
+def fake_server():
+    servers = []
+
+    def make(handle):
+        s = FakeServer(handle)
+        servers.append(s)
+        return s
+
+    yield make
+    for s in servers:
+        s.close()
+
+
+def _reply(handler, status, media, text):
+    data = text.encode("utf-8")
+    handler.send_response(status)
+    handler.send_header("Content-Type", media)
+    handler.send_header("Content-Length", str(len(data)))
+    handler.end_headers()
+    handler.wfile.write(data)
+
+
+def _one_line(exc):
+    msg = str(exc)
+    assert "\n" not in msg, msg
+    return msg
+
+
+# ------------------------------------------------------------------------------------------------ bad endpoints
+def test_a_url_that_is_not_http_is_refused_naming_it():
+    with pytest.raises(StoreError) as err:
+        SparqlStore("ftp://127.0.0.1/query", "http://127.0.0.1:1/update")
+    assert _one_line(err.value) == "SPARQL query endpoint ftp://127.0.0.1/query: not an http:// or https:// URL " \
+                                   "(scheme 'ftp')"
+    with pytest.raises(StoreError, match=r"^SPARQL update endpoint 127.0.0.1:7878/update: not an http:// or "
+                                         r"https:// URL \(no scheme\)$"):
+        SparqlStore("http://127.0.0.1:1/query", "127.0.0.1:7878/update")
+    with pytest.raises(StoreError, match="SPARQL query endpoint http://:7878/query: the URL names no host"):
+        SparqlStore("http://:7878/query", "http://127.0.0.1:1/update")
+
+
+def test_nothing_listening_is_one_line_naming_the_endpoint_after_the_retries():
+    port = free_port()
+    started = time.monotonic()
+    with pytest.raises(StoreUnavailable) as err:
+        SparqlStore("http://127.0.0.1:%d/query" % port, "http://127.0.0.1:%d/update" % port, retry=QUICK)
+    msg = _one_line(err.value)
+    assert msg.startswith("SPARQL query endpoint http://127.0.0.1:%d/query: connection refused (is the SPARQL "
+                          "server running on 127.0.0.1:%d?) (2 attempts over " % (port, port)), msg
+    assert err.value.endpoint == "http://127.0.0.1:%d/query" % port and err.value.applied is False
+    assert time.monotonic() - started < 5
+
+
+def test_a_server_answering_an_html_page_is_named_as_such(fake_server):
+    page = "<!DOCTYPE html><html><head><title>Welcome to nginx!</title></head><body><h1>Welcome</h1></body></html>"
+    srv = fake_server(lambda h, body: _reply(h, 200, "text/html; charset=utf-8", page))
+    with pytest.raises(StoreError) as err:
+        SparqlStore(srv.url, srv.url, retry=QUICK)
+    assert _one_line(err.value) == (
+        "SPARQL query endpoint %s answered the check at opening with an HTML page ('Welcome to nginx!'), not "
+        "SPARQL results JSON: is this the query URL of a SPARQL 1.1 server?" % srv.url)
+
+
+def test_http_500_gives_the_servers_message_in_one_line(fake_server):
+    srv = fake_server(lambda h, body: _reply(h, 500, "text/plain", "boom:\n  the database\n  is on fire"))
+    with pytest.raises(StoreError) as err:
+        SparqlStore(srv.url, srv.url, retry=QUICK)
+    assert _one_line(err.value) == "SPARQL query endpoint %s: HTTP 500 Internal Server Error: boom: the database " \
+                                   "is on fire" % srv.url
+    assert srv.requests == 1  # a 500 is not retried (502/503/504 are)
+
+
+def test_503_is_retried_then_reported(fake_server):
+    srv = fake_server(lambda h, body: _reply(h, 503, "text/html", "<html><body><p>Service  Unavailable</p></body>"
+                                                                   "</html>"))
+    with pytest.raises(StoreError, match=r"HTTP 503 Service Unavailable: Service Unavailable$"):
+        SparqlStore(srv.url, srv.url, retry=QUICK)
+    assert srv.requests == 2
+
+
+def test_a_server_that_does_not_answer_times_out(fake_server):
+    srv = fake_server(lambda h, body: time.sleep(2))
+    with pytest.raises(StoreUnavailable) as err:
+        SparqlStore(srv.url, srv.url, timeout_s=0.2, retry=QUICK)
+    assert "SPARQL query endpoint %s: no answer within 0.2 s (2 attempts over" % srv.url in _one_line(err.value)
+
+
+def test_update_and_query_urls_of_different_datasets_are_refused(oxigraph_server, fake_server):
+    oxigraph_server.start()
+    sink = fake_server(lambda h, body: _reply(h, 204, "text/plain", ""))  # accepts every write, keeps nothing
+    with pytest.raises(StoreError) as err:
+        SparqlStore(oxigraph_server.query_url, sink.url)
+    assert _one_line(err.value) == ("SPARQL update endpoint %s accepted a write that SPARQL query endpoint %s does "
+                                    "not show: do both URLs name the same dataset?"
+                                    % (sink.url, oxigraph_server.query_url))
+
+
+def test_a_query_the_server_refuses_is_a_query_error_naming_query_and_endpoint(sparql_store, oxigraph_server):
+    s = sparql_store()
+    q = s.prepare("SELECT ?o WHERE { ?s ?p ?o } GROUP BY ?s", "grouped", {})  # rdflib lets it pass, SPARQL not
+    with pytest.raises(QueryError) as err:
+        s.select(q)
+    msg = _one_line(err.value)
+    assert msg.startswith("query grouped failed on the server: SPARQL query endpoint %s: HTTP 400 Bad Request: "
+                          % oxigraph_server.query_url), msg
+    assert err.value.query_iri == "grouped"
+
+
+# ------------------------------------------------------------------------------------------------ the server away
+def test_reads_reconnect_after_a_server_restart_and_the_data_is_still_there(tmp_path):
+    with OxigraphServer(str(tmp_path / "data")) as server:
+        s = SparqlStore(server.query_url, server.update_url, retry=QUICK)
+        s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+        assert s.value(A, P) == Literal(1)  # the kept-alive connection is open now
+        server.kill()
+        with pytest.raises(StoreUnavailable) as err:
+            s.value(A, P)
+        assert _one_line(err.value).startswith("SPARQL query endpoint %s: connection refused" % server.query_url)
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+        assert err.value.applied is False and "update endpoint" in str(err.value)
+        server.start()  # same port, same data folder
+        assert s.objects(A, P) == [Literal(1)]
+        s.apply(ChangeSet(add=[(A, P, Literal(3), G_WORLD)]))
+        s.close()
+        again = SparqlStore(server.query_url, server.update_url)
+        assert sorted(again.objects(A, P)) == [Literal(1), Literal(3)]
+        again.close()
+
+
+def _proxy(target, mode):
+    """A write endpoint in front of ``target``: ``mode[0]`` "forward" passes a write and its answer, "lose" passes
+    the write and drops the answer (closes the connection), "drop" drops the write."""
+
+    def handle(h, body):
+        if mode[0] in ("forward", "lose"):
+            req = urllib.request.Request(target, data=body,
+                                         headers={"Content-Type": "application/x-www-form-urlencoded"})
+            with urllib.request.urlopen(req, timeout=10) as resp:
+                status = resp.status
+            if mode[0] == "forward":
+                _reply(h, status, "text/plain", "")
+                return
+        h.close_connection = True  # no answer at all
+
+    return handle
+
+
+def test_a_write_whose_answer_is_lost_is_known_applied_or_not_through_its_token(sparql_store, oxigraph_server,
+                                                                                 fake_server):
+    mode = ["forward"]
+    proxy = fake_server(_proxy(oxigraph_server.update_url, mode))
+    s = SparqlStore(oxigraph_server.query_url, proxy.url, retry=QUICK)
+    mode[0] = "lose"
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))  # written; only the answer was lost: no error
+    assert s.objects(A, P) == [Literal(1)]
+    mode[0] = "drop"
+    with pytest.raises(StoreUnavailable) as err:
+        s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+    msg = _one_line(err.value)
+    assert err.value.applied is False and msg.startswith("SPARQL update endpoint %s: the connection was lost "
+                                                         "before an answer came" % proxy.url), msg
+    assert msg.endswith("asked again, the server does not have it: nothing was written")
+    assert s.objects(A, P) == [Literal(1)]
+    s.close()
+
+
+def test_a_lost_answer_while_the_server_cannot_be_asked_leaves_the_token_for_later(tmp_path, fake_server):
+    with OxigraphServer(str(tmp_path / "data")) as server:
+        mode = ["forward"]
+
+        def handle(h, body):
+            _proxy(server.update_url, mode)(h, body)
+            if mode[0] == "lose":
+                server.kill()  # the server dies right after writing: nobody can say yet
+
+        proxy = fake_server(handle)
+        s = SparqlStore(server.query_url, proxy.url, retry=QUICK)
+        mode[0] = "lose"
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+        assert err.value.applied is None and err.value.token in s.unknown_writes
+        assert "was_applied(" in _one_line(err.value)
+        server.start()
+        assert s.was_applied(err.value.token) and s.unknown_writes == []
+        assert s.objects(A, P) == [Literal(1)]
+        s.close()
+
+
+# ------------------------------------------------------------------------------------------------ options
+def test_a_server_serving_the_union_as_default_graph_needs_no_dataset(tmp_path):
+    with OxigraphServer(str(tmp_path / "data"), extra=["--union-default-graph"]) as server:
+        s = SparqlStore(server.query_url, server.update_url, union_default_graph=True)
+        s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD), (A, URIRef(EX + "q"), Literal(2), URIRef(EX + "g"))]))
+        q = s.prepare("SELECT ?x ?y WHERE { ex:a ex:p ?x ; ex:q ?y }", "union", {"ex": EX})
+        assert s.select(q) == [{"x": Literal(1), "y": Literal(2)}]
+        s.close()
+
+
+# ------------------------------------------------------------------------------------------------ the engine
+def _decide(action):
+    if action.action_type == "SCAN":
+        return "succeeded", json_dumps(scan_result(joints_per_wall=2))
+    return "succeeded", ""
+
+
+def test_the_engine_runs_a_process_on_the_server_as_on_the_embedded_store(sparql_store, make_engine):
+    embedded = make_engine()
+    embedded.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    expected = run_process(embedded, _decide)
+    remote = ProcessEngine(sparql_store(), clock=FakeClock())
+    remote.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    assert run_process(remote, _decide) == expected
+    assert remote.store.value(SITE.wall_1_joint_2, PPR.tapingStatus) == PPR.processed
+    assert remote.check_consistency(full_inference=True) == []
+
+
+def test_two_engines_on_one_server_racing_on_one_task_status_exactly_one_wins(sparql_store):
+    first = ProcessEngine(sparql_store(), clock=FakeClock())
+    first.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    task = first.next_action().task
+    second = ProcessEngine(sparql_store(), clock=FakeClock())  # a second PEMKRE client: finds the running process
+    outcome = {}
+    start = threading.Barrier(2)
+
+    def report(name, engine):
+        start.wait()
+        try:
+            engine.set_task_status(task, "in_progress", request_id="")
+            outcome[name] = "won"
+        except (StoreConflict, TaskStateError) as exc:
+            outcome[name] = exc
+
+    threads = [threading.Thread(target=report, args=(n, e)) for n, e in (("first", first), ("second", second))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert sorted(v if v == "won" else "lost" for v in outcome.values()) == ["lost", "won"], outcome
+    loser = [v for v in outcome.values() if v != "won"][0]
+    assert "another writer" in str(loser) or "already in_progress" in str(loser) or "not running" in str(loser)
+    assert len(first.store.objects(URIRef(task), URIRef("https://locem-bridge.example.org/ont/process#status"))) == 1
