@@ -20,7 +20,8 @@ to serve the union as its default graph (``oxigraph serve --union-default-graph`
 WHERE group (:func:`~locem_bridge.pemkre.sparql_text.values_position`), never as spliced text.
 
 **Writes.** :meth:`SparqlStore.apply` is ONE update request, ``DELETE DATA {..} ; INSERT DATA {..}``, which servers
-that run one request as one transaction (Oxigraph does; so do Fuseki/TDB2 and GraphDB) apply all or nothing. Every
+that run one request as one transaction apply all or nothing (Oxigraph does, tested here; Fuseki with TDB2 and
+GraphDB say they do, not tested here). Every
 write also inserts a *token* (a triple naming a fresh ``urn:uuid:`` in the bookkeeping graph :data:`G_CLAIMS`,
 which queries, :meth:`~SparqlStore.quads` and :meth:`~SparqlStore.count` never see): when the answer to a write is
 lost on the way back, the store asks the server whether the token is there and reports ``applied`` True or False
