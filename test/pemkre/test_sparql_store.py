@@ -241,6 +241,36 @@ def test_a_lost_answer_while_the_server_cannot_be_asked_leaves_the_token_for_lat
         s.close()
 
 
+def test_a_write_that_times_out_is_not_called_unwritten_while_the_server_may_still_apply_it(sparql_store,
+                                                                                            oxigraph_server,
+                                                                                            fake_server):
+    mode = ["forward"]
+    forwarded = threading.Event()
+
+    def slow(h, body):
+        if mode[0] == "slow":
+            time.sleep(0.6)  # the client gave up after 0.3 s; the write still arrives
+        try:
+            _proxy(oxigraph_server.update_url, ["forward"])(h, body)
+        except OSError:
+            pass  # the client is gone: its answer cannot be delivered
+        finally:
+            forwarded.set()
+
+    s = SparqlStore(oxigraph_server.query_url, fake_server(slow).url, timeout_s=0.3, retry=QUICK)
+    mode[0] = "slow"
+    forwarded.clear()
+    with pytest.raises(StoreUnavailable) as err:
+        s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    msg = _one_line(err.value)
+    assert err.value.applied is None and err.value.timed_out, msg
+    assert "no answer within 0.3 s after the write was sent; asked again, the server does not have it yet, but it " \
+           "may still apply it" in msg
+    assert forwarded.wait(5)
+    assert s.was_applied(err.value.token) and s.objects(A, P) == [Literal(1)]
+    s.close()
+
+
 # ------------------------------------------------------------------------------------------------ options
 def test_a_server_serving_the_union_as_default_graph_needs_no_dataset(tmp_path):
     with OxigraphServer(str(tmp_path / "data"), extra=["--union-default-graph"]) as server:

@@ -129,12 +129,14 @@ class StoreUnavailable(StoreError):
     code = "STORE_UNAVAILABLE"
 
     def __init__(self, message: str, endpoint: str = "", reason: str = "", applied: Optional[bool] = False,
-                 token: str = "") -> None:
+                 token: str = "", timed_out: bool = False) -> None:
         super().__init__(message)
         self.endpoint = endpoint
         self.reason = reason
         self.applied = applied
         self.token = token
+        #: the server did not answer in time (it may still be working on the request)
+        self.timed_out = timed_out
 
 
 class StoreConflict(StoreError):

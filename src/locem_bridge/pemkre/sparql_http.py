@@ -140,19 +140,21 @@ class Endpoint:
         self._lock = threading.Lock()
 
     # ---------------------------------------------------------------- public
-    def post(self, form: List[Tuple[str, str]], accept: str, write: bool = False) -> Answer:
+    def post(self, form: List[Tuple[str, str]], accept: str, write: bool = False,
+             retry: Optional[RetryPolicy] = None) -> Answer:
         """POST ``form`` (``application/x-www-form-urlencoded``, as the protocol allows for query and update).
 
         A read is retried on transient failures (bounded by :attr:`retry`). A write is retried only while no
         connection could be made (nothing was sent); once sent, a lost answer raises
         :class:`~locem_bridge.pemkre.errors.StoreUnavailable` with ``applied=None`` and is never resent here.
-        An HTTP error answer raises :class:`HttpStatusError`; other answers are returned as they are.
+        An HTTP error answer raises :class:`HttpStatusError`; other answers are returned as they are. ``retry``
+        replaces :attr:`retry` for this request.
         """
         body = urlencode(form).encode("ascii")
         headers = dict(self._headers)
         headers["Content-Type"] = "application/x-www-form-urlencoded"
         headers["Accept"] = accept
-        delays = self.retry.delays()
+        delays = (retry or self.retry).delays()
         started = time.monotonic()
         attempt = 0
         while True:
@@ -167,7 +169,8 @@ class Endpoint:
             except _Lost as exc:
                 if write:
                     raise StoreUnavailable("%s: %s after the write was sent; whether it was applied is unknown"
-                                           % (self.name, exc.reason), self.url, exc.reason, applied=None) from None
+                                           % (self.name, exc.reason), self.url, exc.reason, applied=None,
+                                           timed_out=exc.timed_out) from None
                 if attempt <= len(delays):
                     self._sleep(delays[attempt - 1])
                     continue

@@ -399,7 +399,8 @@ class SparqlStore(TripleStore):
                 ops = self._cleanup_ops()
                 if ops:
                     try:
-                        self.update_endpoint.post([("update", ops[0])], "*/*", write=True)
+                        self.update_endpoint.post([("update", ops[0])], "*/*", write=True,
+                                                  retry=RetryPolicy(attempts=1))
                     except StoreError:
                         pass  # a leftover token is harmless (outside every query); the store is closing anyway
         finally:
@@ -445,16 +446,22 @@ class SparqlStore(TripleStore):
         except StoreUnavailable as exc:
             if exc.applied is not None:
                 raise
+            lost = str(exc).replace("; whether it was applied is unknown", "")
             try:
                 applied = self._token_stored(token)
             except StoreError as again:
                 self.unknown_writes.append(token)
                 raise StoreUnavailable("%s; the server cannot be asked whether it was applied either (%s); "
-                                       "was_applied(%r) tells later" % (exc, again, token), exc.endpoint,
-                                       exc.reason, applied=None, token=token) from None
+                                       "was_applied(%r) tells later" % (lost, again, token), exc.endpoint,
+                                       exc.reason, applied=None, token=token, timed_out=exc.timed_out) from None
+            if not applied and exc.timed_out:
+                # the server may still be working on it: not written yet is not "never written"
+                self.unknown_writes.append(token)
+                raise StoreUnavailable("%s; asked again, the server does not have it yet, but it may still apply "
+                                       "it; was_applied(%r) tells later" % (lost, token), exc.endpoint, exc.reason,
+                                       applied=None, token=token, timed_out=True) from None
             if not applied:
-                raise StoreUnavailable("%s; asked again, the server does not have it: nothing was written"
-                                       % str(exc).replace("; whether it was applied is unknown", ""),
+                raise StoreUnavailable("%s; asked again, the server does not have it: nothing was written" % lost,
                                        exc.endpoint, exc.reason, applied=False, token=token) from None
             # written: only the answer was lost, which is no failure of the change
 
