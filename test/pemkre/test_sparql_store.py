@@ -324,3 +324,37 @@ def test_two_engines_on_one_server_racing_on_one_task_status_exactly_one_wins(sp
     loser = [v for v in outcome.values() if v != "won"][0]
     assert "another writer" in str(loser) or "already in_progress" in str(loser) or "not running" in str(loser)
     assert len(first.store.objects(URIRef(task), URIRef("https://locem-bridge.example.org/ont/process#status"))) == 1
+
+
+def test_an_engine_restarted_on_the_server_runs_the_process_as_on_the_embedded_store(sparql_store, make_engine):
+    """The schema and ontology graphs share blank nodes (restrictions), written by separate requests: reloaded
+    from the server, they must still be the same nodes (skolemised), or the restarted engine reasons wrongly."""
+    embedded = make_engine()
+    embedded.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    expected = run_process(embedded, _decide)
+    first = ProcessEngine(sparql_store(), clock=FakeClock())
+    first.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    scan = first.next_action()
+    first.set_task_status(scan.task, "in_progress")
+    first.set_task_status(scan.task, *_decide(scan))
+    first.store.close()
+    restarted = ProcessEngine(sparql_store(), clock=FakeClock())
+    assert [(scan.action_type, scan.params())] + run_process(restarted, _decide) == expected
+    assert restarted.store.value(SITE.wall_1_joint_2, PPR.tapingStatus) == PPR.processed
+
+
+def test_blank_nodes_shared_by_the_ontology_and_schema_graphs_stay_shared_on_the_server(sparql_store, make_engine):
+    from rdflib import BNode
+
+    from locem_bridge.pemkre.store import G_ONTOLOGY, G_SCHEMA_INFERRED
+
+    def shared(store):
+        nodes = [{t for q in store.quads(None, None, None, (g,)) for t in (q[0], q[2]) if isinstance(t, BNode)}
+                 for g in (G_ONTOLOGY, G_SCHEMA_INFERRED)]
+        return len(nodes[0] & nodes[1])
+
+    expected = shared(make_engine().store)
+    assert expected > 0
+    remote = ProcessEngine(sparql_store(), clock=FakeClock())
+    assert shared(remote.store) == expected
+    assert shared(sparql_store()) == expected  # a second client reading them

@@ -18,9 +18,11 @@ def test_terms_are_written_as_n_triples_and_cannot_break_out():
     assert term_text(Literal("s", datatype=XSD.string)) == '"s"'
     with pytest.raises(InvalidParameterError, match="may not contain"):
         term_text(URIRef("https://ex.example/a> } ; DROP ALL ; <x"))
+    assert term_text(BNode("b1")) == term_text(BNode("b1"), blank=True) == "<urn:pemkre:bnode:b1>"
     with pytest.raises(InvalidParameterError, match="blank node"):
-        term_text(BNode("b1"))
-    assert term_text(BNode("b1"), blank=True) == "_:b1"
+        term_text(BNode("b 1"))
+    assert json_rows({"head": {"vars": ["a"]}, "results": {"bindings": [
+        {"a": {"type": "uri", "value": "urn:pemkre:bnode:b1"}}]}}, "here")[1] == [{"a": BNode("b1")}]
 
 
 @pytest.mark.parametrize("text, kind, before", [

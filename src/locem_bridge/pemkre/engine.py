@@ -97,7 +97,10 @@ _M_resourceHash = META.resourceModelHash
 #: The fingerprint of what the stored resource model was built from (given by the loader; see resume_resource_model).
 _M_resourceKey = META.resourceModelKey
 #: Schema closures by ontology hash, shared by the engines of one process (a closure is never modified).
-_CLOSURE_CACHE: Dict[str, Graph] = {}
+#: schema hash -> (the schema graph, its closure): the schema is cached with its closure because a reload of the
+#: same files gives its blank nodes new labels, and the ontology graph and the inferred schema graph written from
+#: them must share their blank nodes
+_CLOSURE_CACHE: Dict[str, Tuple[Graph, Graph]] = {}
 
 
 @dataclass
@@ -224,16 +227,19 @@ class ProcessEngine:
         self.prefixes = loaded.prefixes
         stored_hash = store.value(META.ontology, META.schemaHash, (G_META,))
         if stored_hash is None or str(stored_hash) != loaded.schema_hash:
-            closed = _CLOSURE_CACHE.get(loaded.schema_hash)
-            if closed is None:
-                closed = bounded_closure(loaded.schema, schema_max_seconds, schema_max_triples)
+            cached = _CLOSURE_CACHE.get(loaded.schema_hash)
+            if cached is None:
+                schema = loaded.schema
+                closed = bounded_closure(schema, schema_max_seconds, schema_max_triples)
                 _CLOSURE_CACHE.clear()
-                _CLOSURE_CACHE[loaded.schema_hash] = closed
-            rules = SchemaRules(closed, loaded.schema)
+                _CLOSURE_CACHE[loaded.schema_hash] = (schema, closed)
+            else:
+                schema, closed = cached
+            rules = SchemaRules(closed, schema)
             self._check_unsupported(rules, allow_unsupported_owl)
             model = compile_model(closed, store, self.prefixes)  # before any write: a bad model changes nothing
-            store.replace_graph(G_ONTOLOGY, loaded.schema)
-            store.replace_graph(G_SCHEMA_INFERRED, inferred_part(loaded.schema, closed))
+            store.replace_graph(G_ONTOLOGY, schema)
+            store.replace_graph(G_SCHEMA_INFERRED, inferred_part(schema, closed))
             self.reasoner = IncrementalReasoner(rules, reasoning_max_seconds, reasoning_max_triples,
                                                  reasoning_clock)
             cs = self.reasoner.recompute_all(store, max_seconds=schema_max_seconds, max_triples=schema_max_triples)

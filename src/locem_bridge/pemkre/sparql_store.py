@@ -70,7 +70,7 @@ from rdflib.term import Node
 from .errors import InvalidParameterError, QueryError, StoreConflict, StoreError, StoreUnavailable
 from .oxigraph_store import _VAR_RE, query_kind
 from .sparql_http import Answer, Endpoint, HttpStatusError, RetryPolicy
-from .sparql_text import iri_text, json_rows, term_text, values_block, values_position
+from .sparql_text import iri_text, json_rows, term_text, unskolem, values_block, values_position
 from .store import (ASSERTED_GRAPHS, G_META, INFERRED_GRAPHS, ChangeSet, PreparedQuery, Quad, QueryResult, Triple,
                     TripleStore, conflict_error)
 from .vocab import GRAPHS, META
@@ -230,11 +230,7 @@ class SparqlStore(TripleStore):
         for name, term in (("s", s), ("p", p), ("o", o)):
             if term is None:
                 pattern.append("?" + name)
-            elif isinstance(term, BNode):
-                # a server's blank node cannot be named in a query: match any, keep those with this label
-                pattern.append("?" + name)
-                wanted[name] = term
-            else:
+            else:  # a blank node too: it is stored as its skolem IRI
                 pattern.append(term_text(term))
         if graphs is None:
             head = ""
@@ -515,6 +511,7 @@ class SparqlStore(TripleStore):
                              % (where, what, str(exc).splitlines()[0][:200])) from None
         out: List[Triple] = []
         for s, p, o in g:
+            s, o = unskolem(s), unskolem(o)
             if isinstance(o, Literal) and o.datatype == XSD.string:
                 o = Literal(str(o))
             out.append((s, p, o))

@@ -18,6 +18,9 @@ _XSD_STRING = str(XSD.string)
 _IRI_BAD = re.compile(r'[\x00-\x20<>"{}|^`\\]')
 _LANG_RE = re.compile(r"^[A-Za-z]+(-[A-Za-z0-9]+)*$")
 _BNODE_RE = re.compile(r"^[A-Za-z0-9_]([A-Za-z0-9_.\-]*[A-Za-z0-9_\-])?$")
+#: blank nodes travel to and from the server as IRIs under this prefix (skolemised), so one blank node stays one
+#: node across update requests and graphs (a blank node label names a node within one request only)
+SKOLEM_PREFIX = "urn:pemkre:bnode:"
 _ESCAPES = {"\\": "\\\\", '"': '\\"', "\n": "\\n", "\r": "\\r"}
 _ESCAPE_RE = re.compile(r'[\\"\n\r]')
 
@@ -30,9 +33,10 @@ def iri_text(iri: str) -> str:
     return "<%s>" % iri
 
 
-def term_text(term: Node, blank: bool = False) -> str:
-    """An rdflib term as an N-Triples / SPARQL term; blank nodes only where ``blank`` allows them (data blocks
-    of ``INSERT DATA``; never in ``VALUES`` or ``DELETE DATA``)."""
+def term_text(term: Node, blank: bool = True) -> str:
+    """An rdflib term as an N-Triples / SPARQL term. A blank node is written as the IRI
+    ``<urn:pemkre:bnode:LABEL>`` (skolemised: it keeps its identity across requests and graphs; :func:`json_term`
+    and :func:`unskolem` turn it back into the blank node). ``blank`` is kept for callers; it changes nothing."""
     if isinstance(term, URIRef):
         return iri_text(str(term))
     if isinstance(term, Literal):
@@ -45,14 +49,18 @@ def term_text(term: Node, blank: bool = False) -> str:
             return '"%s"^^%s' % (lexical, iri_text(str(term.datatype)))
         return '"%s"' % lexical
     if isinstance(term, BNode):
-        if not blank:
-            raise InvalidParameterError("a blank node (_:%s) cannot be sent as a value to a SPARQL server: it "
-                                        "names nothing outside one request" % term)
         label = str(term)
         if not _BNODE_RE.match(label):
-            raise InvalidParameterError("blank node label %r cannot be written in N-Triples" % label[:100])
-        return "_:" + label
+            raise InvalidParameterError("blank node label %r cannot be written to a SPARQL server" % label[:100])
+        return iri_text(SKOLEM_PREFIX + label)
     raise InvalidParameterError("not an RDF term: %r" % (term,))
+
+
+def unskolem(term: Node) -> Node:
+    """The blank node a skolem IRI written by :func:`term_text` stands for; any other term unchanged."""
+    if isinstance(term, URIRef) and term.startswith(SKOLEM_PREFIX):
+        return BNode(term[len(SKOLEM_PREFIX):])
+    return term
 
 
 def values_block(bindings: Mapping[str, Node]) -> str:
@@ -165,6 +173,8 @@ def json_term(value: object, where: str) -> Node:
     if not isinstance(v, str):
         raise StoreError("%s: a result term has no text value: %r" % (where, value))
     if kind == "uri":
+        if v.startswith(SKOLEM_PREFIX):
+            return BNode(v[len(SKOLEM_PREFIX):])
         u = _IRI_CACHE.get(v)
         if u is None:
             if len(_IRI_CACHE) >= _IRI_CACHE_MAX:
