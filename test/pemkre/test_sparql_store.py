@@ -5,6 +5,7 @@ whose answer is lost (the claim token tells whether it was applied); the engine 
 import http.server
 import threading
 import time
+import urllib.parse
 import urllib.request
 
 import pytest
@@ -358,3 +359,32 @@ def test_blank_nodes_shared_by_the_ontology_and_schema_graphs_stay_shared_on_the
     remote = ProcessEngine(sparql_store(), clock=FakeClock())
     assert shared(remote.store) == expected
     assert shared(sparql_store()) == expected  # a second client reading them
+
+
+def test_a_conditional_write_that_failed_after_its_claim_can_be_retried_at_once(sparql_store, oxigraph_server,
+                                                                                 fake_server):
+    mode = ["forward"]
+    forward = _proxy(oxigraph_server.update_url, mode)
+    fail_final = [True]
+
+    def handle(h, body):
+        text = urllib.parse.parse_qs(body.decode("utf-8")).get("update", [""])[0]
+        if fail_final[0] and "INSERT {" in text and "NOW()" not in text:  # the final write, after the claim
+            fail_final[0] = False
+            _reply(h, 500, "text/plain", "injected failure")
+            return
+        forward(h, body)
+
+    proxy = fake_server(handle)
+    s = SparqlStore(oxigraph_server.query_url, proxy.url, retry=QUICK, claim_attempts=2)
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    change = ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(2), G_WORLD)],
+                       expect=[(A, P, Literal(1), G_WORLD)])
+    with pytest.raises(StoreError):
+        s.apply(change)
+    assert not fail_final[0]
+    started = time.monotonic()
+    s.apply(change)  # not blocked by its own dead claim
+    assert time.monotonic() - started < 5
+    assert s.objects(A, P) == [Literal(2)]
+    s.close()

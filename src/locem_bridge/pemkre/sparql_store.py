@@ -117,6 +117,9 @@ class SparqlStore(TripleStore):
         self._graphs: Set[URIRef] = set(ASSERTED_GRAPHS) | set(INFERRED_GRAPHS) | {G_META}
         self._dataset: List[Tuple[str, str]] = []
         self._done_tokens: List[str] = []  # claims of applied writes, deleted by the next write
+        #: this client's conditional-change claims that may still be on the server (a withdrawal failed): never
+        #: counted as rivals, deleted by the next claim request
+        self._my_claims: Set[str] = set()
         #: tokens of writes whose answer was lost and whose fate is not known yet (see was_applied)
         self.unknown_writes: List[str] = []
         self._lock = threading.RLock()
@@ -299,32 +302,54 @@ class SparqlStore(TripleStore):
         rivals: List[str] = []
         for attempt in range(1, self.claim_attempts + 1):
             claim = self._new_token()
-            self._write(self._cleanup_ops() + [
+            stale = sorted(self._my_claims)
+            self._my_claims.add(claim)  # from here on it may be on the server
+            self._write(self._cleanup_ops() + ([self._delete_tokens_text(stale)] if stale else []) + [
                 "INSERT { %s GRAPH %s { <%s> %s %s ; %s ?now } } WHERE { %s BIND(NOW() AS ?now) }"
                 % (self._claim_text(claim), term_text(G_CLAIMS), claim, term_text(P_CLAIM_ON), term_text(key),
                    term_text(P_CLAIM_AT), expects)], claim, "claiming " + what)
-            live = self._live_claims(key)
-            if claim not in live:
-                self._raise_conflict(changes)
-            rivals = [c for c in live if c != claim]
-            if not rivals:
-                token = self._new_token()
-                ops = [self._delete_tokens_text([claim]),
-                       "%sINSERT { %s %s } WHERE { %s }" % ("DELETE { %s } " % removes if removes else "", adds,
-                                                           self._claim_text(token), expects)]
-                self._write(ops, token, what)
-                if not self._token_stored(token):
+            self._my_claims.difference_update(stale)
+            try:
+                live = self._live_claims(key)
+                if claim not in live:
+                    self._my_claims.discard(claim)
                     self._raise_conflict(changes)
-                self._done_tokens.append(token)
-                return
+                rivals = [c for c in live if c != claim and c not in self._my_claims]
+                if not rivals:
+                    token = self._new_token()
+                    ops = [self._delete_tokens_text([claim]),
+                           "%sINSERT { %s %s } WHERE { %s }" % ("DELETE { %s } " % removes if removes else "",
+                                                               adds, self._claim_text(token), expects)]
+                    self._write(ops, token, what)
+                    self._my_claims.discard(claim)  # deleted by the write
+                    if not self._token_stored(token):
+                        self._raise_conflict(changes)
+                    self._done_tokens.append(token)
+                    return
+            except BaseException:
+                self._withdraw(claim)
+                raise
             # another writer claimed the same quads at the same time: both step back, each tries again after a
             # random pause (one of them will find itself alone; the other then finds the quads changed)
             self._update(self._delete_tokens_text([claim]), "withdrawing a claim")
+            self._my_claims.discard(claim)
             self._pause(random.uniform(0.002, 0.02) * attempt)
         s, p, o, g = changes.expect[0]
         raise StoreConflict("conflict: %s %s %s in graph %s stays claimed by another writer (%s) after %d attempts; "
                             "nothing was written" % (s.n3(), p.n3(), o.n3(), g.n3(), ", ".join(rivals[:3]),
                                                      self.claim_attempts), changes.expect[0])
+
+    def _withdraw(self, claim: str) -> None:
+        """Delete this client's claim, best effort (one request, not retried); when that fails too, the claim is
+        kept in ``_my_claims`` (not a rival to this client, deleted by its next claim request)."""
+        if claim not in self._my_claims:
+            return
+        try:
+            self.update_endpoint.post([("update", self._delete_tokens_text([claim]))], "*/*", write=True,
+                                      retry=RetryPolicy(attempts=1))
+        except StoreError:
+            return
+        self._my_claims.discard(claim)
 
     def _live_claims(self, key: URIRef) -> List[str]:
         """Tokens of the claims on ``key`` younger than ``claim_ttl_s`` (by the server's clock)."""
