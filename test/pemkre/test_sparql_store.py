@@ -388,3 +388,41 @@ def test_a_conditional_write_that_failed_after_its_claim_can_be_retried_at_once(
     assert time.monotonic() - started < 5
     assert s.objects(A, P) == [Literal(2)]
     s.close()
+
+
+def test_a_claim_ttl_shorter_than_twice_the_longest_read_and_write_path_is_refused(sparql_store):
+    from locem_bridge.pemkre.errors import InvalidParameterError
+
+    with pytest.raises(InvalidParameterError, match="claim_ttl_s 30.0 s is too short"):
+        sparql_store(timeout_s=10.0, claim_ttl_s=30.0)
+    s = sparql_store()
+    assert s.claim_ttl_s > 2 * s.claim_path_s
+
+
+def test_dead_claims_are_deleted_by_the_next_claim_request_and_an_unreadable_clock_is_not_forever(sparql_store):
+    from locem_bridge.pemkre.sparql_store import G_CLAIMS, P_CLAIM_AT, P_CLAIM_ON
+
+    s = sparql_store(retry=QUICK, timeout_s=2.0)
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    dead = URIRef("urn:uuid:00000000-0000-0000-0000-000000000001")
+    old = Literal("2000-01-01T00:00:00Z", datatype=URIRef("http://www.w3.org/2001/XMLSchema#dateTime"))
+    s.apply(ChangeSet(add=[(dead, P_CLAIM_ON, URIRef("urn:pemkre-claim:x"), G_CLAIMS),
+                           (dead, P_CLAIM_AT, old, G_CLAIMS)]))
+    assert len(list(s.quads(dead, None, None, (G_CLAIMS,)))) == 2
+    s.apply(ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(2), G_WORLD)],
+                      expect=[(A, P, Literal(1), G_WORLD)]))
+    assert list(s.quads(dead, None, None, (G_CLAIMS,))) == []
+    # a claim whose time cannot be read: counted by this client's clock, dead after the ttl
+    clock = [100.0]
+    import locem_bridge.pemkre.sparql_store as mod
+    real = mod.time.monotonic
+    try:
+        mod.time.monotonic = lambda: clock[0]
+        s._select_doc = lambda *a, **k: {"head": {"vars": ["t", "at", "now"]}, "results": {"bindings": [
+            {"t": {"type": "uri", "value": "urn:uuid:r"}, "at": {"type": "literal", "value": "garbage"},
+             "now": {"type": "literal", "value": "garbage"}}]}}
+        assert s._live_claims(URIRef("urn:pemkre-claim:x")) == ["urn:uuid:r"]
+        clock[0] += s.claim_ttl_s + 1
+        assert s._live_claims(URIRef("urn:pemkre-claim:x")) == []
+    finally:
+        mod.time.monotonic = real

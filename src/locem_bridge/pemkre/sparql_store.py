@@ -40,7 +40,7 @@ claimant withdraws and tries again after a random pause (at most ``claim_attempt
 win: a winner's claim is visible from before its read until its change is committed, so a second writer either
 sees it (and steps back) or reads after the change (and its own conditional write finds the quads changed). The
 loser gets :class:`~locem_bridge.pemkre.errors.StoreConflict` naming the expected quad that was not there. A claim
-older than ``claim_ttl_s`` (a client that died between claim and write) no longer counts. Cost: four requests for
+older than ``claim_ttl_s`` (a client that died between claim and write) no longer counts and is deleted by the next claim request; the ttl must exceed twice the longest read-and-write path (default: that plus 30 s), and a client that took more than half the ttl since its claim withdraws instead of writing. Cost: four requests for
 a conditional change (claim, read claims, write, read token), one for any other change.
 
 Failures are one line naming the endpoint: :class:`~locem_bridge.pemkre.errors.StoreUnavailable` (refused,
@@ -105,12 +105,25 @@ class SparqlStore(TripleStore):
 
     def __init__(self, query_url: str, update_url: str, timeout_s: float = 10.0,
                  retry: RetryPolicy = RetryPolicy(), union_default_graph: bool = False, check: bool = True,
-                 chunk_triples: int = 5000, claim_ttl_s: float = 30.0, claim_attempts: int = 12) -> None:
+                 chunk_triples: int = 5000, claim_ttl_s: Optional[float] = None, claim_attempts: int = 12) -> None:
         self.query_endpoint = Endpoint(query_url, "query", timeout_s, retry)
         self.update_endpoint = Endpoint(update_url, "update", timeout_s, retry)
         self.union_default_graph = union_default_graph
         self.chunk_triples = max(1, int(chunk_triples))
+        #: the longest a claim may have to wait for its write: reading the claims and writing, each with every
+        #: retry timing out
+        self.claim_path_s = sum(e.retry.attempts * timeout_s + sum(e.retry.delays())
+                                for e in (self.query_endpoint, self.update_endpoint))
+        if claim_ttl_s is None:
+            claim_ttl_s = 2 * self.claim_path_s + 30.0
+        if float(claim_ttl_s) <= 2 * self.claim_path_s:
+            raise InvalidParameterError(
+                "claim_ttl_s %.1f s is too short: a claim must outlive twice the longest read-and-write path "
+                "(%.1f s with timeout_s %.1f and %d attempts); use more than %.1f s, or a shorter timeout / fewer "
+                "attempts" % (float(claim_ttl_s), self.claim_path_s, timeout_s, retry.attempts,
+                              2 * self.claim_path_s))
         self.claim_ttl_s = float(claim_ttl_s)
+        self._first_seen: Dict[str, float] = {}  # claim token -> when this client first saw it (monotonic)
         self.claim_attempts = max(1, int(claim_attempts))
         self._pause = time.sleep
         self.client = "%s pid %d" % (socket.gethostname(), os.getpid())
@@ -304,7 +317,9 @@ class SparqlStore(TripleStore):
             claim = self._new_token()
             stale = sorted(self._my_claims)
             self._my_claims.add(claim)  # from here on it may be on the server
+            claimed_at = time.monotonic()
             self._write(self._cleanup_ops() + ([self._delete_tokens_text(stale)] if stale else []) + [
+                self._delete_dead_claims_text(),
                 "INSERT { %s GRAPH %s { <%s> %s %s ; %s ?now } } WHERE { %s BIND(NOW() AS ?now) }"
                 % (self._claim_text(claim), term_text(G_CLAIMS), claim, term_text(P_CLAIM_ON), term_text(key),
                    term_text(P_CLAIM_AT), expects)], claim, "claiming " + what)
@@ -316,6 +331,13 @@ class SparqlStore(TripleStore):
                     self._raise_conflict(changes)
                 rivals = [c for c in live if c != claim and c not in self._my_claims]
                 if not rivals:
+                    waited = time.monotonic() - claimed_at
+                    if waited > self.claim_ttl_s / 2:
+                        raise StoreUnavailable(
+                            "%s: %s took %.1f s from the claim, more than half the claim ttl (%.1f s): the claim "
+                            "was withdrawn, nothing was written" % (self.update_endpoint.name, what, waited,
+                                                                    self.claim_ttl_s),
+                            self.update_endpoint.name, "claim too old", applied=False)
                     token = self._new_token()
                     ops = [self._delete_tokens_text([claim]),
                            "%sINSERT { %s %s } WHERE { %s }" % ("DELETE { %s } " % removes if removes else "",
@@ -339,6 +361,14 @@ class SparqlStore(TripleStore):
                             "nothing was written" % (s.n3(), p.n3(), o.n3(), g.n3(), ", ".join(rivals[:3]),
                                                      self.claim_attempts), changes.expect[0])
 
+    def _delete_dead_claims_text(self) -> str:
+        """The operation deleting every claim older than ``claim_ttl_s`` by the server's clock (led by each claim
+        request, so dead claims do not pile up)."""
+        g = term_text(G_CLAIMS)
+        return ('DELETE { GRAPH %s { ?t ?p ?o } } WHERE { GRAPH %s { ?t %s ?at ; ?p ?o } '
+                'FILTER(?at < NOW() - "PT%dS"^^<http://www.w3.org/2001/XMLSchema#dayTimeDuration>) }'
+                % (g, g, term_text(P_CLAIM_AT), int(self.claim_ttl_s) + 1))
+
     def _withdraw(self, claim: str) -> None:
         """Delete this client's claim, best effort (one request, not retried); when that fails too, the claim is
         kept in ``_my_claims`` (not a rival to this client, deleted by its next claim request)."""
@@ -358,12 +388,17 @@ class SparqlStore(TripleStore):
                                   term_text(P_CLAIM_AT)), "the claims of a conditional change", dataset=False)
         _, rows = json_rows(doc, self.query_endpoint.name)
         out = []
+        seen_now = time.monotonic()
         for r in rows:
             at, now = r.get("at"), r.get("now")
+            token = str(r.get("t"))
+            first = self._first_seen.setdefault(token, seen_now)
             try:
                 age = (now.toPython() - at.toPython()).total_seconds()  # type: ignore[union-attr]
-            except Exception:  # a server whose NOW() we cannot read: every claim counts
-                age = 0.0
+            except Exception:  # a server clock we cannot read: the age by this client's clock since first seen
+                age = seen_now - first
+            if len(self._first_seen) > 10000:
+                self._first_seen.clear()
             if age < self.claim_ttl_s:
                 out.append(str(r["t"]))
         return out
