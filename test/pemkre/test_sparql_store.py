@@ -426,3 +426,21 @@ def test_dead_claims_are_deleted_by_the_next_claim_request_and_an_unreadable_clo
         assert s._live_claims(URIRef("urn:pemkre-claim:x")) == []
     finally:
         mod.time.monotonic = real
+
+
+def test_a_write_after_one_whose_fate_is_unknown_waits_until_the_server_settles_it(sparql_store, oxigraph_server):
+    s = sparql_store(retry=QUICK, timeout_s=2.0)
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    lost = "urn:uuid:00000000-0000-0000-0000-0000000000aa"
+    s.unknown_writes.append(lost)  # as after a write whose answer was lost and could not be asked about
+    oxigraph_server.kill()
+    try:
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+        msg = _one_line(err.value)
+        assert "earlier write's fate is unknown" in msg and s.update_endpoint.name in msg, msg
+        assert s.unknown_writes == [lost]
+    finally:
+        oxigraph_server.start()
+    s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))  # the server answers: settled (not applied), then written
+    assert s.unknown_writes == [] and sorted(s.objects(A, P)) == [Literal(1), Literal(2)]

@@ -293,6 +293,7 @@ class SparqlStore(TripleStore):
         except InvalidParameterError as exc:
             raise StoreError("cannot write this change (nothing was written): %s" % exc) from None
         with self._lock:
+            self._settle_unknown_writes()
             if changes.expect:
                 self._apply_conditional(changes, removes, adds, expects)
             else:
@@ -360,6 +361,20 @@ class SparqlStore(TripleStore):
         raise StoreConflict("conflict: %s %s %s in graph %s stays claimed by another writer (%s) after %d attempts; "
                             "nothing was written" % (s.n3(), p.n3(), o.n3(), g.n3(), ", ".join(rivals[:3]),
                                                      self.claim_attempts), changes.expect[0])
+
+    def _settle_unknown_writes(self) -> None:
+        """Before a new write: ask the server about every earlier write whose answer was lost
+        (:meth:`was_applied`); :class:`~locem_bridge.pemkre.errors.StoreUnavailable` while any stays unknown (a
+        write must not build blindly on one that may or may not have happened)."""
+        for token in list(self.unknown_writes):
+            try:
+                self.was_applied(token)
+            except StoreError as exc:
+                raise StoreUnavailable(
+                    "%s: an earlier write's fate is unknown (its answer was lost, token %s) and the server cannot "
+                    "be asked (%s); nothing was written; was_applied(%r) settles it" % (
+                        self.update_endpoint.name, token, exc, token), self.update_endpoint.name,
+                    "earlier write unknown", applied=False) from None
 
     def _delete_dead_claims_text(self) -> str:
         """The operation deleting every claim older than ``claim_ttl_s`` by the server's clock (led by each claim
