@@ -444,3 +444,32 @@ def test_a_write_after_one_whose_fate_is_unknown_waits_until_the_server_settles_
         oxigraph_server.start()
     s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))  # the server answers: settled (not applied), then written
     assert s.unknown_writes == [] and sorted(s.objects(A, P)) == [Literal(1), Literal(2)]
+
+
+@pytest.mark.parametrize("status", [502, 504])
+def test_a_gateway_error_on_a_write_is_a_lost_answer_settled_by_the_token(sparql_store, oxigraph_server,
+                                                                           fake_server, status):
+    mode = ["forward"]
+
+    def handle(h, body):
+        if mode[0] == "forward":
+            _proxy(oxigraph_server.update_url, ["forward"])(h, body)
+        elif mode[0] == "applied":
+            req = urllib.request.Request(oxigraph_server.update_url, data=body,
+                                         headers={"Content-Type": "application/x-www-form-urlencoded"})
+            urllib.request.urlopen(req, timeout=10).close()
+            _reply(h, status, "text/plain", "gateway")
+        else:
+            _reply(h, status, "text/plain", "gateway")
+
+    proxy = fake_server(handle)
+    s = SparqlStore(oxigraph_server.query_url, proxy.url, retry=QUICK)
+    mode[0] = "applied"
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))  # written; the gateway's error hid the answer
+    assert s.objects(A, P) == [Literal(1)]
+    mode[0] = "not applied"
+    with pytest.raises(StoreUnavailable) as err:
+        s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+    assert err.value.applied is None and err.value.token in s.unknown_writes, str(err.value)
+    assert s.was_applied(err.value.token) is False
+    s.close()

@@ -178,6 +178,11 @@ class Endpoint:
             if answer.status in TRANSIENT_STATUSES and not write and attempt <= len(delays):
                 self._sleep(delays[attempt - 1])
                 continue
+            if write and answer.status in (502, 504):
+                # a gateway in front of the server failed or gave up: the write may have reached the server
+                raise StoreUnavailable("%s: HTTP %d %s after the write was sent (a gateway); whether it was applied "
+                                       "is unknown" % (self.name, answer.status, answer.reason), self.url,
+                                       "HTTP %d" % answer.status, applied=None, timed_out=True)
             if answer.status >= 300:
                 raise self.status_error(answer)
             return answer
