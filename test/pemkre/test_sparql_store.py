@@ -15,7 +15,7 @@ from rdflib import Literal, URIRef
 
 from locem_bridge.pemkre import PLB, PPR, ProcessEngine
 from locem_bridge.pemkre.errors import QueryError, StoreConflict, StoreError, StoreUnavailable, TaskStateError
-from locem_bridge.pemkre.sparql_http import RetryPolicy
+from locem_bridge.pemkre.sparql_http import Endpoint, RetryPolicy
 from locem_bridge.pemkre.sparql_store import SparqlStore
 from locem_bridge.pemkre.store import G_WORLD, ChangeSet
 from locem_bridge.pemkre.vocab import SITE
@@ -246,11 +246,11 @@ def test_a_write_that_times_out_is_not_called_unwritten_while_the_server_may_sti
                                                                                             oxigraph_server,
                                                                                             fake_server):
     mode = ["forward"]
-    forwarded = threading.Event()
+    forwarded, release = threading.Event(), threading.Event()
 
     def slow(h, body):
         if mode[0] == "slow":
-            time.sleep(0.6)  # the client gave up after 0.3 s; the write still arrives
+            release.wait(30)  # held until the client has given up and asked for the token
         try:
             _proxy(oxigraph_server.update_url, ["forward"])(h, body)
         except OSError:
@@ -259,15 +259,19 @@ def test_a_write_that_times_out_is_not_called_unwritten_while_the_server_may_sti
             forwarded.set()
 
     s = SparqlStore(oxigraph_server.query_url, fake_server(slow).url, timeout_s=0.3, retry=QUICK)
+    s.query_endpoint = Endpoint(oxigraph_server.query_url, "query", 10.0, QUICK)  # reads are not what is timed
     mode[0] = "slow"
     forwarded.clear()
-    with pytest.raises(StoreUnavailable) as err:
-        s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    try:
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    finally:
+        release.set()  # now the write arrives, after the client gave up
     msg = _one_line(err.value)
     assert err.value.applied is None and err.value.timed_out, msg
     assert "no answer within 0.3 s after the write was sent; asked again, the server does not have it yet, but it " \
            "may still apply it" in msg
-    assert forwarded.wait(5)
+    assert forwarded.wait(10)
     assert s.was_applied(err.value.token) and s.objects(A, P) == [Literal(1)]
     s.close()
 
@@ -308,23 +312,26 @@ def test_two_engines_on_one_server_racing_on_one_task_status_exactly_one_wins(sp
     outcome = {}
     start = threading.Barrier(2)
 
-    def report(name, engine):
+    def report(name, engine, status):
         start.wait()
         try:
-            engine.set_task_status(task, "in_progress", request_id="")
-            outcome[name] = "won"
+            engine.set_task_status(task, status, request_id="")
+            outcome[name] = ("won", status)
         except (StoreConflict, TaskStateError) as exc:
-            outcome[name] = exc
+            outcome[name] = ("lost", exc)
 
-    threads = [threading.Thread(target=report, args=(n, e)) for n, e in (("first", first), ("second", second))]
+    threads = [threading.Thread(target=report, args=(n, e, st))
+               for n, e, st in (("first", first, "in_progress"), ("second", second, "failed"))]
     for t in threads:
         t.start()
     for t in threads:
         t.join(60)
-    assert sorted(v if v == "won" else "lost" for v in outcome.values()) == ["lost", "won"], outcome
-    loser = [v for v in outcome.values() if v != "won"][0]
+    assert sorted(v[0] for v in outcome.values()) == ["lost", "won"], outcome
+    loser = [v[1] for v in outcome.values() if v[0] == "lost"][0]
     assert "another writer" in str(loser) or "already in_progress" in str(loser) or "not running" in str(loser)
-    assert len(first.store.objects(URIRef(task), URIRef("https://locem-bridge.example.org/ont/process#status"))) == 1
+    winner_status = [v[1] for v in outcome.values() if v[0] == "won"][0]
+    status = first.store.objects(URIRef(task), URIRef("https://locem-bridge.example.org/ont/process#status"))
+    assert len(status) == 1 and str(status[0]).endswith(winner_status), (status, winner_status)
 
 
 def test_an_engine_restarted_on_the_server_runs_the_process_as_on_the_embedded_store(sparql_store, make_engine):
