@@ -480,3 +480,16 @@ def test_a_gateway_error_on_a_write_is_a_lost_answer_settled_by_the_token(sparql
     assert err.value.applied is None and err.value.token in s.unknown_writes, str(err.value)
     assert s.was_applied(err.value.token) is False
     s.close()
+
+
+def test_only_pemkre_graphs_found_on_the_server_join_the_default_graph(sparql_store, oxigraph_server):
+    from locem_bridge.pemkre.vocab import GRAPHS
+
+    writer = sparql_store()
+    foreign, ours = URIRef(EX + "other-system"), URIRef(str(GRAPHS) + "extra")
+    writer.replace_graph(foreign, [(A, P, Literal(1))])
+    writer.replace_graph(ours, [(A, P, Literal(2))])
+    reader = sparql_store()  # finds both graphs on the server
+    q = reader.prepare("SELECT ?x WHERE { ex:a ex:p ?x }", "p", {"ex": EX})
+    assert reader.select(q) == [{"x": Literal(2)}]
+    assert foreign not in reader.refresh_graphs() and ours in reader.refresh_graphs()

@@ -11,7 +11,7 @@ graphs). Standard SPARQL has no "union default graph" switch, so each query name
 the protocol's ``default-graph-uri`` parameters, one per named graph the store knows (RDF-merged into the default
 graph by the server), and the same list as ``named-graph-uri`` so ``GRAPH ?g`` patterns keep working. The graphs
 known are PEMKRE's own (:data:`~locem_bridge.pemkre.store.ASSERTED_GRAPHS`, the inferred graphs, ``G_META``), those
-found on the server when the store is opened, and those this client writes; a graph another client creates later
+under PEMKRE's graph namespace found on the server when the store is opened (other systems' graphs stay out), and those this client writes; a graph another client creates later
 is seen after :meth:`SparqlStore.refresh_graphs`. The query text is not rewritten for this. A server already set up
 to serve the union as its default graph (``oxigraph serve --union-default-graph``, Fuseki's
 ``tdb2:unionDefaultGraph``) may be used with ``union_default_graph=True``, which sends no dataset at all.
@@ -156,10 +156,12 @@ class SparqlStore(TripleStore):
         self.refresh_graphs()
 
     def refresh_graphs(self) -> List[URIRef]:
-        """Ask the server for its named graphs and make them part of the union default graph; returns them."""
+        """Ask the server for its named graphs under PEMKRE's graph namespace (:data:`~locem_bridge.pemkre.vocab.GRAPHS`)
+        and make them part of the union default graph; returns them. Other graphs on the server stay out."""
         doc = self._select_doc("SELECT DISTINCT ?g WHERE { GRAPH ?g { } }", "the list of named graphs", dataset=False)
         _, rows = json_rows(doc, self.query_endpoint.name)
-        found = [r["g"] for r in rows if isinstance(r.get("g"), URIRef) and r["g"] != G_CLAIMS]
+        found = [r["g"] for r in rows if isinstance(r.get("g"), URIRef) and r["g"] != G_CLAIMS
+                 and str(r["g"]).startswith(str(GRAPHS))]  # other systems' graphs on the server stay out
         with self._lock:
             self._graphs.update(found)  # type: ignore[arg-type]
             self._refresh_dataset()
