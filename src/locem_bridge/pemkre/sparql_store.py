@@ -244,7 +244,8 @@ class SparqlStore(TripleStore):
     # ---------------------------------------------------------------- reads
     def quads(self, s: Optional[Node] = None, p: Optional[Node] = None, o: Optional[Node] = None,
               graphs: Optional[Sequence[URIRef]] = None) -> Iterator[Quad]:
-        pattern, filters, wanted = [], [], {}
+        pattern: List[str] = []
+        filters: List[str] = []
         for name, term in (("s", s), ("p", p), ("o", o)):
             if term is None:
                 pattern.append("?" + name)
@@ -262,8 +263,6 @@ class SparqlStore(TripleStore):
         _, rows = json_rows(doc, self.query_endpoint.name)
         out: List[Quad] = []
         for r in rows:
-            if any(r.get(k) != v for k, v in wanted.items()):
-                continue
             out.append((s if s is not None else r["s"], p if p is not None else r["p"],
                         o if o is not None else r["o"], r["g"]))  # type: ignore[arg-type]
         return iter(out)
