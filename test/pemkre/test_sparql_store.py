@@ -3,6 +3,7 @@
 query the server refuses; the server killed and restarted (reads reconnect, the data is still there); a write
 whose answer is lost (the claim token tells whether it was applied); the engine on the server."""
 import http.server
+import re
 import threading
 import time
 import urllib.parse
@@ -308,6 +309,7 @@ def test_two_engines_on_one_server_racing_on_one_task_status_exactly_one_wins(sp
     first = ProcessEngine(sparql_store(), clock=FakeClock())
     first.start_process(str(PLB.TapingProcess), {"validateLines": False})
     task = first.next_action().task
+    first.set_task_status(task, "in_progress")
     second = ProcessEngine(sparql_store(), clock=FakeClock())  # a second PEMKRE client: finds the running process
     outcome = {}
     start = threading.Barrier(2)
@@ -321,14 +323,15 @@ def test_two_engines_on_one_server_racing_on_one_task_status_exactly_one_wins(sp
             outcome[name] = ("lost", exc)
 
     threads = [threading.Thread(target=report, args=(n, e, st))
-               for n, e, st in (("first", first, "in_progress"), ("second", second, "failed"))]
+               for n, e, st in (("first", first, "succeeded"), ("second", second, "failed"))]
     for t in threads:
         t.start()
     for t in threads:
         t.join(60)
     assert sorted(v[0] for v in outcome.values()) == ["lost", "won"], outcome
     loser = [v[1] for v in outcome.values() if v[0] == "lost"][0]
-    assert "another writer" in str(loser) or "already in_progress" in str(loser) or "not running" in str(loser)
+    # both reports are final: whichever comes second, even one after the other, finds the task no longer running
+    assert "another writer" in str(loser) or "not running" in str(loser), loser
     winner_status = [v[1] for v in outcome.values() if v[0] == "won"][0]
     status = first.store.objects(URIRef(task), URIRef("https://locem-bridge.example.org/ont/process#status"))
     assert len(status) == 1 and str(status[0]).endswith(winner_status), (status, winner_status)
@@ -366,6 +369,27 @@ def test_blank_nodes_shared_by_the_ontology_and_schema_graphs_stay_shared_on_the
     remote = ProcessEngine(sparql_store(), clock=FakeClock())
     assert shared(remote.store) == expected
     assert shared(sparql_store()) == expected  # a second client reading them
+
+
+def test_two_clients_starting_on_an_empty_server_write_the_same_blank_node_labels(sparql_store):
+    """Two clients (two processes: no shared closure cache) starting at once: one's ontology graph and the other's
+    inferred schema graph may end up together on the server; with canonical labels they still share their nodes."""
+    from rdflib import BNode
+
+    import locem_bridge.pemkre.engine as engine_module
+    from locem_bridge.pemkre import RdflibStore
+    from locem_bridge.pemkre.store import G_ONTOLOGY, G_SCHEMA_INFERRED
+
+    def graph(store, g):  # the triples around blank nodes
+        return {q[:3] for q in store.quads(None, None, None, (g,)) if any(isinstance(t, BNode) for t in q[:3])}
+
+    engine_module._CLOSURE_CACHE.clear()  # the first process
+    remote = ProcessEngine(sparql_store(), clock=FakeClock())
+    engine_module._CLOSURE_CACHE.clear()  # the second process loads the same files
+    other = ProcessEngine(RdflibStore(), clock=FakeClock())
+    for g in (G_ONTOLOGY, G_SCHEMA_INFERRED):
+        mine, theirs = graph(remote.store, g), graph(other.store, g)
+        assert mine and mine == theirs, g  # the same triples, blank node labels included
 
 
 def test_a_conditional_write_that_failed_after_its_claim_can_be_retried_at_once(sparql_store, oxigraph_server,
@@ -421,25 +445,23 @@ def test_dead_claims_are_deleted_by_the_next_claim_request_and_an_unreadable_clo
     assert list(s.quads(dead, None, None, (G_CLAIMS,))) == []
     # a claim whose time cannot be read: counted by this client's clock, dead after the ttl
     clock = [100.0]
-    import locem_bridge.pemkre.sparql_store as mod
-    real = mod.time.monotonic
-    try:
-        mod.time.monotonic = lambda: clock[0]
-        s._select_doc = lambda *a, **k: {"head": {"vars": ["t", "at", "now"]}, "results": {"bindings": [
-            {"t": {"type": "uri", "value": "urn:uuid:r"}, "at": {"type": "literal", "value": "garbage"},
-             "now": {"type": "literal", "value": "garbage"}}]}}
-        assert s._live_claims(URIRef("urn:pemkre-claim:x")) == ["urn:uuid:r"]
-        clock[0] += s.claim_ttl_s + 1
-        assert s._live_claims(URIRef("urn:pemkre-claim:x")) == []
-    finally:
-        mod.time.monotonic = real
+    s.clock = lambda: clock[0]  # the store's own clock, not the global time.monotonic
+    s._select_doc = lambda *a, **k: {"head": {"vars": ["t", "at", "now"]}, "results": {"bindings": [
+        {"t": {"type": "uri", "value": "urn:uuid:r"}, "at": {"type": "literal", "value": "garbage"},
+         "now": {"type": "literal", "value": "garbage"}}]}}
+    assert [c.token for c in s._live_claims(URIRef("urn:pemkre-claim:x"))] == ["urn:uuid:r"]
+    clock[0] += s.claim_ttl_s + 1
+    assert s._live_claims(URIRef("urn:pemkre-claim:x")) == []
 
 
-def test_a_write_after_one_whose_fate_is_unknown_waits_until_the_server_settles_it(sparql_store, oxigraph_server):
+def test_a_write_after_one_whose_fate_is_unknown_waits_until_it_shows_or_the_claim_ttl_has_passed(sparql_store,
+                                                                                                   oxigraph_server):
     s = sparql_store(retry=QUICK, timeout_s=2.0)
+    clock = [1000.0]
+    s.clock = lambda: clock[0]
     s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
     lost = "urn:uuid:00000000-0000-0000-0000-0000000000aa"
-    s.unknown_writes.append(lost)  # as after a write whose answer was lost and could not be asked about
+    s._note_unknown(lost, s.clock(), timed_out=False)  # as after a write whose answer was lost, server not asked
     oxigraph_server.kill()
     try:
         with pytest.raises(StoreUnavailable) as err:
@@ -449,8 +471,170 @@ def test_a_write_after_one_whose_fate_is_unknown_waits_until_the_server_settles_
         assert s.unknown_writes == [lost]
     finally:
         oxigraph_server.start()
-    s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))  # the server answers: settled (not applied), then written
+    # the server answers, but not having the token yet proves nothing: the write may still arrive
+    clock[0] += 5
+    with pytest.raises(StoreUnavailable) as err:
+        s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+    msg = _one_line(err.value)
+    assert err.value.applied is False and "sent 5.0 s ago" in msg and "may still apply it" in msg, msg
+    assert s.was_applied(lost) is None and s.unknown_writes == [lost]
+    clock[0] += s.claim_ttl_s  # the claim ttl has passed since it was sent: it will not be applied any more
+    s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
     assert s.unknown_writes == [] and sorted(s.objects(A, P)) == [Literal(1), Literal(2)]
+
+
+def test_a_write_that_arrives_after_its_token_was_first_missed_is_found_and_holds_back_later_writes(
+        sparql_store, oxigraph_server, fake_server):
+    mode = ["forward"]
+    forwarded, release = threading.Event(), threading.Event()
+
+    def slow(h, body):
+        held = mode[0] == "slow"
+        if held:
+            release.wait(30)  # held until the test releases it: a write on its way for a long time
+        try:
+            _proxy(oxigraph_server.update_url, ["forward"])(h, body)
+        except OSError:
+            pass  # the client is gone
+        finally:
+            if held:
+                forwarded.set()
+
+    s = SparqlStore(oxigraph_server.query_url, fake_server(slow).url, timeout_s=0.3, retry=QUICK)
+    s.query_endpoint = Endpoint(oxigraph_server.query_url, "query", 10.0, QUICK)
+    clock = [1000.0]
+    s.clock = lambda: clock[0]
+    mode[0] = "slow"
+    try:
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+        token = err.value.token
+        assert err.value.applied is None and s.unknown_writes == [token]
+        mode[0] = "forward"
+        assert s.was_applied(token) is None and s.unknown_writes == [token]  # not there yet: still unknown
+        with pytest.raises(StoreUnavailable, match="earlier write's fate is unknown"):
+            s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))  # nothing builds on it while it may arrive
+        assert s.objects(A, P) == []
+    finally:
+        release.set()
+    assert forwarded.wait(10)  # the old write lands now
+    assert s.was_applied(token) is True and s.unknown_writes == []
+    s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+    assert sorted(s.objects(A, P)) == [Literal(1), Literal(2)]
+    s.close()
+
+
+def test_a_conditional_write_of_unknown_fate_keeps_its_claim_so_no_other_writer_builds_on_the_old_state(
+        sparql_store, oxigraph_server, fake_server):
+    from locem_bridge.pemkre.sparql_store import G_CLAIMS, P_CLAIM_ON
+
+    hold = [False]
+    forwarded, release = threading.Event(), threading.Event()
+
+    def handle(h, body):
+        text = urllib.parse.parse_qs(body.decode("utf-8")).get("update", [""])[0]
+        held = hold[0] and "INSERT {" in text and "NOW()" not in text  # the final write, after the claim
+        if held:
+            release.wait(30)
+        try:
+            _proxy(oxigraph_server.update_url, ["forward"])(h, body)
+        except OSError:
+            pass
+        finally:
+            if held:
+                forwarded.set()
+
+    s = SparqlStore(oxigraph_server.query_url, fake_server(handle).url, timeout_s=0.3, retry=QUICK)
+    s.query_endpoint = Endpoint(oxigraph_server.query_url, "query", 10.0, QUICK)
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    change = ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(2), G_WORLD)],
+                       expect=[(A, P, Literal(1), G_WORLD)])
+    rival = ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(3), G_WORLD)],
+                      expect=[(A, P, Literal(1), G_WORLD)])
+    key = SparqlStore.claim_key(change.expect)
+    other = sparql_store(retry=QUICK, claim_attempts=2)
+    hold[0] = True
+    try:
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(change)
+        assert err.value.applied is None and err.value.token in s.unknown_writes, str(err.value)
+        assert len(list(other.quads(None, P_CLAIM_ON, key, (G_CLAIMS,)))) == 1  # the claim was not withdrawn
+        with pytest.raises(StoreUnavailable) as err2:
+            other.apply(rival)  # would win on the old state (and be undone by the late write) without the claim
+        msg = _one_line(err2.value)
+        assert "claimed by another writer (%s, claimed " % s.client in msg and "nothing was written" in msg, msg
+    finally:
+        release.set()
+    assert forwarded.wait(10)
+    assert s.was_applied(err.value.token) is True
+    assert other.objects(A, P) == [Literal(2)]
+    assert list(other.quads(None, P_CLAIM_ON, key, (G_CLAIMS,))) == []  # the write deleted its claim
+    with pytest.raises(StoreConflict):
+        other.apply(rival)
+    s.close()
+
+
+def test_a_claim_left_by_a_dead_client_makes_the_store_unavailable_naming_its_age_not_a_conflict(sparql_store,
+                                                                                                oxigraph_server):
+    from locem_bridge.pemkre.sparql_store import G_CLAIMS, P_CLAIM_AT, P_CLAIM_ON, P_WRITE_CLAIM
+
+    s = sparql_store(retry=QUICK, claim_attempts=3)
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    change = ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(2), G_WORLD)],
+                       expect=[(A, P, Literal(1), G_WORLD)])
+    ghost = "<urn:uuid:00000000-0000-0000-0000-0000000000dd>"
+    update = ("INSERT { GRAPH <%s> { %s <%s> \"ghost host pid 1\" ; <%s> <%s> ; <%s> ?now } } WHERE { BIND(NOW() AS "
+              "?now) }" % (G_CLAIMS, ghost, P_WRITE_CLAIM, P_CLAIM_ON, SparqlStore.claim_key(change.expect),
+                           P_CLAIM_AT))
+    body = urllib.parse.urlencode({"update": update}).encode("ascii")
+    urllib.request.urlopen(urllib.request.Request(oxigraph_server.update_url, data=body), timeout=10).close()
+    with pytest.raises(StoreUnavailable) as err:
+        s.apply(change)
+    msg = _one_line(err.value)
+    assert not isinstance(err.value, StoreConflict) and err.value.applied is False
+    assert re.search(r"is claimed by another writer \(ghost host pid 1, claimed \d+ s ago\) through 3 attempts; "
+                     r"nothing was written; .*claim_ttl_s", msg), msg
+    assert s.objects(A, P) == [Literal(1)]
+
+
+def test_a_conditional_write_answered_but_whose_token_cannot_be_read_back_is_unknown_not_unapplied(sparql_store):
+    s = sparql_store(retry=QUICK)
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    real, asked = s._token_stored, []
+
+    def failing_once(token):
+        if not asked:
+            asked.append(token)
+            raise StoreUnavailable("SPARQL query endpoint x: connection refused", "x", "connection refused")
+        return real(token)
+
+    s._token_stored = failing_once
+    with pytest.raises(StoreUnavailable) as err:
+        s.apply(ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(2), G_WORLD)],
+                          expect=[(A, P, Literal(1), G_WORLD)]))
+    msg = _one_line(err.value)
+    assert err.value.applied is None and err.value.token == asked[0] and s.unknown_writes == asked, msg
+    assert "reading its token back failed" in msg, msg
+    assert s.was_applied(asked[0]) is True and s.unknown_writes == []
+    assert s.objects(A, P) == [Literal(2)]
+    # a write the server answered whose token is not there did not apply (its condition failed): settled at once
+    s._note_unknown("urn:uuid:00000000-0000-0000-0000-0000000000ee", s.clock(), timed_out=False, answered=True)
+    assert s.was_applied("urn:uuid:00000000-0000-0000-0000-0000000000ee") is False and s.unknown_writes == []
+
+
+def test_reads_without_a_graph_never_see_another_systems_graphs(sparql_store, oxigraph_server):
+    s = sparql_store()
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    foreign = URIRef(EX + "mes/orders")
+    body = urllib.parse.urlencode({"update": "INSERT DATA { GRAPH <%s> { <%s> <%s> 9 . <%s> <%s> <%s> } }" % (
+        foreign, A, P, A, URIRef("http://www.w3.org/1999/02/22-rdf-syntax-ns#type"), URIRef(EX + "Order"))})
+    urllib.request.urlopen(urllib.request.Request(oxigraph_server.update_url, data=body.encode("ascii")),
+                           timeout=10).close()
+    assert s.objects(A, P) == [Literal(1)]
+    assert all(q[3] != foreign for q in s.quads())
+    assert s.count() == 1
+    assert foreign not in [g.identifier for g in s.snapshot().graphs()]
+    assert s.objects(A, P, (foreign,)) == [Literal(9)]  # named, it is read
 
 
 @pytest.mark.parametrize("status", [502, 504])
@@ -478,7 +662,10 @@ def test_a_gateway_error_on_a_write_is_a_lost_answer_settled_by_the_token(sparql
     with pytest.raises(StoreUnavailable) as err:
         s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
     assert err.value.applied is None and err.value.token in s.unknown_writes, str(err.value)
-    assert s.was_applied(err.value.token) is False
+    # not there: but a gateway's error may come while the write is still on its way, so it stays unknown
+    assert s.was_applied(err.value.token) is None and err.value.token in s.unknown_writes
+    s.clock = lambda: time.monotonic() + s.claim_ttl_s  # until the claim ttl has passed since it was sent
+    assert s.was_applied(err.value.token) is False and s.unknown_writes == []
     s.close()
 
 

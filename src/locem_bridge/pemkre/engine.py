@@ -177,6 +177,21 @@ def _grounded(graph: Graph) -> List[Tuple[Node, Node, Node]]:
     return list(canonical.skolemize(authority=str(LOG).rstrip("/").rsplit("/", 1)[0], basepath="/resource-node/"))
 
 
+def _canonical_labels(graph: Graph) -> Graph:
+    """``graph`` with its blank nodes relabelled canonically (rdflib.compare): the labels depend only on the
+    triples, so any process loading the same ontology files gets the same labels. Prefix bindings are kept."""
+    if not any(isinstance(x, BNode) for t in graph for x in t):
+        return graph
+    from rdflib.compare import to_canonical_graph
+
+    out = Graph()
+    for prefix, namespace in graph.namespaces():
+        out.bind(prefix, namespace, override=True, replace=True)
+    for t in to_canonical_graph(graph):
+        out.add(t)
+    return out
+
+
 def _argument_literal(text: str) -> Literal:
     """A template step's literal argument: an integer or a number typed as such, else text."""
     try:
@@ -229,7 +244,10 @@ class ProcessEngine:
         if stored_hash is None or str(stored_hash) != loaded.schema_hash:
             cached = _CLOSURE_CACHE.get(loaded.schema_hash)
             if cached is None:
-                schema = loaded.schema
+                # canonical blank node labels: every client loading the same files writes the same labels, so an
+                # ontology graph written by one client and an inferred schema graph written by another (two
+                # clients starting on one empty server) still share their blank nodes
+                schema = _canonical_labels(loaded.schema)
                 closed = bounded_closure(schema, schema_max_seconds, schema_max_triples)
                 _CLOSURE_CACHE.clear()
                 _CLOSURE_CACHE[loaded.schema_hash] = (schema, closed)

@@ -122,8 +122,11 @@ class StoreUnavailable(StoreError):
 
     ``endpoint`` names the URL (without credentials), ``reason`` what went wrong. For a write, ``applied`` says
     what became of it: ``False`` nothing was written, ``True`` it was written (only the answer was late), ``None``
-    unknown (the answer was lost and the server could not be asked); ``token`` then names the write's claim token
-    (see :meth:`~locem_bridge.pemkre.sparql_store.SparqlStore.was_applied`).
+    unknown (the answer was lost and the server could not be asked, or the write is not there yet but may still
+    arrive); ``token`` then names the write's claim token (see
+    :meth:`~locem_bridge.pemkre.sparql_store.SparqlStore.was_applied`). A remote store also raises it while a
+    write it could not settle is unknown, and while the quads of a conditional change stay claimed by another
+    client (``applied=False``: nothing was written; try again later).
     """
 
     code = "STORE_UNAVAILABLE"

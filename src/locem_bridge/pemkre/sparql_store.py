@@ -25,9 +25,15 @@ GraphDB say they do, not tested here). Every
 write also inserts a *token* (a triple naming a fresh ``urn:uuid:`` in the bookkeeping graph :data:`G_CLAIMS`,
 which queries, :meth:`~SparqlStore.quads` and :meth:`~SparqlStore.count` never see): when the answer to a write is
 lost on the way back, the store asks the server whether the token is there and reports ``applied`` True or False
-in :class:`~locem_bridge.pemkre.errors.StoreUnavailable`, or ``None`` when it cannot ask (then
-:meth:`SparqlStore.was_applied` asks later). The store never sends a write twice; the engine decides. Tokens of
-applied writes are deleted by the next write of this client (in the same request) and on :meth:`close`.
+in :class:`~locem_bridge.pemkre.errors.StoreUnavailable`, or ``None`` when it cannot ask or when a write that
+timed out is not there yet (the server may still apply it; then :meth:`SparqlStore.was_applied` asks later). Such
+a write stays *unknown* (:attr:`SparqlStore.unknown_writes`) until its token is found or ``claim_ttl_s`` has
+passed since it was sent: a token not found once proves nothing while the write may still be on its way (a
+second process from a retried start, an old status report arriving late). While any write is unknown, every
+further write of this client raises :class:`~locem_bridge.pemkre.errors.StoreUnavailable` (``applied=False``,
+the node answers NOT_READY) naming the unknown write and its age. The store never sends a write twice; the
+engine decides. Tokens of applied writes are deleted by the next write of this client (in the same request) and
+on :meth:`close`.
 
 **Conditional changes** (:attr:`~locem_bridge.pemkre.store.ChangeSet.expect`): one transaction per request is not
 enough, because a server's update transactions need not be serializable. Oxigraph's are snapshot-isolated: two
@@ -36,12 +42,29 @@ writers racing on one status both won). So a conditional change first *claims* t
 inserts a claim (token, the hash of the expected quads, the server's ``NOW()``) only WHERE the expected quads are
 there, then the client reads every live claim on them. Alone, it writes the change as ``DELETE {..} INSERT {..}
 WHERE {expected}`` together with removing its claim, in one request, and reads its token back; with rivals, every
-claimant withdraws and tries again after a random pause (at most ``claim_attempts`` times). Exactly one writer can
+claimant withdraws and tries again after a random pause (at most ``claim_attempts`` times; when another
+claimant is still there after that, :class:`~locem_bridge.pemkre.errors.StoreUnavailable` names it and its claim's
+age: a claim left by a client that died is no conflict, it blocks the quads until it is ``claim_ttl_s`` old).
+A claim whose final write's fate is unknown is not withdrawn: it keeps other writers away until that write shows
+or the claim dies. Exactly one writer can
 win: a winner's claim is visible from before its read until its change is committed, so a second writer either
 sees it (and steps back) or reads after the change (and its own conditional write finds the quads changed). The
 loser gets :class:`~locem_bridge.pemkre.errors.StoreConflict` naming the expected quad that was not there. A claim
 older than ``claim_ttl_s`` (a client that died between claim and write) no longer counts and is deleted by the next claim request; the ttl must exceed twice the longest read-and-write path (default: that plus 30 s), and a client that took more than half the ttl since its claim withdraws instead of writing. Cost: four requests for
 a conditional change (claim, read claims, write, read token), one for any other change.
+
+**Blank nodes are skolem IRIs on the server.** The store takes blank nodes only through
+:meth:`~SparqlStore.replace_graph` (the ontology graphs' restrictions and lists) and writes each as the IRI
+``<urn:pemkre:bnode:LABEL>`` (:data:`~locem_bridge.pemkre.sparql_text.SKOLEM_PREFIX`), so one node stays one node
+across requests and graphs; results, :meth:`~SparqlStore.quads` and CONSTRUCT answers turn these IRIs back into
+blank nodes. Queries run *on the server* see IRIs, not blank nodes: ``isBlank(?x)`` is false and ``isIRI(?x)``
+true for them, ``STR(?x)`` gives the skolem IRI, and ``ORDER BY`` sorts them among the IRIs (blank nodes sort
+before IRIs). An integrator's query (MES, dashboard) that tells blank nodes apart must test
+``STRSTARTS(STR(?x), "urn:pemkre:bnode:")`` instead. The labels are the engine's canonical ones (the same for
+every client loading the same ontology files).
+
+**Reads are scoped to PEMKRE's graphs.** :meth:`~SparqlStore.quads` and :meth:`~SparqlStore.count` without a
+graph read the graphs this store knows (as the union default graph above), never every graph on the server.
 
 Failures are one line naming the endpoint: :class:`~locem_bridge.pemkre.errors.StoreUnavailable` (refused,
 unknown host, timeout, connection lost; reads are retried with backoff first, see
@@ -61,13 +84,13 @@ import time
 import threading
 import uuid
 from dataclasses import dataclass
-from typing import Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Set, Tuple
+from typing import Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Set, Tuple
 
 from rdflib import BNode, Graph, Literal, URIRef
 from rdflib.namespace import XSD
 from rdflib.term import Node
 
-from .errors import InvalidParameterError, QueryError, StoreConflict, StoreError, StoreUnavailable
+from .errors import InvalidParameterError, QueryError, StoreError, StoreUnavailable
 from .oxigraph_store import _VAR_RE, query_kind
 from .sparql_http import Answer, Endpoint, HttpStatusError, RetryPolicy
 from .sparql_text import iri_text, json_rows, term_text, unskolem, values_block, values_position
@@ -95,6 +118,25 @@ class _Compiled:
 
     text: str
     values_at: Optional[int]
+
+
+@dataclass(frozen=True)
+class _Unknown:
+    """A write whose answer was lost: when it was sent (the store's clock), whether it timed out (the server may
+    have been working on it), whether the server answered it (2xx: then a token not found means not applied)."""
+
+    sent: float
+    timed_out: bool
+    answered: bool = False
+
+
+@dataclass(frozen=True)
+class _Claim:
+    """A live claim read from the server: its token, its age in seconds, the client that made it."""
+
+    token: str
+    age: float
+    client: str
 
 
 class SparqlStore(TripleStore):
@@ -126,6 +168,8 @@ class SparqlStore(TripleStore):
         self._first_seen: Dict[str, float] = {}  # claim token -> when this client first saw it (monotonic)
         self.claim_attempts = max(1, int(claim_attempts))
         self._pause = time.sleep
+        #: the clock of claim ages and unknown writes (monotonic seconds); tests put a fake one here
+        self.clock: Callable[[], float] = time.monotonic
         self.client = "%s pid %d" % (socket.gethostname(), os.getpid())
         self._graphs: Set[URIRef] = set(ASSERTED_GRAPHS) | set(INFERRED_GRAPHS) | {G_META}
         self._dataset: List[Tuple[str, str]] = []
@@ -133,8 +177,8 @@ class SparqlStore(TripleStore):
         #: this client's conditional-change claims that may still be on the server (a withdrawal failed): never
         #: counted as rivals, deleted by the next claim request
         self._my_claims: Set[str] = set()
-        #: tokens of writes whose answer was lost and whose fate is not known yet (see was_applied)
-        self.unknown_writes: List[str] = []
+        #: writes whose answer was lost and whose fate is not known yet, by token (see was_applied)
+        self._unknown: Dict[str, _Unknown] = {}
         self._lock = threading.RLock()
         self._closed = False
         self._refresh_dataset()
@@ -180,6 +224,12 @@ class SparqlStore(TripleStore):
             with self._lock:
                 self._graphs.update(new)
                 self._refresh_dataset()
+
+    def _known_graphs(self) -> List[URIRef]:
+        """The graphs reads without a graph look at: PEMKRE's own, those found on the server under its graph
+        namespace, those this client wrote (never the claims graph, never another system's graphs)."""
+        with self._lock:
+            return sorted(g for g in self._graphs if g != G_CLAIMS)
 
     # ---------------------------------------------------------------- queries
     def prepare(self, text: str, name: str, prefixes: Mapping[str, str]) -> PreparedQuery:
@@ -245,20 +295,17 @@ class SparqlStore(TripleStore):
     def quads(self, s: Optional[Node] = None, p: Optional[Node] = None, o: Optional[Node] = None,
               graphs: Optional[Sequence[URIRef]] = None) -> Iterator[Quad]:
         pattern: List[str] = []
-        filters: List[str] = []
         for name, term in (("s", s), ("p", p), ("o", o)):
             if term is None:
                 pattern.append("?" + name)
             else:  # a blank node too: it is stored as its skolem IRI
                 pattern.append(term_text(term))
-        if graphs is None:
-            head = ""
-            filters.append("FILTER(?g != %s)" % term_text(G_CLAIMS))
-        else:
-            if not graphs:
-                return iter(())
-            head = "VALUES ?g { %s } " % " ".join(term_text(g) for g in graphs)
-        text = "SELECT ?s ?p ?o ?g WHERE { %sGRAPH ?g { %s } %s }" % (head, " ".join(pattern), " ".join(filters))
+        if graphs is None:  # the graphs this store knows (PEMKRE's), not every graph on the server
+            graphs = self._known_graphs()
+        if not graphs:
+            return iter(())
+        head = "VALUES ?g { %s } " % " ".join(term_text(g) for g in graphs)
+        text = "SELECT ?s ?p ?o ?g WHERE { %sGRAPH ?g { %s } }" % (head, " ".join(pattern))
         doc = self._select_doc(text, "a quad lookup", dataset=False)
         _, rows = json_rows(doc, self.query_endpoint.name)
         out: List[Quad] = []
@@ -269,7 +316,8 @@ class SparqlStore(TripleStore):
 
     def count(self, graph: Optional[URIRef] = None) -> int:
         if graph is None:
-            text = "SELECT (COUNT(*) AS ?n) WHERE { GRAPH ?g { ?s ?p ?o } FILTER(?g != %s) }" % term_text(G_CLAIMS)
+            text = "SELECT (COUNT(*) AS ?n) WHERE { VALUES ?g { %s } GRAPH ?g { ?s ?p ?o } }" % " ".join(
+                term_text(g) for g in self._known_graphs())
         else:
             text = "SELECT (COUNT(*) AS ?n) WHERE { GRAPH %s { ?s ?p ?o } }" % term_text(graph)
         doc = self._select_doc(text, "a count", dataset=False)
@@ -308,18 +356,23 @@ class SparqlStore(TripleStore):
                 self._done_tokens.append(token)
             self._know_graphs(q[3] for q in changes.add)
 
+    @staticmethod
+    def claim_key(expect: Sequence[Quad]) -> URIRef:
+        """The IRI a conditional change's claims name: the hash of its expected quads (any order)."""
+        return URIRef("urn:pemkre-claim:" + hashlib.sha256(
+            "\n".join(sorted(SparqlStore._quad_text(q) for q in expect)).encode("utf-8")).hexdigest())
+
     def _apply_conditional(self, changes: ChangeSet, removes: str, adds: str, expects: str) -> None:
         """Claim the expected quads, write if the claim is the only live one, else withdraw and try again (see the
         module docstring: a server's update transaction need not be serializable, Oxigraph's is not)."""
-        key = URIRef("urn:pemkre-claim:" + hashlib.sha256(
-            "\n".join(sorted(self._quad_text(q) for q in changes.expect)).encode("utf-8")).hexdigest())
+        key = self.claim_key(changes.expect)
         what = "a conditional change of %d removals and %d additions" % (len(changes.remove), len(changes.add))
-        rivals: List[str] = []
+        rivals: List[_Claim] = []
         for attempt in range(1, self.claim_attempts + 1):
             claim = self._new_token()
             stale = sorted(self._my_claims)
             self._my_claims.add(claim)  # from here on it may be on the server
-            claimed_at = time.monotonic()
+            claimed_at = self.clock()
             self._write(self._cleanup_ops() + ([self._delete_tokens_text(stale)] if stale else []) + [
                 self._delete_dead_claims_text(),
                 "INSERT { %s GRAPH %s { <%s> %s %s ; %s ?now } } WHERE { %s BIND(NOW() AS ?now) }"
@@ -328,12 +381,12 @@ class SparqlStore(TripleStore):
             self._my_claims.difference_update(stale)
             try:
                 live = self._live_claims(key)
-                if claim not in live:
+                if claim not in [c.token for c in live]:
                     self._my_claims.discard(claim)
                     self._raise_conflict(changes)
-                rivals = [c for c in live if c != claim and c not in self._my_claims]
+                rivals = [c for c in live if c.token != claim and c.token not in self._my_claims]
                 if not rivals:
-                    waited = time.monotonic() - claimed_at
+                    waited = self.clock() - claimed_at
                     if waited > self.claim_ttl_s / 2:
                         raise StoreUnavailable(
                             "%s: %s took %.1f s from the claim, more than half the claim ttl (%.1f s): the claim "
@@ -344,38 +397,80 @@ class SparqlStore(TripleStore):
                     ops = [self._delete_tokens_text([claim]),
                            "%sINSERT { %s %s } WHERE { %s }" % ("DELETE { %s } " % removes if removes else "",
                                                                adds, self._claim_text(token), expects)]
+                    sent = self.clock()
                     self._write(ops, token, what)
                     self._my_claims.discard(claim)  # deleted by the write
-                    if not self._token_stored(token):
+                    try:
+                        stored = self._token_stored(token)
+                    except StoreError as exc:
+                        # the server answered the write (it is done), but whether its condition held is unknown
+                        self._note_unknown(token, sent, timed_out=False, answered=True)
+                        raise StoreUnavailable(
+                            "%s: %s was answered, but reading its token back failed (%s); whether it was applied "
+                            "is unknown; was_applied(%r) tells later" % (self.update_endpoint.name, what, exc, token),
+                            self.update_endpoint.name, "token read failed", applied=None, token=token) from None
+                    if not stored:
                         self._raise_conflict(changes)
                     self._done_tokens.append(token)
                     return
-            except BaseException:
-                self._withdraw(claim)
+            except BaseException as exc:
+                if not (isinstance(exc, StoreUnavailable) and exc.applied is None):
+                    self._withdraw(claim)
+                # else the final write's fate is unknown: the claim stays (it keeps other writers off the quads
+                # until that write shows, which deletes it, or the claim dies of age)
                 raise
             # another writer claimed the same quads at the same time: both step back, each tries again after a
             # random pause (one of them will find itself alone; the other then finds the quads changed)
             self._update(self._delete_tokens_text([claim]), "withdrawing a claim")
             self._my_claims.discard(claim)
             self._pause(random.uniform(0.002, 0.02) * attempt)
+        # a claimant that stays through every attempt is no rival writing at the same time: a client that died
+        # (or hangs) between its claim and its write; its claim blocks these quads until it dies of age
         s, p, o, g = changes.expect[0]
-        raise StoreConflict("conflict: %s %s %s in graph %s stays claimed by another writer (%s) after %d attempts; "
-                            "nothing was written" % (s.n3(), p.n3(), o.n3(), g.n3(), ", ".join(rivals[:3]),
-                                                     self.claim_attempts), changes.expect[0])
+        oldest = max(rivals, key=lambda c: c.age)
+        raise StoreUnavailable(
+            "%s: %s %s %s in graph %s is claimed by another writer (%s, claimed %.0f s ago%s) through %d attempts; "
+            "nothing was written; a claim that is not completed dies %.0f s after it was made (claim_ttl_s), so "
+            "this change can be tried again in %.0f s at the latest" % (
+                self.update_endpoint.name, s.n3(), p.n3(), o.n3(), g.n3(), oldest.client or oldest.token,
+                oldest.age, ", and %d more" % (len(rivals) - 1) if len(rivals) > 1 else "", self.claim_attempts,
+                self.claim_ttl_s, max(0.0, self.claim_ttl_s - min(c.age for c in rivals))),
+            self.update_endpoint.name, "claimed by another writer", applied=False)
+
+    def _note_unknown(self, token: str, sent: float, timed_out: bool, answered: bool = False) -> None:
+        """Remember a write whose fate is unknown (see :meth:`was_applied`)."""
+        with self._lock:
+            self._unknown[token] = _Unknown(sent, timed_out, answered)
+
+    @property
+    def unknown_writes(self) -> List[str]:
+        """Tokens of the writes whose answer was lost and whose fate is not known yet (oldest first)."""
+        with self._lock:
+            return sorted(self._unknown, key=lambda t: self._unknown[t].sent)
 
     def _settle_unknown_writes(self) -> None:
         """Before a new write: ask the server about every earlier write whose answer was lost
         (:meth:`was_applied`); :class:`~locem_bridge.pemkre.errors.StoreUnavailable` while any stays unknown (a
-        write must not build blindly on one that may or may not have happened)."""
-        for token in list(self.unknown_writes):
+        write must not build blindly on one that may or may not have happened, or still happen)."""
+        for token in self.unknown_writes:
             try:
-                self.was_applied(token)
+                fate = self.was_applied(token)
             except StoreError as exc:
                 raise StoreUnavailable(
                     "%s: an earlier write's fate is unknown (its answer was lost, token %s) and the server cannot "
                     "be asked (%s); nothing was written; was_applied(%r) settles it" % (
                         self.update_endpoint.name, token, exc, token), self.update_endpoint.name,
                     "earlier write unknown", applied=False) from None
+            if fate is None:
+                info = self._unknown.get(token)
+                age = self.clock() - info.sent if info is not None else 0.0
+                raise StoreUnavailable(
+                    "%s: an earlier write's fate is unknown (sent %.1f s ago, its answer %s, token %s): the server "
+                    "does not have it yet but may still apply it; nothing was written; writes go on once it shows "
+                    "or %.0f s (claim_ttl_s) after it was sent" % (
+                        self.update_endpoint.name, age, "timed out" if info is not None and info.timed_out else
+                        "was lost", token, self.claim_ttl_s), self.update_endpoint.name,
+                    "earlier write unknown", applied=False)
 
     def _delete_dead_claims_text(self) -> str:
         """The operation deleting every claim older than ``claim_ttl_s`` by the server's clock (led by each claim
@@ -397,14 +492,17 @@ class SparqlStore(TripleStore):
             return
         self._my_claims.discard(claim)
 
-    def _live_claims(self, key: URIRef) -> List[str]:
-        """Tokens of the claims on ``key`` younger than ``claim_ttl_s`` (by the server's clock)."""
-        doc = self._select_doc("SELECT ?t ?at (NOW() AS ?now) WHERE { GRAPH %s { ?t %s %s ; %s ?at } }"
+    def _live_claims(self, key: URIRef) -> List[_Claim]:
+        """The claims on ``key`` younger than ``claim_ttl_s`` (by the server's clock; by this client's clock since
+        it first saw a claim whose time it cannot read)."""
+        doc = self._select_doc("SELECT ?t ?at ?c (NOW() AS ?now) WHERE { GRAPH %s { ?t %s %s ; %s ?at "
+                               "OPTIONAL { ?t %s ?c } } }"
                                % (term_text(G_CLAIMS), term_text(P_CLAIM_ON), term_text(key),
-                                  term_text(P_CLAIM_AT)), "the claims of a conditional change", dataset=False)
+                                  term_text(P_CLAIM_AT), term_text(P_WRITE_CLAIM)),
+                               "the claims of a conditional change", dataset=False)
         _, rows = json_rows(doc, self.query_endpoint.name)
-        out = []
-        seen_now = time.monotonic()
+        out: List[_Claim] = []
+        seen_now = self.clock()
         for r in rows:
             at, now = r.get("at"), r.get("now")
             token = str(r.get("t"))
@@ -416,7 +514,7 @@ class SparqlStore(TripleStore):
             if len(self._first_seen) > 10000:
                 self._first_seen.clear()
             if age < self.claim_ttl_s:
-                out.append(str(r["t"]))
+                out.append(_Claim(token, age, str(r.get("c") or "")))
         return out
 
     def replace_graph(self, graph: URIRef, triples: Iterable[Triple]) -> None:
@@ -450,16 +548,24 @@ class SparqlStore(TripleStore):
                          "dropping PEMKRE's graphs")
         return graphs
 
-    def was_applied(self, token: str) -> bool:
+    def was_applied(self, token: str) -> Optional[bool]:
         """Was the write with claim ``token`` applied? (asks the server; for a
-        :class:`~locem_bridge.pemkre.errors.StoreUnavailable` with ``applied=None``)"""
+        :class:`~locem_bridge.pemkre.errors.StoreUnavailable` with ``applied=None``). True: its token is there.
+        None: not there yet, but the write may still arrive (it stays in :attr:`unknown_writes`). False: not
+        applied and it will not be (the server answered it, or ``claim_ttl_s`` has passed since it was sent).
+        :class:`~locem_bridge.pemkre.errors.StoreError` when the server cannot be asked."""
         found = self._token_stored(token)
         with self._lock:
-            if token in self.unknown_writes:
-                self.unknown_writes.remove(token)
+            info = self._unknown.get(token)
             if found:
-                self._done_tokens.append(token)
-        return found
+                self._unknown.pop(token, None)
+                if token not in self._done_tokens:
+                    self._done_tokens.append(token)
+                return True
+            if info is None or info.answered or self.clock() - info.sent >= self.claim_ttl_s:
+                self._unknown.pop(token, None)
+                return False
+            return None
 
     def close(self) -> None:
         """Delete the claim tokens of applied writes (one request, not retried) and drop the connection."""
@@ -513,6 +619,7 @@ class SparqlStore(TripleStore):
     def _write(self, ops: List[str], token: str, what: str) -> None:
         """Send ``ops`` as one update request; when its answer is lost, learn from ``token`` whether it was
         applied (a token of an applied write is left for the next write to delete)."""
+        sent = self.clock()
         try:
             self._update(" ;\n".join(ops), what)
         except StoreUnavailable as exc:
@@ -522,13 +629,13 @@ class SparqlStore(TripleStore):
             try:
                 applied = self._token_stored(token)
             except StoreError as again:
-                self.unknown_writes.append(token)
+                self._note_unknown(token, sent, exc.timed_out)
                 raise StoreUnavailable("%s; the server cannot be asked whether it was applied either (%s); "
                                        "was_applied(%r) tells later" % (lost, again, token), exc.endpoint,
                                        exc.reason, applied=None, token=token, timed_out=exc.timed_out) from None
             if not applied and exc.timed_out:
                 # the server may still be working on it: not written yet is not "never written"
-                self.unknown_writes.append(token)
+                self._note_unknown(token, sent, True)
                 raise StoreUnavailable("%s; asked again, the server does not have it yet, but it may still apply "
                                        "it; was_applied(%r) tells later" % (lost, token), exc.endpoint, exc.reason,
                                        applied=None, token=token, timed_out=True) from None
