@@ -24,14 +24,17 @@ that run one request as one transaction apply all or nothing (Oxigraph does, tes
 GraphDB say they do, not tested here). Every
 write also inserts a *token* (a triple naming a fresh ``urn:uuid:`` in the bookkeeping graph :data:`G_CLAIMS`,
 which queries, :meth:`~SparqlStore.quads` and :meth:`~SparqlStore.count` never see): when the answer to a write is
-lost on the way back, the store asks the server whether the token is there and reports ``applied`` True or False
-in :class:`~locem_bridge.pemkre.errors.StoreUnavailable`, or ``None`` when it cannot ask or when a write that
-timed out is not there yet (the server may still apply it; then :meth:`SparqlStore.was_applied` asks later). Such
-a write stays *unknown* (:attr:`SparqlStore.unknown_writes`) until its token is found or ``claim_ttl_s`` has
-passed since it was sent: a token not found once proves nothing while the write may still be on its way (a
-second process from a retried start, an old status report arriving late). While any write is unknown, every
-further write of this client raises :class:`~locem_bridge.pemkre.errors.StoreUnavailable` (``applied=False``,
-the node answers NOT_READY) naming the unknown write and its age. The store never sends a write twice; the
+lost on the way back, the store asks the server whether the token is there and reports ``applied`` True in
+:class:`~locem_bridge.pemkre.errors.StoreUnavailable` when it is, else ``None``: a write sent whose answer timed out
+or whose connection was lost may still be applied (the server may still be working on it, or a proxy may have it
+queued); then :meth:`SparqlStore.was_applied` asks later. Such a write stays *unknown*
+(:attr:`SparqlStore.unknown_writes`) until its token is found or ``claim_ttl_s`` has passed since it was sent: a
+token not found once proves nothing while the write may still be on its way. This assumes the server finishes (or
+drops) an update within ``claim_ttl_s`` of receiving it. While any write is unknown, every further write of this
+client raises :class:`~locem_bridge.pemkre.errors.StoreUnavailable` (``applied=False``, the node answers
+NOT_READY) naming the unknown write and its age: after one lost answer of a write that never lands, writes wait up
+to ``claim_ttl_s`` (about 200 s with the defaults). A write refused before it was sent (connection refused) is
+``applied=False`` at once. The store never sends a write twice; the
 engine decides. Tokens of applied writes are deleted by the next write of this client (in the same request) and
 on :meth:`close`.
 
@@ -107,6 +110,7 @@ P_CLAIM_ON = META.claimOn
 #: ... and ``<token> meta:claimAt NOW()`` (the server's clock; claims older than ``claim_ttl_s`` are dead)
 P_CLAIM_AT = META.claimAt
 
+_TOKEN_RE = re.compile(r"^urn:uuid:[0-9a-f-]{36}$")
 _ACCEPT_RESULTS = "application/sparql-results+json"
 _ACCEPT_GRAPH = "application/n-triples"
 _JSON_TYPES = ("application/sparql-results+json", "application/json")
@@ -170,7 +174,7 @@ class SparqlStore(TripleStore):
         self._pause = time.sleep
         #: the clock of claim ages and unknown writes (monotonic seconds); tests put a fake one here
         self.clock: Callable[[], float] = time.monotonic
-        self.client = "%s pid %d" % (socket.gethostname(), os.getpid())
+        self.client = "%s pid %d store %s" % (socket.gethostname(), os.getpid(), uuid.uuid4().hex[:8])
         self._graphs: Set[URIRef] = set(ASSERTED_GRAPHS) | set(INFERRED_GRAPHS) | {G_META}
         self._dataset: List[Tuple[str, str]] = []
         self._done_tokens: List[str] = []  # claims of applied writes, deleted by the next write
@@ -529,6 +533,7 @@ class SparqlStore(TripleStore):
             raise StoreError("cannot replace graph %s: %s" % (graph, exc)) from None
         self._know_graphs([graph])
         with self._lock:
+            self._settle_unknown_writes()   # a late write must not land in the graph after it was replaced
             first = "DROP SILENT GRAPH %s" % g
             if chunks:
                 first += " ;\nINSERT DATA { GRAPH %s { %s } }" % (g, chunks[0])
@@ -543,6 +548,7 @@ class SparqlStore(TripleStore):
         graphs = sorted(g for g in set(self.refresh_graphs()) | self._graphs | {G_CLAIMS}
                         if str(g).startswith(str(GRAPHS)))
         with self._lock:
+            self._settle_unknown_writes()   # a late write must not bring data back into the fresh store
             self._done_tokens = []
             self._update(" ;\n".join("DROP SILENT GRAPH %s" % term_text(g) for g in graphs),
                          "dropping PEMKRE's graphs")
@@ -554,6 +560,9 @@ class SparqlStore(TripleStore):
         None: not there yet, but the write may still arrive (it stays in :attr:`unknown_writes`). False: not
         applied and it will not be (the server answered it, or ``claim_ttl_s`` has passed since it was sent).
         :class:`~locem_bridge.pemkre.errors.StoreError` when the server cannot be asked."""
+        if not _TOKEN_RE.match(str(token)):
+            raise StoreError("was_applied: %r is not a write token (allowed: urn:uuid:<36 hex digits and dashes>, as "
+                             "StoreUnavailable.token gives it)" % (token,))
         found = self._token_stored(token)
         with self._lock:
             info = self._unknown.get(token)
@@ -591,7 +600,7 @@ class SparqlStore(TripleStore):
         return "GRAPH %s { %s %s %s }" % (term_text(q[3]), term_text(q[0]), term_text(q[1]), term_text(q[2]))
 
     @staticmethod
-    def _new_token() -> str:
+    def _new_token() -> str:  # matches _TOKEN_RE
         return "urn:uuid:%s" % uuid.uuid4()
 
     def _claim_text(self, token: str) -> str:
@@ -633,15 +642,13 @@ class SparqlStore(TripleStore):
                 raise StoreUnavailable("%s; the server cannot be asked whether it was applied either (%s); "
                                        "was_applied(%r) tells later" % (lost, again, token), exc.endpoint,
                                        exc.reason, applied=None, token=token, timed_out=exc.timed_out) from None
-            if not applied and exc.timed_out:
-                # the server may still be working on it: not written yet is not "never written"
-                self._note_unknown(token, sent, True)
+            if not applied:
+                # sent, and no answer: the server may still be working on it (a timeout), or have it in a queue
+                # behind a proxy that closed the connection; not written yet is not "never written"
+                self._note_unknown(token, sent, exc.timed_out)
                 raise StoreUnavailable("%s; asked again, the server does not have it yet, but it may still apply "
                                        "it; was_applied(%r) tells later" % (lost, token), exc.endpoint, exc.reason,
-                                       applied=None, token=token, timed_out=True) from None
-            if not applied:
-                raise StoreUnavailable("%s; asked again, the server does not have it: nothing was written" % lost,
-                                       exc.endpoint, exc.reason, applied=False, token=token) from None
+                                       applied=None, token=token, timed_out=exc.timed_out) from None
             # written: only the answer was lost, which is no failure of the change
 
     def _update(self, text: str, what: str) -> None:
