@@ -1,6 +1,9 @@
-"""PEMKRE test fixtures: engines on real on-disk oxigraph stores under tmp_path, a deterministic clock."""
+"""PEMKRE test fixtures: engines on real on-disk oxigraph stores under tmp_path, a deterministic clock; a real
+SPARQL 1.1 server (``oxigraph serve``, one per session, emptied for each test) and SparqlStores on it."""
 import os
 import sys
+import urllib.parse
+import urllib.request
 
 import pytest
 
@@ -8,6 +11,7 @@ _HERE = os.path.dirname(os.path.abspath(__file__))
 if _HERE not in sys.path:
     sys.path.insert(0, _HERE)
 
+from oxigraph_server import OxigraphServer  # noqa: E402
 from pemkre_testkit import FakeClock  # noqa: E402
 from locem_bridge.pemkre import JournaledStore, ProcessEngine  # noqa: E402
 
@@ -27,6 +31,40 @@ def make_engine(tmp_path, clock):
         stores.append(store)
         kwargs.setdefault("clock", clock)
         return ProcessEngine(store, **kwargs)
+
+    yield factory
+    for s in stores:
+        s.close()
+
+
+@pytest.fixture(scope="session")
+def oxigraph_server(tmp_path_factory):
+    """One ``oxigraph serve`` on a free loopback port for the session (killed at the end)."""
+    server = OxigraphServer(str(tmp_path_factory.mktemp("oxigraph") / "data"))
+    with server:
+        yield server
+
+
+def clear_server(server: OxigraphServer) -> None:
+    """Empty every graph of ``server`` (``DROP ALL``)."""
+    body = urllib.parse.urlencode({"update": "DROP ALL"}).encode("ascii")
+    with urllib.request.urlopen(urllib.request.Request(server.update_url, data=body), timeout=10):
+        pass
+
+
+@pytest.fixture
+def sparql_store(oxigraph_server):
+    """Factory of SparqlStores on the session's server, emptied before the test; closes them afterwards."""
+    from locem_bridge.pemkre.sparql_store import SparqlStore
+
+    oxigraph_server.start()  # a test may have killed it
+    clear_server(oxigraph_server)
+    stores = []
+
+    def factory(**kwargs) -> SparqlStore:
+        store = SparqlStore(oxigraph_server.query_url, oxigraph_server.update_url, **kwargs)
+        stores.append(store)
+        return store
 
     yield factory
     for s in stores:

@@ -45,6 +45,35 @@ def test_an_unknown_kind_is_refused_before_anything_is_touched(tmp_path):
     path = tmp_path / "store"
     path.mkdir()
     (path / "keep").write_text("data")
-    with pytest.raises(ValueError, match=r"store must be journal, rocksdb or memory, got 'sqlite'"):
+    with pytest.raises(ValueError, match=r"store must be journal, rocksdb, memory or sparql, got 'sqlite'"):
         open_store("sqlite", str(path), fresh=True)
-    assert (path / "keep").read_text() == "data" and STORE_KINDS == ("journal", "rocksdb", "memory")
+    assert (path / "keep").read_text() == "data" and STORE_KINDS == ("journal", "rocksdb", "memory", "sparql")
+
+
+def test_sparql_opens_a_server_store_that_keeps_a_write_and_fresh_drops_only_pemkre_graphs(oxigraph_server,
+                                                                                          tmp_path):
+    from conftest import clear_server
+    from locem_bridge.pemkre.sparql_store import SparqlStore
+
+    oxigraph_server.start()
+    clear_server(oxigraph_server)
+    urls = dict(query_url=oxigraph_server.query_url, update_url=oxigraph_server.update_url)
+    other = URIRef("https://mes.example/graph/orders")  # another system's data on the same server
+    store = open_store("sparql", str(tmp_path / "unused"), **urls)
+    assert isinstance(store, SparqlStore) and store.persistent
+    store.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD), (A, P, Literal(2), other)]))
+    store.close()
+    assert not (tmp_path / "unused").exists()
+    again = open_store("sparql", "", **urls)
+    try:
+        assert again.objects(A, P, (G_WORLD,)) == [Literal(1)]
+    finally:
+        again.close()
+    fresh = open_store("sparql", "", fresh=True, **urls)
+    try:
+        assert fresh.value(A, P, (G_WORLD,)) is None and fresh.value(A, P, (other,)) == Literal(2)  # dropped, kept
+        assert fresh.count() == 0 and fresh.value(A, P) is None  # reads without a graph never see other systems
+    finally:
+        fresh.close()
+    with pytest.raises(ValueError, match="store sparql needs the server's query_url and update_url"):
+        open_store("sparql", "", query_url=oxigraph_server.query_url)

@@ -15,8 +15,9 @@ from .kpi import compute_kpis, export_kpis
 from .journal_store import JournaledStore
 from .oxigraph_store import OxigraphStore
 from .rdflib_store import RdflibStore
+from .sparql_store import SparqlStore
 from .store import QueryResult, TripleStore
 from .vocab import PLB, PPR, PROC, SK
 
 __all__ = ["NextAction", "ProcessEngine", "TaskStatusReport", "PemkreError", "compute_kpis", "export_kpis",
-           "JournaledStore", "OxigraphStore", "RdflibStore", "QueryResult", "TripleStore", "PLB", "PPR", "PROC", "SK"]
+           "JournaledStore", "OxigraphStore", "RdflibStore", "SparqlStore", "QueryResult", "TripleStore", "PLB", "PPR", "PROC", "SK"]

@@ -17,6 +17,9 @@ and finds the process that was running when the store was last used. Then, from 
   A report may carry a *request id* (any text, unique per report): it is stored with the status in the same
   atomic change, so the same report sent again -- a client retrying after PEMKRE died before answering -- is
   answered as already applied and changes nothing, also after a restart. ``start_process`` takes one too.
+  The change is conditional on the status it was read with (:attr:`ChangeSet.expect`): when another engine on the
+  same store moved the task on in between, the report raises
+  :class:`~locem_bridge.pemkre.errors.StoreConflict` and writes nothing.
 * :meth:`ProcessEngine.query` runs a predefined query of the ontology with values passed as bindings.
 
 Every state change is one atomic :meth:`TripleStore.apply` holding the asserted triples and the inferred triples
@@ -94,7 +97,10 @@ _M_resourceHash = META.resourceModelHash
 #: The fingerprint of what the stored resource model was built from (given by the loader; see resume_resource_model).
 _M_resourceKey = META.resourceModelKey
 #: Schema closures by ontology hash, shared by the engines of one process (a closure is never modified).
-_CLOSURE_CACHE: Dict[str, Graph] = {}
+#: schema hash -> (the schema graph, its closure): the schema is cached with its closure because a reload of the
+#: same files gives its blank nodes new labels, and the ontology graph and the inferred schema graph written from
+#: them must share their blank nodes
+_CLOSURE_CACHE: Dict[str, Tuple[Graph, Graph]] = {}
 
 
 @dataclass
@@ -171,6 +177,21 @@ def _grounded(graph: Graph) -> List[Tuple[Node, Node, Node]]:
     return list(canonical.skolemize(authority=str(LOG).rstrip("/").rsplit("/", 1)[0], basepath="/resource-node/"))
 
 
+def _canonical_labels(graph: Graph) -> Graph:
+    """``graph`` with its blank nodes relabelled canonically (rdflib.compare): the labels depend only on the
+    triples, so any process loading the same ontology files gets the same labels. Prefix bindings are kept."""
+    if not any(isinstance(x, BNode) for t in graph for x in t):
+        return graph
+    from rdflib.compare import to_canonical_graph
+
+    out = Graph()
+    for prefix, namespace in graph.namespaces():
+        out.bind(prefix, namespace, override=True, replace=True)
+    for t in to_canonical_graph(graph):
+        out.add(t)
+    return out
+
+
 def _argument_literal(text: str) -> Literal:
     """A template step's literal argument: an integer or a number typed as such, else text."""
     try:
@@ -221,16 +242,22 @@ class ProcessEngine:
         self.prefixes = loaded.prefixes
         stored_hash = store.value(META.ontology, META.schemaHash, (G_META,))
         if stored_hash is None or str(stored_hash) != loaded.schema_hash:
-            closed = _CLOSURE_CACHE.get(loaded.schema_hash)
-            if closed is None:
-                closed = bounded_closure(loaded.schema, schema_max_seconds, schema_max_triples)
+            cached = _CLOSURE_CACHE.get(loaded.schema_hash)
+            if cached is None:
+                # canonical blank node labels: every client loading the same files writes the same labels, so an
+                # ontology graph written by one client and an inferred schema graph written by another (two
+                # clients starting on one empty server) still share their blank nodes
+                schema = _canonical_labels(loaded.schema)
+                closed = bounded_closure(schema, schema_max_seconds, schema_max_triples)
                 _CLOSURE_CACHE.clear()
-                _CLOSURE_CACHE[loaded.schema_hash] = closed
-            rules = SchemaRules(closed, loaded.schema)
+                _CLOSURE_CACHE[loaded.schema_hash] = (schema, closed)
+            else:
+                schema, closed = cached
+            rules = SchemaRules(closed, schema)
             self._check_unsupported(rules, allow_unsupported_owl)
             model = compile_model(closed, store, self.prefixes)  # before any write: a bad model changes nothing
-            store.replace_graph(G_ONTOLOGY, loaded.schema)
-            store.replace_graph(G_SCHEMA_INFERRED, inferred_part(loaded.schema, closed))
+            store.replace_graph(G_ONTOLOGY, schema)
+            store.replace_graph(G_SCHEMA_INFERRED, inferred_part(schema, closed))
             self.reasoner = IncrementalReasoner(rules, reasoning_max_seconds, reasoning_max_triples,
                                                  reasoning_clock)
             cs = self.reasoner.recompute_all(store, max_seconds=schema_max_seconds, max_triples=schema_max_triples)
@@ -793,7 +820,8 @@ class ProcessEngine:
             if sp is None:
                 raise UnknownTaskError("no task <%s> is known; task IRIs come from next_action" % t)
             state = self._state(sp)  # type: ignore[arg-type]
-            current = self.model.status_name.get(self._v(t, _P_status), "")
+            current_iri = self._v(t, _P_status)
+            current = self.model.status_name.get(current_iri, "")
             if state.status != "running" or state.task != t or current not in ("issued", "in_progress"):
                 raise TaskStateError("task <%s> is not running (its status is %s, its process <%s> is %s, the "
                                      "process's current task is %s); only the current issued/in_progress task "
@@ -806,6 +834,9 @@ class ProcessEngine:
             assert tt is not None
             now = self.clock()
             cs = ChangeSet()
+            # conditional: the status read above must still be there when the change is written, so two writers
+            # sharing a store (two PEMKRE clients of one SPARQL server) cannot both move this task on
+            cs.expect.append((t, _P_status, current_iri, G_LOG))  # type: ignore[arg-type]
             self._replace(cs, t, _P_status, self.model.status_iri[status])
             effects_applied, world_changed = 0, 0
             # a template step: its parent task (the node's task) takes its status along; the node's effects

@@ -111,9 +111,46 @@ class ReasoningBoundError(PemkreError):
 
 
 class StoreError(PemkreError):
-    """The triplestore failed (I/O, lock held by another process, corrupted data)."""
+    """The triplestore failed (I/O, lock held by another process, corrupted data; a SPARQL server that answered
+    with an HTTP error or with something that is not a SPARQL answer)."""
 
     code = "STORE_ERROR"
+
+
+class StoreUnavailable(StoreError):
+    """A remote triplestore cannot be reached (connection refused, timeout, unknown host, connection lost).
+
+    ``endpoint`` names the URL (without credentials), ``reason`` what went wrong. For a write, ``applied`` says
+    what became of it: ``False`` nothing was written, ``True`` it was written (only the answer was late), ``None``
+    unknown (the answer was lost and the server could not be asked, or the write is not there yet but may still
+    arrive); ``token`` then names the write's claim token (see
+    :meth:`~locem_bridge.pemkre.sparql_store.SparqlStore.was_applied`). A remote store also raises it while a
+    write it could not settle is unknown, and while the quads of a conditional change stay claimed by another
+    client (``applied=False``: nothing was written; try again later).
+    """
+
+    code = "STORE_UNAVAILABLE"
+
+    def __init__(self, message: str, endpoint: str = "", reason: str = "", applied: Optional[bool] = False,
+                 token: str = "", timed_out: bool = False) -> None:
+        super().__init__(message)
+        self.endpoint = endpoint
+        self.reason = reason
+        self.applied = applied
+        self.token = token
+        #: the server did not answer in time (it may still be working on the request)
+        self.timed_out = timed_out
+
+
+class StoreConflict(StoreError):
+    """A conditional change (:attr:`~locem_bridge.pemkre.store.ChangeSet.expect`) was not applied because a quad
+    it expects was not in the store: another writer changed it first. ``quad`` is that quad; nothing was written."""
+
+    code = "STORE_CONFLICT"
+
+    def __init__(self, message: str, quad: object = None) -> None:
+        super().__init__(message)
+        self.quad = quad
 
 
 class WorldUpdateError(PemkreError, ValueError):

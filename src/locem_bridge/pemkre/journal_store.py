@@ -154,19 +154,24 @@ class JournaledStore(OxigraphStore):
             oq = ox.Quad(to_ox(q[0]), to_ox(q[1]), to_ox(q[2]), self._g(q[3]))
             add.append(oq)
             lines.append("+ %s .\n" % oq)
-        self._append("".join(lines))
-        for oq in rem:
-            self._store.remove(oq)
-        self._store.extend(add)
-        self.removals += len(rem)
+        with self._write_lock:
+            self._check_expected(changes)
+            if not lines:
+                return
+            self._append("".join(lines))
+            for oq in rem:
+                self._store.remove(oq)
+            self._store.extend(add)
+            self.removals += len(rem)
 
     def replace_graph(self, graph: URIRef, triples: Iterable[Triple]) -> None:
         g = self._g(graph)
         quads = [ox.Quad(to_ox(s), to_ox(p), to_ox(o), g) for s, p, o in triples]
-        self._append("C %s\n" % g + "".join("+ %s .\n" % q for q in quads))
-        if self._store.contains_named_graph(g):
-            self._store.clear_graph(g)
-        self._store.extend(quads)
+        with self._write_lock:
+            self._append("C %s\n" % g + "".join("+ %s .\n" % q for q in quads))
+            if self._store.contains_named_graph(g):
+                self._store.clear_graph(g)
+            self._store.extend(quads)
 
     def maintain(self) -> None:
         """After ``rebuild_after_removals`` removals: rebuild the in-memory indexes from the live quads (removed

@@ -10,6 +10,7 @@ Durability: ``apply`` is one SPARQL update (``DELETE DATA ; INSERT DATA``) execu
 returns, the write is in RocksDB's write-ahead log, which a ``kill -9`` of this process does not lose.
 """
 import re
+import threading
 from typing import Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple
 
 import pyoxigraph as ox
@@ -122,6 +123,8 @@ class OxigraphStore(TripleStore):
         self.persistent = path is not None
         self._graph_cache: Dict[URIRef, ox.NamedNode] = {}
         self._closed = False
+        #: held by each write, so a conditional change's check and its write are one step for this process
+        self._write_lock = threading.RLock()
         self.removals = 0  # since the last maintain() that did something
         self.rebuild_after_removals = 20_000
 
@@ -219,11 +222,15 @@ class OxigraphStore(TripleStore):
             parts.append("DELETE DATA { %s }" % " ".join(self._quad_text(q) for q in changes.remove))
         if changes.add:
             parts.append("INSERT DATA { %s }" % " ".join(self._quad_text(q) for q in changes.add))
-        try:
-            self._store.update(" ;\n".join(parts))
-        except Exception as exc:
-            raise StoreError("store write failed (nothing was written): %s" % exc) from None
-        self.removals += len(changes.remove)
+        with self._write_lock:
+            self._check_expected(changes)
+            if not parts:
+                return
+            try:
+                self._store.update(" ;\n".join(parts))
+            except Exception as exc:
+                raise StoreError("store write failed (nothing was written): %s" % exc) from None
+            self.removals += len(changes.remove)
 
     def replace_graph(self, graph: URIRef, triples: Iterable[Triple]) -> None:
         g = self._g(graph)

@@ -5,6 +5,7 @@ is enough. Queries are prepared once with ``rdflib.plugins.sparql.prepareQuery(i
 ``initBindings``. rdflib's persistent stores (BerkeleyDB, SQLAlchemy plugins) need extra native modules; the
 benchmark's store section says why the default is pyoxigraph instead.
 """
+import threading
 from typing import Iterable, Iterator, Mapping, Optional, Sequence
 
 from rdflib import Dataset, URIRef
@@ -23,6 +24,7 @@ class RdflibStore(TripleStore):
 
     def __init__(self) -> None:
         self.dataset = Dataset(default_union=True)
+        self._write_lock = threading.RLock()
 
     def prepare(self, text: str, name: str, prefixes: Mapping[str, str]) -> PreparedQuery:
         try:
@@ -72,10 +74,12 @@ class RdflibStore(TripleStore):
                 yield s2, p2, o2, gid
 
     def apply(self, changes: ChangeSet) -> None:
-        for s, p, o, g in changes.remove:
-            self.dataset.graph(g).remove((s, p, o))
-        for s, p, o, g in changes.add:
-            self.dataset.graph(g).add((s, p, o))
+        with self._write_lock:
+            self._check_expected(changes)
+            for s, p, o, g in changes.remove:
+                self.dataset.graph(g).remove((s, p, o))
+            for s, p, o, g in changes.add:
+                self.dataset.graph(g).add((s, p, o))
 
     def replace_graph(self, graph: URIRef, triples: Iterable[Triple]) -> None:
         gr = self.dataset.graph(graph)

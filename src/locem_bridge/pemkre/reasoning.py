@@ -502,7 +502,7 @@ class IncrementalReasoner:
                     dead.discard(t)
                     changed = True
         budget.check_time()
-        out = ChangeSet(list(changes.remove), list(changes.add))
+        out = ChangeSet(list(changes.remove), list(changes.add), list(changes.expect))
         for t in over:
             out.remove.append(t + (G_ABOX_INFERRED,))
         # removed assertions that are still entailed stay, as inferred triples
@@ -523,7 +523,7 @@ class IncrementalReasoner:
         return out
 
     def _with_full_recompute(self, store: TripleStore, changes: ChangeSet, budget: "_Budget") -> ChangeSet:
-        out = ChangeSet(list(changes.remove), list(changes.add))
+        out = ChangeSet(list(changes.remove), list(changes.add), list(changes.expect))
         out.extend(self.recompute_all(store, pending=changes, max_seconds=budget.max_seconds,
                                       max_triples=budget.max_triples))
         return out

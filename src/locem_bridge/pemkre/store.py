@@ -10,8 +10,16 @@ Queries are prepared once (:meth:`TripleStore.prepare`, with the vocabulary pref
 *bindings*: values are handed to the query engine as RDF terms (SPARQL substitution / rdflib ``initBindings``),
 never spliced into query text. Terms at this interface are rdflib terms, so people script against rdflib.
 
-A remote SPARQL 1.1 store can be added later by implementing this class (``prepare`` keeps the text,
-bindings become a ``VALUES`` block of serialized terms, ``apply`` one ``DELETE DATA; INSERT DATA`` request).
+A change may be *conditional*: :attr:`ChangeSet.expect` lists quads that must be in the store for it to apply,
+checked in the same transaction as the write (the embedded stores under their write lock, the SPARQL store in one
+``DELETE {..} INSERT {..} WHERE {..}`` request). A status update that expects the previous status cannot be won by
+two writers: the loser gets :class:`~locem_bridge.pemkre.errors.StoreConflict` naming the quad that was not there,
+and nothing of its change is written.
+
+Backends: :class:`~locem_bridge.pemkre.journal_store.JournaledStore` and
+:class:`~locem_bridge.pemkre.oxigraph_store.OxigraphStore` (embedded, one process per store),
+:class:`~locem_bridge.pemkre.rdflib_store.RdflibStore` (in memory) and
+:class:`~locem_bridge.pemkre.sparql_store.SparqlStore` (a remote SPARQL 1.1 server, any number of clients).
 """
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
@@ -48,17 +56,20 @@ INFERRED_GRAPHS: Tuple[URIRef, ...] = (G_SCHEMA_INFERRED, G_ABOX_INFERRED)
 
 @dataclass
 class ChangeSet:
-    """Quads to remove, then quads to add, applied atomically by :meth:`TripleStore.apply`."""
+    """Quads to remove, then quads to add, applied atomically by :meth:`TripleStore.apply`; only if every quad of
+    ``expect`` is in the store at that moment (else :class:`~locem_bridge.pemkre.errors.StoreConflict`)."""
 
     remove: List[Quad] = field(default_factory=list)
     add: List[Quad] = field(default_factory=list)
+    expect: List[Quad] = field(default_factory=list)
 
     def __bool__(self) -> bool:
-        return bool(self.remove or self.add)
+        return bool(self.remove or self.add or self.expect)
 
     def extend(self, other: "ChangeSet") -> None:
         self.remove.extend(other.remove)
         self.add.extend(other.add)
+        self.expect.extend(other.expect)
 
 
 @dataclass(frozen=True)
@@ -165,7 +176,15 @@ class TripleStore(ABC):
 
     @abstractmethod
     def apply(self, changes: ChangeSet) -> None:
-        """Remove then add, atomically; blank nodes are not allowed in a change set."""
+        """Remove then add, atomically, if every ``changes.expect`` quad is present (else
+        :class:`~locem_bridge.pemkre.errors.StoreConflict`, nothing written); blank nodes are not allowed."""
+
+    def _check_expected(self, changes: ChangeSet) -> None:
+        """Raise :class:`~locem_bridge.pemkre.errors.StoreConflict` for the first expected quad that is not stored
+        (the embedded stores call this under the lock their writes hold)."""
+        for q in changes.expect:
+            if not any(True for _ in self.quads(q[0], q[1], q[2], (q[3],))):
+                raise conflict_error(self, q)
 
     @abstractmethod
     def replace_graph(self, graph: URIRef, triples: Iterable[Triple]) -> None:
@@ -193,3 +212,18 @@ class TripleStore(ABC):
         for s, p, o, g in self.quads(None, None, None, graphs):
             ds.graph(g).add((s, p, o))
         return ds
+
+
+def conflict_error(store: TripleStore, quad: Quad, where: str = ""):
+    """The :class:`~locem_bridge.pemkre.errors.StoreConflict` for ``quad`` (expected, not found): one line naming
+    the quad and what its subject and predicate hold in that graph now."""
+    from .errors import StoreConflict
+
+    s, p, o, g = quad
+    try:
+        now = [t for t in store.objects(s, p, (g,))]
+    except Exception:  # the conflict is the news; what is there now is a courtesy
+        now = None
+    held = "unknown" if now is None else (", ".join(t.n3() for t in now[:5]) if now else "nothing")
+    return StoreConflict("conflict%s: the change expects %s %s %s in graph %s, but another writer changed it (it "
+                         "holds %s now); nothing was written" % (where, s.n3(), p.n3(), o.n3(), g.n3(), held), quad)

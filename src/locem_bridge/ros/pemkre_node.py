@@ -17,7 +17,8 @@ signal) and advertises the services; ``shutdown`` closes the store. Every reply 
 (``OK`` or the PEMKRE error code) and ``message``; a refused call changes nothing.
 
 Parameters: ``~store_path`` (directory of the persistent store; default ``$ROS_HOME/pemkre_store``),
-``~store`` (``journal`` default, ``rocksdb``, ``memory``), ``~fsync`` (journal: flush each change to disk),
+``~store`` (``journal`` default, ``rocksdb``, ``memory``, ``sparql``: a SPARQL 1.1 server at ``~query_url`` and
+``~update_url``), ``~fsync`` (journal: flush each change to disk),
 ``~ontology_dir`` (default: the package's ``ontologies/``), ``~extra_ontology_dirs`` (an integrator's folders of
 Turtle loaded beside it, separated by ``:`` or ``,``), ``~trees_dir`` and ``~extra_trees_dirs`` (the tree folders
 HICEM runs, for the robot's resource model), ``~robot`` (the robot YAML: its resource model -- generated from it,
@@ -172,7 +173,8 @@ def main() -> None:
     robot_file = param("robot", "")
 
     def factory() -> ProcessEngine:
-        store = open_store(kind, path, param("fsync", False), param("fresh", False))
+        store = open_store(kind, path, param("fsync", False), param("fresh", False),
+                           query_url=param("query_url", ""), update_url=param("update_url", ""))
         try:
             engine = ProcessEngine(store, files,
                                    site_namespace=param("site_namespace", "") or None,

@@ -1,0 +1,701 @@
+"""What only a remote store can get wrong, against a real ``oxigraph serve`` and tiny fake servers: bad endpoints
+(wrong scheme, nothing listening, an HTML page, HTTP 500, no answer) each give one line naming the endpoint; a
+query the server refuses; the server killed and restarted (reads reconnect, the data is still there); a write
+whose answer is lost (the claim token tells whether it was applied); the engine on the server."""
+import http.server
+import re
+import threading
+import time
+import urllib.parse
+import urllib.request
+
+import pytest
+from oxigraph_server import OxigraphServer, free_port
+from pemkre_testkit import FakeClock, json_dumps, run_process, scan_result
+from rdflib import Literal, URIRef
+
+from locem_bridge.pemkre import PLB, PPR, ProcessEngine
+from locem_bridge.pemkre.errors import QueryError, StoreConflict, StoreError, StoreUnavailable, TaskStateError
+from locem_bridge.pemkre.sparql_http import Endpoint, RetryPolicy
+from locem_bridge.pemkre.sparql_store import SparqlStore
+from locem_bridge.pemkre.store import G_WORLD, ChangeSet
+from locem_bridge.pemkre.vocab import SITE
+
+EX = "https://ex.example/"
+A, P = URIRef(EX + "a"), URIRef(EX + "p")
+QUICK = RetryPolicy(attempts=2, first_delay_s=0.01, max_delay_s=0.01)
+
+
+class FakeServer:
+    """An HTTP server on a free loopback port whose every POST is answered by ``handle(handler, body)``."""
+
+    def __init__(self, handle):
+        outer = self
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            def do_POST(self):
+                body = self.rfile.read(int(self.headers.get("Content-Length") or 0))
+                outer.requests += 1
+                handle(self, body)
+
+            def log_message(self, *args):
+                pass
+
+        self.requests = 0
+        self.httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        self.url = "http://127.0.0.1:%d/sparql" % self.httpd.server_address[1]
+        self.thread = threading.Thread(target=self.httpd.serve_forever, args=(0.05,), daemon=True)
+        self.thread.start()
+
+    def close(self):
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+
+@pytest.fixture
+def fake_server():
+    servers = []
+
+    def make(handle):
+        s = FakeServer(handle)
+        servers.append(s)
+        return s
+
+    yield make
+    for s in servers:
+        s.close()
+
+
+def _reply(handler, status, media, text):
+    data = text.encode("utf-8")
+    handler.send_response(status)
+    handler.send_header("Content-Type", media)
+    handler.send_header("Content-Length", str(len(data)))
+    handler.end_headers()
+    handler.wfile.write(data)
+
+
+def _one_line(exc):
+    msg = str(exc)
+    assert "\n" not in msg, msg
+    return msg
+
+
+# ------------------------------------------------------------------------------------------------ bad endpoints
+def test_a_url_that_is_not_http_is_refused_naming_it():
+    with pytest.raises(StoreError) as err:
+        SparqlStore("ftp://127.0.0.1/query", "http://127.0.0.1:1/update")
+    assert _one_line(err.value) == "SPARQL query endpoint ftp://127.0.0.1/query: not an http:// or https:// URL " \
+                                   "(scheme 'ftp')"
+    with pytest.raises(StoreError, match=r"^SPARQL update endpoint 127.0.0.1:7878/update: not an http:// or "
+                                         r"https:// URL \(no scheme\)$"):
+        SparqlStore("http://127.0.0.1:1/query", "127.0.0.1:7878/update")
+    with pytest.raises(StoreError, match="SPARQL query endpoint http://:7878/query: the URL names no host"):
+        SparqlStore("http://:7878/query", "http://127.0.0.1:1/update")
+
+
+def test_nothing_listening_is_one_line_naming_the_endpoint_after_the_retries():
+    port = free_port()
+    started = time.monotonic()
+    with pytest.raises(StoreUnavailable) as err:
+        SparqlStore("http://127.0.0.1:%d/query" % port, "http://127.0.0.1:%d/update" % port, retry=QUICK)
+    msg = _one_line(err.value)
+    assert msg.startswith("SPARQL query endpoint http://127.0.0.1:%d/query: connection refused (is the SPARQL "
+                          "server running on 127.0.0.1:%d?) (2 attempts over " % (port, port)), msg
+    assert err.value.endpoint == "http://127.0.0.1:%d/query" % port and err.value.applied is False
+    assert time.monotonic() - started < 5
+
+
+def test_a_server_answering_an_html_page_is_named_as_such(fake_server):
+    page = "<!DOCTYPE html><html><head><title>Welcome to nginx!</title></head><body><h1>Welcome</h1></body></html>"
+    srv = fake_server(lambda h, body: _reply(h, 200, "text/html; charset=utf-8", page))
+    with pytest.raises(StoreError) as err:
+        SparqlStore(srv.url, srv.url, retry=QUICK)
+    assert _one_line(err.value) == (
+        "SPARQL query endpoint %s answered the check at opening with an HTML page ('Welcome to nginx!'), not "
+        "SPARQL results JSON: is this the query URL of a SPARQL 1.1 server?" % srv.url)
+
+
+def test_http_500_gives_the_servers_message_in_one_line(fake_server):
+    srv = fake_server(lambda h, body: _reply(h, 500, "text/plain", "boom:\n  the database\n  is on fire"))
+    with pytest.raises(StoreError) as err:
+        SparqlStore(srv.url, srv.url, retry=QUICK)
+    assert _one_line(err.value) == "SPARQL query endpoint %s: HTTP 500 Internal Server Error: boom: the database " \
+                                   "is on fire" % srv.url
+    assert srv.requests == 1  # a 500 is not retried (502/503/504 are)
+
+
+def test_503_is_retried_then_reported(fake_server):
+    srv = fake_server(lambda h, body: _reply(h, 503, "text/html", "<html><body><p>Service  Unavailable</p></body>"
+                                                                   "</html>"))
+    with pytest.raises(StoreError, match=r"HTTP 503 Service Unavailable: Service Unavailable$"):
+        SparqlStore(srv.url, srv.url, retry=QUICK)
+    assert srv.requests == 2
+
+
+def test_a_server_that_does_not_answer_times_out(fake_server):
+    srv = fake_server(lambda h, body: time.sleep(2))
+    with pytest.raises(StoreUnavailable) as err:
+        SparqlStore(srv.url, srv.url, timeout_s=0.2, retry=QUICK)
+    assert "SPARQL query endpoint %s: no answer within 0.2 s (2 attempts over" % srv.url in _one_line(err.value)
+
+
+def test_update_and_query_urls_of_different_datasets_are_refused(oxigraph_server, fake_server):
+    oxigraph_server.start()
+    sink = fake_server(lambda h, body: _reply(h, 204, "text/plain", ""))  # accepts every write, keeps nothing
+    with pytest.raises(StoreError) as err:
+        SparqlStore(oxigraph_server.query_url, sink.url)
+    assert _one_line(err.value) == ("SPARQL update endpoint %s accepted a write that SPARQL query endpoint %s does "
+                                    "not show: do both URLs name the same dataset?"
+                                    % (sink.url, oxigraph_server.query_url))
+
+
+def test_a_query_the_server_refuses_is_a_query_error_naming_query_and_endpoint(sparql_store, oxigraph_server):
+    s = sparql_store()
+    q = s.prepare("SELECT ?o WHERE { ?s ?p ?o } GROUP BY ?s", "grouped", {})  # rdflib lets it pass, SPARQL not
+    with pytest.raises(QueryError) as err:
+        s.select(q)
+    msg = _one_line(err.value)
+    assert msg.startswith("query grouped failed on the server: SPARQL query endpoint %s: HTTP 400 Bad Request: "
+                          % oxigraph_server.query_url), msg
+    assert err.value.query_iri == "grouped"
+
+
+# ------------------------------------------------------------------------------------------------ the server away
+def test_reads_reconnect_after_a_server_restart_and_the_data_is_still_there(tmp_path):
+    with OxigraphServer(str(tmp_path / "data")) as server:
+        s = SparqlStore(server.query_url, server.update_url, retry=QUICK)
+        s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+        assert s.value(A, P) == Literal(1)  # the kept-alive connection is open now
+        server.kill()
+        with pytest.raises(StoreUnavailable) as err:
+            s.value(A, P)
+        assert _one_line(err.value).startswith("SPARQL query endpoint %s: connection refused" % server.query_url)
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+        assert err.value.applied is False and "update endpoint" in str(err.value)
+        server.start()  # same port, same data folder
+        assert s.objects(A, P) == [Literal(1)]
+        s.apply(ChangeSet(add=[(A, P, Literal(3), G_WORLD)]))
+        s.close()
+        again = SparqlStore(server.query_url, server.update_url)
+        assert sorted(again.objects(A, P)) == [Literal(1), Literal(3)]
+        again.close()
+
+
+def _proxy(target, mode):
+    """A write endpoint in front of ``target``: ``mode[0]`` "forward" passes a write and its answer, "lose" passes
+    the write and drops the answer (closes the connection), "drop" drops the write."""
+
+    def handle(h, body):
+        if mode[0] in ("forward", "lose"):
+            req = urllib.request.Request(target, data=body,
+                                         headers={"Content-Type": "application/x-www-form-urlencoded"})
+            with urllib.request.urlopen(req, timeout=10) as resp:
+                status = resp.status
+            if mode[0] == "forward":
+                _reply(h, status, "text/plain", "")
+                return
+        h.close_connection = True  # no answer at all
+
+    return handle
+
+
+def test_a_write_whose_answer_is_lost_is_known_applied_or_not_through_its_token(sparql_store, oxigraph_server,
+                                                                                 fake_server):
+    mode = ["forward"]
+    proxy = fake_server(_proxy(oxigraph_server.update_url, mode))
+    s = SparqlStore(oxigraph_server.query_url, proxy.url, retry=QUICK)
+    mode[0] = "lose"
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))  # written; only the answer was lost: no error
+    assert s.objects(A, P) == [Literal(1)]
+    mode[0] = "drop"
+    clock = [1000.0]
+    s.clock = lambda: clock[0]
+    with pytest.raises(StoreUnavailable) as err:
+        s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+    msg = _one_line(err.value)
+    # sent, and the connection lost: the server may still have it on its way (a proxy's queue), so it is not
+    # "nothing was written" until its token shows or the claim ttl has passed
+    assert err.value.applied is None and msg.startswith("SPARQL update endpoint %s: the connection was lost "
+                                                        "before an answer came" % proxy.url), msg
+    assert "does not have it yet, but it may still apply it" in msg, msg
+    assert s.objects(A, P) == [Literal(1)]
+    mode[0] = "forward"
+    with pytest.raises(StoreUnavailable) as err:        # no write builds on it meanwhile
+        s.apply(ChangeSet(add=[(A, P, Literal(3), G_WORLD)]))
+    assert err.value.applied is False and "an earlier write's fate is unknown" in str(err.value)
+    assert s.was_applied(s.unknown_writes[0]) is None
+    for drop in (lambda: s.replace_graph(G_WORLD, [(A, P, Literal(4))]), s.drop_pemkre_graphs):
+        with pytest.raises(StoreUnavailable, match="an earlier write's fate is unknown"):
+            drop()                                      # the late write could land after it
+    assert s.objects(A, P) == [Literal(1)]
+    clock[0] += s.claim_ttl_s + 1.0
+    assert s.unknown_writes and s.was_applied(s.unknown_writes[0]) is False and not s.unknown_writes
+    s.apply(ChangeSet(add=[(A, P, Literal(3), G_WORLD)]))
+    assert sorted(s.objects(A, P)) == [Literal(1), Literal(3)]
+    with pytest.raises(StoreError, match="'<x> . } ; DROP ALL #' is not a write token"):
+        s.was_applied("<x> . } ; DROP ALL #")
+    s.close()
+
+
+def test_a_lost_answer_while_the_server_cannot_be_asked_leaves_the_token_for_later(tmp_path, fake_server):
+    with OxigraphServer(str(tmp_path / "data")) as server:
+        mode = ["forward"]
+
+        def handle(h, body):
+            _proxy(server.update_url, mode)(h, body)
+            if mode[0] == "lose":
+                server.kill()  # the server dies right after writing: nobody can say yet
+
+        proxy = fake_server(handle)
+        s = SparqlStore(server.query_url, proxy.url, retry=QUICK)
+        mode[0] = "lose"
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+        assert err.value.applied is None and err.value.token in s.unknown_writes
+        assert "was_applied(" in _one_line(err.value)
+        server.start()
+        assert s.was_applied(err.value.token) and s.unknown_writes == []
+        assert s.objects(A, P) == [Literal(1)]
+        s.close()
+
+
+def test_a_write_that_times_out_is_not_called_unwritten_while_the_server_may_still_apply_it(sparql_store,
+                                                                                            oxigraph_server,
+                                                                                            fake_server):
+    mode = ["forward"]
+    forwarded, release = threading.Event(), threading.Event()
+
+    def slow(h, body):
+        if mode[0] == "slow":
+            release.wait(30)  # held until the client has given up and asked for the token
+        try:
+            _proxy(oxigraph_server.update_url, ["forward"])(h, body)
+        except OSError:
+            pass  # the client is gone: its answer cannot be delivered
+        finally:
+            forwarded.set()
+
+    s = SparqlStore(oxigraph_server.query_url, fake_server(slow).url, timeout_s=0.3, retry=QUICK)
+    s.query_endpoint = Endpoint(oxigraph_server.query_url, "query", 10.0, QUICK)  # reads are not what is timed
+    mode[0] = "slow"
+    forwarded.clear()
+    try:
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    finally:
+        release.set()  # now the write arrives, after the client gave up
+    msg = _one_line(err.value)
+    assert err.value.applied is None and err.value.timed_out, msg
+    assert "no answer within 0.3 s after the write was sent; asked again, the server does not have it yet, but it " \
+           "may still apply it" in msg
+    assert forwarded.wait(10)
+    assert s.was_applied(err.value.token) and s.objects(A, P) == [Literal(1)]
+    s.close()
+
+
+# ------------------------------------------------------------------------------------------------ options
+def test_a_server_serving_the_union_as_default_graph_needs_no_dataset(tmp_path):
+    with OxigraphServer(str(tmp_path / "data"), extra=["--union-default-graph"]) as server:
+        s = SparqlStore(server.query_url, server.update_url, union_default_graph=True)
+        s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD), (A, URIRef(EX + "q"), Literal(2), URIRef(EX + "g"))]))
+        q = s.prepare("SELECT ?x ?y WHERE { ex:a ex:p ?x ; ex:q ?y }", "union", {"ex": EX})
+        assert s.select(q) == [{"x": Literal(1), "y": Literal(2)}]
+        s.close()
+
+
+# ------------------------------------------------------------------------------------------------ the engine
+def _decide(action):
+    if action.action_type == "SCAN":
+        return "succeeded", json_dumps(scan_result(joints_per_wall=2))
+    return "succeeded", ""
+
+
+def test_the_engine_runs_a_process_on_the_server_as_on_the_embedded_store(sparql_store, make_engine):
+    embedded = make_engine()
+    embedded.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    expected = run_process(embedded, _decide)
+    remote = ProcessEngine(sparql_store(), clock=FakeClock())
+    remote.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    assert run_process(remote, _decide) == expected
+    assert remote.store.value(SITE.wall_1_joint_2, PPR.tapingStatus) == PPR.processed
+    assert remote.check_consistency(full_inference=True) == []
+
+
+def test_two_engines_on_one_server_racing_on_one_task_status_exactly_one_wins(sparql_store):
+    first = ProcessEngine(sparql_store(), clock=FakeClock())
+    first.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    task = first.next_action().task
+    first.set_task_status(task, "in_progress")
+    second = ProcessEngine(sparql_store(), clock=FakeClock())  # a second PEMKRE client: finds the running process
+    outcome = {}
+    start = threading.Barrier(2)
+
+    def report(name, engine, status):
+        start.wait()
+        try:
+            engine.set_task_status(task, status, request_id="")
+            outcome[name] = ("won", status)
+        except (StoreConflict, TaskStateError) as exc:
+            outcome[name] = ("lost", exc)
+
+    threads = [threading.Thread(target=report, args=(n, e, st))
+               for n, e, st in (("first", first, "succeeded"), ("second", second, "failed"))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert sorted(v[0] for v in outcome.values()) == ["lost", "won"], outcome
+    loser = [v[1] for v in outcome.values() if v[0] == "lost"][0]
+    # both reports are final: whichever comes second, even one after the other, finds the task no longer running
+    assert "another writer" in str(loser) or "not running" in str(loser), loser
+    winner_status = [v[1] for v in outcome.values() if v[0] == "won"][0]
+    status = first.store.objects(URIRef(task), URIRef("https://locem-bridge.example.org/ont/process#status"))
+    assert len(status) == 1 and str(status[0]).endswith(winner_status), (status, winner_status)
+
+
+def test_an_engine_restarted_on_the_server_runs_the_process_as_on_the_embedded_store(sparql_store, make_engine):
+    """The schema and ontology graphs share blank nodes (restrictions), written by separate requests: reloaded
+    from the server, they must still be the same nodes (skolemised), or the restarted engine reasons wrongly."""
+    embedded = make_engine()
+    embedded.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    expected = run_process(embedded, _decide)
+    first = ProcessEngine(sparql_store(), clock=FakeClock())
+    first.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    scan = first.next_action()
+    first.set_task_status(scan.task, "in_progress")
+    first.set_task_status(scan.task, *_decide(scan))
+    first.store.close()
+    restarted = ProcessEngine(sparql_store(), clock=FakeClock())
+    assert [(scan.action_type, scan.params())] + run_process(restarted, _decide) == expected
+    assert restarted.store.value(SITE.wall_1_joint_2, PPR.tapingStatus) == PPR.processed
+
+
+def test_blank_nodes_shared_by_the_ontology_and_schema_graphs_stay_shared_on_the_server(sparql_store, make_engine):
+    from rdflib import BNode
+
+    from locem_bridge.pemkre.store import G_ONTOLOGY, G_SCHEMA_INFERRED
+
+    def shared(store):
+        nodes = [{t for q in store.quads(None, None, None, (g,)) for t in (q[0], q[2]) if isinstance(t, BNode)}
+                 for g in (G_ONTOLOGY, G_SCHEMA_INFERRED)]
+        return len(nodes[0] & nodes[1])
+
+    expected = shared(make_engine().store)
+    assert expected > 0
+    remote = ProcessEngine(sparql_store(), clock=FakeClock())
+    assert shared(remote.store) == expected
+    assert shared(sparql_store()) == expected  # a second client reading them
+
+
+def test_two_clients_starting_on_an_empty_server_write_the_same_blank_node_labels(sparql_store):
+    """Two clients (two processes: no shared closure cache) starting at once: one's ontology graph and the other's
+    inferred schema graph may end up together on the server; with canonical labels they still share their nodes."""
+    from rdflib import BNode
+
+    import locem_bridge.pemkre.engine as engine_module
+    from locem_bridge.pemkre import RdflibStore
+    from locem_bridge.pemkre.store import G_ONTOLOGY, G_SCHEMA_INFERRED
+
+    def graph(store, g):  # the triples around blank nodes
+        return {q[:3] for q in store.quads(None, None, None, (g,)) if any(isinstance(t, BNode) for t in q[:3])}
+
+    engine_module._CLOSURE_CACHE.clear()  # the first process
+    remote = ProcessEngine(sparql_store(), clock=FakeClock())
+    engine_module._CLOSURE_CACHE.clear()  # the second process loads the same files
+    other = ProcessEngine(RdflibStore(), clock=FakeClock())
+    for g in (G_ONTOLOGY, G_SCHEMA_INFERRED):
+        mine, theirs = graph(remote.store, g), graph(other.store, g)
+        assert mine and mine == theirs, g  # the same triples, blank node labels included
+
+
+def test_a_conditional_write_that_failed_after_its_claim_can_be_retried_at_once(sparql_store, oxigraph_server,
+                                                                                 fake_server):
+    mode = ["forward"]
+    forward = _proxy(oxigraph_server.update_url, mode)
+    fail_final = [True]
+
+    def handle(h, body):
+        text = urllib.parse.parse_qs(body.decode("utf-8")).get("update", [""])[0]
+        if fail_final[0] and "INSERT {" in text and "NOW()" not in text:  # the final write, after the claim
+            fail_final[0] = False
+            _reply(h, 500, "text/plain", "injected failure")
+            return
+        forward(h, body)
+
+    proxy = fake_server(handle)
+    s = SparqlStore(oxigraph_server.query_url, proxy.url, retry=QUICK, claim_attempts=2)
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    change = ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(2), G_WORLD)],
+                       expect=[(A, P, Literal(1), G_WORLD)])
+    with pytest.raises(StoreError):
+        s.apply(change)
+    assert not fail_final[0]
+    started = time.monotonic()
+    s.apply(change)  # not blocked by its own dead claim
+    assert time.monotonic() - started < 5
+    assert s.objects(A, P) == [Literal(2)]
+    s.close()
+
+
+def test_a_claim_ttl_shorter_than_twice_the_longest_read_and_write_path_is_refused(sparql_store):
+    from locem_bridge.pemkre.errors import InvalidParameterError
+
+    with pytest.raises(InvalidParameterError, match="claim_ttl_s 30.0 s is too short"):
+        sparql_store(timeout_s=10.0, claim_ttl_s=30.0)
+    s = sparql_store()
+    assert s.claim_ttl_s > 2 * s.claim_path_s
+
+
+def test_dead_claims_are_deleted_by_the_next_claim_request_and_an_unreadable_clock_is_not_forever(sparql_store):
+    from locem_bridge.pemkre.sparql_store import G_CLAIMS, P_CLAIM_AT, P_CLAIM_ON
+
+    s = sparql_store(retry=QUICK, timeout_s=2.0)
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    dead = URIRef("urn:uuid:00000000-0000-0000-0000-000000000001")
+    old = Literal("2000-01-01T00:00:00Z", datatype=URIRef("http://www.w3.org/2001/XMLSchema#dateTime"))
+    s.apply(ChangeSet(add=[(dead, P_CLAIM_ON, URIRef("urn:pemkre-claim:x"), G_CLAIMS),
+                           (dead, P_CLAIM_AT, old, G_CLAIMS)]))
+    assert len(list(s.quads(dead, None, None, (G_CLAIMS,)))) == 2
+    s.apply(ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(2), G_WORLD)],
+                      expect=[(A, P, Literal(1), G_WORLD)]))
+    assert list(s.quads(dead, None, None, (G_CLAIMS,))) == []
+    # a claim whose time cannot be read: counted by this client's clock, dead after the ttl
+    clock = [100.0]
+    s.clock = lambda: clock[0]  # the store's own clock, not the global time.monotonic
+    s._select_doc = lambda *a, **k: {"head": {"vars": ["t", "at", "now"]}, "results": {"bindings": [
+        {"t": {"type": "uri", "value": "urn:uuid:r"}, "at": {"type": "literal", "value": "garbage"},
+         "now": {"type": "literal", "value": "garbage"}}]}}
+    assert [c.token for c in s._live_claims(URIRef("urn:pemkre-claim:x"))] == ["urn:uuid:r"]
+    clock[0] += s.claim_ttl_s + 1
+    assert s._live_claims(URIRef("urn:pemkre-claim:x")) == []
+
+
+def test_a_write_after_one_whose_fate_is_unknown_waits_until_it_shows_or_the_claim_ttl_has_passed(sparql_store,
+                                                                                                   oxigraph_server):
+    s = sparql_store(retry=QUICK, timeout_s=2.0)
+    clock = [1000.0]
+    s.clock = lambda: clock[0]
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    lost = "urn:uuid:00000000-0000-0000-0000-0000000000aa"
+    s._note_unknown(lost, s.clock(), timed_out=False)  # as after a write whose answer was lost, server not asked
+    oxigraph_server.kill()
+    try:
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+        msg = _one_line(err.value)
+        assert "earlier write's fate is unknown" in msg and s.update_endpoint.name in msg, msg
+        assert s.unknown_writes == [lost]
+    finally:
+        oxigraph_server.start()
+    # the server answers, but not having the token yet proves nothing: the write may still arrive
+    clock[0] += 5
+    with pytest.raises(StoreUnavailable) as err:
+        s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+    msg = _one_line(err.value)
+    assert err.value.applied is False and "sent 5.0 s ago" in msg and "may still apply it" in msg, msg
+    assert s.was_applied(lost) is None and s.unknown_writes == [lost]
+    clock[0] += s.claim_ttl_s  # the claim ttl has passed since it was sent: it will not be applied any more
+    s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+    assert s.unknown_writes == [] and sorted(s.objects(A, P)) == [Literal(1), Literal(2)]
+
+
+def test_a_write_that_arrives_after_its_token_was_first_missed_is_found_and_holds_back_later_writes(
+        sparql_store, oxigraph_server, fake_server):
+    mode = ["forward"]
+    forwarded, release = threading.Event(), threading.Event()
+
+    def slow(h, body):
+        held = mode[0] == "slow"
+        if held:
+            release.wait(30)  # held until the test releases it: a write on its way for a long time
+        try:
+            _proxy(oxigraph_server.update_url, ["forward"])(h, body)
+        except OSError:
+            pass  # the client is gone
+        finally:
+            if held:
+                forwarded.set()
+
+    s = SparqlStore(oxigraph_server.query_url, fake_server(slow).url, timeout_s=0.3, retry=QUICK)
+    s.query_endpoint = Endpoint(oxigraph_server.query_url, "query", 10.0, QUICK)
+    clock = [1000.0]
+    s.clock = lambda: clock[0]
+    mode[0] = "slow"
+    try:
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+        token = err.value.token
+        assert err.value.applied is None and s.unknown_writes == [token]
+        mode[0] = "forward"
+        assert s.was_applied(token) is None and s.unknown_writes == [token]  # not there yet: still unknown
+        with pytest.raises(StoreUnavailable, match="earlier write's fate is unknown"):
+            s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))  # nothing builds on it while it may arrive
+        assert s.objects(A, P) == []
+    finally:
+        release.set()
+    assert forwarded.wait(10)  # the old write lands now
+    assert s.was_applied(token) is True and s.unknown_writes == []
+    s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+    assert sorted(s.objects(A, P)) == [Literal(1), Literal(2)]
+    s.close()
+
+
+def test_a_conditional_write_of_unknown_fate_keeps_its_claim_so_no_other_writer_builds_on_the_old_state(
+        sparql_store, oxigraph_server, fake_server):
+    from locem_bridge.pemkre.sparql_store import G_CLAIMS, P_CLAIM_ON
+
+    hold = [False]
+    forwarded, release = threading.Event(), threading.Event()
+
+    def handle(h, body):
+        text = urllib.parse.parse_qs(body.decode("utf-8")).get("update", [""])[0]
+        held = hold[0] and "INSERT {" in text and "NOW()" not in text  # the final write, after the claim
+        if held:
+            release.wait(30)
+        try:
+            _proxy(oxigraph_server.update_url, ["forward"])(h, body)
+        except OSError:
+            pass
+        finally:
+            if held:
+                forwarded.set()
+
+    s = SparqlStore(oxigraph_server.query_url, fake_server(handle).url, timeout_s=0.3, retry=QUICK)
+    s.query_endpoint = Endpoint(oxigraph_server.query_url, "query", 10.0, QUICK)
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    change = ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(2), G_WORLD)],
+                       expect=[(A, P, Literal(1), G_WORLD)])
+    rival = ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(3), G_WORLD)],
+                      expect=[(A, P, Literal(1), G_WORLD)])
+    key = SparqlStore.claim_key(change.expect)
+    other = sparql_store(retry=QUICK, claim_attempts=2)
+    hold[0] = True
+    try:
+        with pytest.raises(StoreUnavailable) as err:
+            s.apply(change)
+        assert err.value.applied is None and err.value.token in s.unknown_writes, str(err.value)
+        assert len(list(other.quads(None, P_CLAIM_ON, key, (G_CLAIMS,)))) == 1  # the claim was not withdrawn
+        with pytest.raises(StoreUnavailable) as err2:
+            other.apply(rival)  # would win on the old state (and be undone by the late write) without the claim
+        msg = _one_line(err2.value)
+        assert "claimed by another writer (%s, claimed " % s.client in msg and "nothing was written" in msg, msg
+    finally:
+        release.set()
+    assert forwarded.wait(10)
+    assert s.was_applied(err.value.token) is True
+    assert other.objects(A, P) == [Literal(2)]
+    assert list(other.quads(None, P_CLAIM_ON, key, (G_CLAIMS,))) == []  # the write deleted its claim
+    with pytest.raises(StoreConflict):
+        other.apply(rival)
+    s.close()
+
+
+def test_a_claim_left_by_a_dead_client_makes_the_store_unavailable_naming_its_age_not_a_conflict(sparql_store,
+                                                                                                oxigraph_server):
+    from locem_bridge.pemkre.sparql_store import G_CLAIMS, P_CLAIM_AT, P_CLAIM_ON, P_WRITE_CLAIM
+
+    s = sparql_store(retry=QUICK, claim_attempts=3)
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    change = ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(2), G_WORLD)],
+                       expect=[(A, P, Literal(1), G_WORLD)])
+    ghost = "<urn:uuid:00000000-0000-0000-0000-0000000000dd>"
+    update = ("INSERT { GRAPH <%s> { %s <%s> \"ghost host pid 1\" ; <%s> <%s> ; <%s> ?now } } WHERE { BIND(NOW() AS "
+              "?now) }" % (G_CLAIMS, ghost, P_WRITE_CLAIM, P_CLAIM_ON, SparqlStore.claim_key(change.expect),
+                           P_CLAIM_AT))
+    body = urllib.parse.urlencode({"update": update}).encode("ascii")
+    urllib.request.urlopen(urllib.request.Request(oxigraph_server.update_url, data=body), timeout=10).close()
+    with pytest.raises(StoreUnavailable) as err:
+        s.apply(change)
+    msg = _one_line(err.value)
+    assert not isinstance(err.value, StoreConflict) and err.value.applied is False
+    assert re.search(r"is claimed by another writer \(ghost host pid 1, claimed \d+ s ago\) through 3 attempts; "
+                     r"nothing was written; .*claim_ttl_s", msg), msg
+    assert s.objects(A, P) == [Literal(1)]
+
+
+def test_a_conditional_write_answered_but_whose_token_cannot_be_read_back_is_unknown_not_unapplied(sparql_store):
+    s = sparql_store(retry=QUICK)
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    real, asked = s._token_stored, []
+
+    def failing_once(token):
+        if not asked:
+            asked.append(token)
+            raise StoreUnavailable("SPARQL query endpoint x: connection refused", "x", "connection refused")
+        return real(token)
+
+    s._token_stored = failing_once
+    with pytest.raises(StoreUnavailable) as err:
+        s.apply(ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(2), G_WORLD)],
+                          expect=[(A, P, Literal(1), G_WORLD)]))
+    msg = _one_line(err.value)
+    assert err.value.applied is None and err.value.token == asked[0] and s.unknown_writes == asked, msg
+    assert "reading its token back failed" in msg, msg
+    assert s.was_applied(asked[0]) is True and s.unknown_writes == []
+    assert s.objects(A, P) == [Literal(2)]
+    # a write the server answered whose token is not there did not apply (its condition failed): settled at once
+    s._note_unknown("urn:uuid:00000000-0000-0000-0000-0000000000ee", s.clock(), timed_out=False, answered=True)
+    assert s.was_applied("urn:uuid:00000000-0000-0000-0000-0000000000ee") is False and s.unknown_writes == []
+
+
+def test_reads_without_a_graph_never_see_another_systems_graphs(sparql_store, oxigraph_server):
+    s = sparql_store()
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))
+    foreign = URIRef(EX + "mes/orders")
+    body = urllib.parse.urlencode({"update": "INSERT DATA { GRAPH <%s> { <%s> <%s> 9 . <%s> <%s> <%s> } }" % (
+        foreign, A, P, A, URIRef("http://www.w3.org/1999/02/22-rdf-syntax-ns#type"), URIRef(EX + "Order"))})
+    urllib.request.urlopen(urllib.request.Request(oxigraph_server.update_url, data=body.encode("ascii")),
+                           timeout=10).close()
+    assert s.objects(A, P) == [Literal(1)]
+    assert all(q[3] != foreign for q in s.quads())
+    assert s.count() == 1
+    assert foreign not in [g.identifier for g in s.snapshot().graphs()]
+    assert s.objects(A, P, (foreign,)) == [Literal(9)]  # named, it is read
+
+
+@pytest.mark.parametrize("status", [502, 504])
+def test_a_gateway_error_on_a_write_is_a_lost_answer_settled_by_the_token(sparql_store, oxigraph_server,
+                                                                           fake_server, status):
+    mode = ["forward"]
+
+    def handle(h, body):
+        if mode[0] == "forward":
+            _proxy(oxigraph_server.update_url, ["forward"])(h, body)
+        elif mode[0] == "applied":
+            req = urllib.request.Request(oxigraph_server.update_url, data=body,
+                                         headers={"Content-Type": "application/x-www-form-urlencoded"})
+            urllib.request.urlopen(req, timeout=10).close()
+            _reply(h, status, "text/plain", "gateway")
+        else:
+            _reply(h, status, "text/plain", "gateway")
+
+    proxy = fake_server(handle)
+    s = SparqlStore(oxigraph_server.query_url, proxy.url, retry=QUICK)
+    mode[0] = "applied"
+    s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD)]))  # written; the gateway's error hid the answer
+    assert s.objects(A, P) == [Literal(1)]
+    mode[0] = "not applied"
+    with pytest.raises(StoreUnavailable) as err:
+        s.apply(ChangeSet(add=[(A, P, Literal(2), G_WORLD)]))
+    assert err.value.applied is None and err.value.token in s.unknown_writes, str(err.value)
+    # not there: but a gateway's error may come while the write is still on its way, so it stays unknown
+    assert s.was_applied(err.value.token) is None and err.value.token in s.unknown_writes
+    s.clock = lambda: time.monotonic() + s.claim_ttl_s  # until the claim ttl has passed since it was sent
+    assert s.was_applied(err.value.token) is False and s.unknown_writes == []
+    s.close()
+
+
+def test_only_pemkre_graphs_found_on_the_server_join_the_default_graph(sparql_store, oxigraph_server):
+    from locem_bridge.pemkre.vocab import GRAPHS
+
+    writer = sparql_store()
+    foreign, ours = URIRef(EX + "other-system"), URIRef(str(GRAPHS) + "extra")
+    writer.replace_graph(foreign, [(A, P, Literal(1))])
+    writer.replace_graph(ours, [(A, P, Literal(2))])
+    reader = sparql_store()  # finds both graphs on the server
+    q = reader.prepare("SELECT ?x WHERE { ex:a ex:p ?x }", "p", {"ex": EX})
+    assert reader.select(q) == [{"x": Literal(2)}]
+    assert foreign not in reader.refresh_graphs() and ours in reader.refresh_graphs()
