@@ -276,6 +276,51 @@ def test_a_raster_progress_needs_one_gap_between_each_two_stretches():
     rig = PathRig()
     switch = RasterSwitch(rig, rig, rig.switch, [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5])],
                           reach=0.05, clock=rig.clock)
-    with pytest.raises(ValueError, match="1 gaps for 2 stretches|gaps for 2 stretches"):
-        RasterProgress(switch, rig, [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5])], [0.0, 0.3],
-                       0.6, reach=0.05, gaps_m=[0.3, 0.2])
+    for gaps in ([0.3, 0.2], []):
+        with pytest.raises(ValueError, match="%d gaps for 2 stretches" % len(gaps)):
+            RasterProgress(switch, rig, [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5])],
+                           [0.0, 0.3], 0.6, reach=0.05, gaps_m=gaps)
+
+
+@pytest.mark.parametrize("speed", [0.3, 0.5, 1.0])
+def test_a_path_gap_is_never_shorter_than_the_arm_takes_through_the_turn(speed):
+    """The gaps ``_raster_path`` gives RasterProgress count each turn as the length the arm covers at lane speed in
+    the time the UR stand-in's blended path (its time-optimal profile, v <= sqrt(a R) on each arc) takes from one
+    stretch's end to the next one's start: never shorter (the point should LOCEM die would run ahead of the spray)
+    and not much longer. The turn's bare path length is too short at every one of these speeds."""
+    import math
+    from locem_bridge.bridges.commands_wall import LANE_ACCEL, PATH_BLEND, RUNUP_MARGIN, path_gaps
+    from locem_bridge.sim.ur.blended import BlendedCurve
+
+    spacing, width = 0.146, 0.6
+    blend = min(PATH_BLEND, 0.45 * spacing)
+    runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN + blend
+    points, ends = [], []
+    for k in range(4):
+        sign = 1.0 if k % 2 == 0 else -1.0
+        w0, w1 = (0.0, width) if sign > 0 else (width, 0.0)
+        z = k * spacing
+        points += [np.array([w0 - sign * runup, 0.0, z]), np.array([w1 + sign * runup, 0.0, z])]
+        ends.append((np.array([w0, 0.0, z]), np.array([w1, 0.0, z])))
+    gaps = path_gaps(points, ends, speed, blend, spacing)
+    m = len(points) - 1
+    curve = BlendedCurve(np.array(points), [blend] * (m - 1), [speed] * m, [LANE_ACCEL] * m)
+    cells = np.arange(len(curve.times)) * curve.ds
+
+    def arc_length(k, point):                      # the curve's length at ``point`` on straight segment k
+        a, b = curve.points[k - 1], curve.points[k]
+        f = float(np.linalg.norm(point - a) / np.linalg.norm(b - a))
+        for kind, s0, length, kk, data, _v, _a in curve.pieces:
+            if kind == "line" and kk == k and data[0] - 1e-9 <= f <= data[1] + 1e-9:
+                return s0 + (f - data[0]) / (data[1] - data[0]) * length
+        raise AssertionError("no straight piece of segment %d at %.3f" % (k, f))
+
+    for i, gap in enumerate(gaps):
+        s_end, s_next = arc_length(2 * i + 1, ends[i][1]), arc_length(2 * i + 3, ends[i + 1][0])
+        taken = float(np.interp(s_next, cells, curve.times) - np.interp(s_end, cells, curve.times))
+        assert speed * taken <= gap + 1e-3, (i, speed * taken, gap)
+        assert gap <= 1.5 * speed * taken, (i, speed * taken, gap)
+        bare = 2.0 * runup + spacing
+        if speed > math.sqrt(LANE_ACCEL * blend):
+            assert speed * taken > bare, (speed * taken, bare)   # the old, unweighted length ran ahead
+

@@ -2,8 +2,6 @@
 SPARQL 1.1 server (``oxigraph serve``, one per session, emptied for each test) and SparqlStores on it."""
 import os
 import sys
-import urllib.parse
-import urllib.request
 
 import pytest
 
@@ -11,7 +9,7 @@ _HERE = os.path.dirname(os.path.abspath(__file__))
 if _HERE not in sys.path:
     sys.path.insert(0, _HERE)
 
-from oxigraph_server import OxigraphServer  # noqa: E402
+from oxigraph_server import OxigraphServer, clear_server  # noqa: E402
 from pemkre_testkit import FakeClock  # noqa: E402
 from locem_bridge.pemkre import JournaledStore, ProcessEngine  # noqa: E402
 
@@ -43,13 +41,6 @@ def oxigraph_server(tmp_path_factory):
     server = OxigraphServer(str(tmp_path_factory.mktemp("oxigraph") / "data"))
     with server:
         yield server
-
-
-def clear_server(server: OxigraphServer) -> None:
-    """Empty every graph of ``server`` (``DROP ALL``)."""
-    body = urllib.parse.urlencode({"update": "DROP ALL"}).encode("ascii")
-    with urllib.request.urlopen(urllib.request.Request(server.update_url, data=body), timeout=10):
-        pass
 
 
 @pytest.fixture

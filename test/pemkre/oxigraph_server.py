@@ -136,3 +136,10 @@ class OxigraphServer:
 
     def __exit__(self, *exc) -> None:
         self.kill()
+
+
+def clear_server(server: OxigraphServer) -> None:
+    """Empty every graph of ``server`` (``DROP ALL``)."""
+    body = urllib.parse.urlencode({"update": "DROP ALL"}).encode("ascii")
+    with urllib.request.urlopen(urllib.request.Request(server.update_url, data=body), timeout=10):
+        pass

@@ -52,7 +52,7 @@ def test_an_unknown_kind_is_refused_before_anything_is_touched(tmp_path):
 
 def test_sparql_opens_a_server_store_that_keeps_a_write_and_fresh_drops_only_pemkre_graphs(oxigraph_server,
                                                                                           tmp_path):
-    from conftest import clear_server
+    from oxigraph_server import clear_server  # not 'conftest': another test folder's conftest may hold that name
     from locem_bridge.pemkre.sparql_store import SparqlStore
 
     oxigraph_server.start()

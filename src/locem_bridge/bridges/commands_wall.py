@@ -539,6 +539,24 @@ class RasterSwitch(LaneSwitch):
 JUMP_M = 0.1
 
 
+def path_gaps(points: Sequence[np.ndarray], ends: Sequence[Tuple[np.ndarray, np.ndarray]], speed: float,
+              blend: float, spacing: float) -> List[float]:
+    """For a serpentine run as one blended path (``points``: each lane's two ends, run-ups included, in order;
+    ``ends``: each lane's worked stretch, start and end; lanes ``spacing`` apart, turns blended with ``blend``,
+    lane ``speed`` at :data:`LANE_ACCEL`): the path from each stretch's end to the next one's start (run-out, turn,
+    run-up) as the length the arm would cover at lane speed in the time it takes. The controller slows down on
+    the turn's two arcs (to sqrt(LANE_ACCEL x radius); a 90 degree blend's arc radius is its blend radius) and on
+    the straight between them, and brakes and speeds up at LANE_ACCEL: the unblended lengths plus that time lost,
+    an upper bound, so the point :class:`RasterProgress` gives should LOCEM die stays behind the spray."""
+    v_turn = min(speed, math.sqrt(LANE_ACCEL * blend))
+    # two quarter arcs and the straight between them at v_turn, braking before and speeding up after at LANE_ACCEL
+    lost = ((math.pi * blend + max(0.0, spacing - 2.0 * blend)) * (speed / v_turn - 1.0)
+            + (speed - v_turn) ** 2 / LANE_ACCEL)
+    return [float(np.linalg.norm(points[2 * i + 1] - ends[i][1])
+                  + np.linalg.norm(points[2 * i + 2] - points[2 * i + 1])
+                  + np.linalg.norm(ends[i + 1][0] - points[2 * i + 2])) + lost for i in range(len(ends) - 1)]
+
+
 class RasterProgress(HookedWaiter):
     """A waiter around a raster's tool switch (:class:`LaneSwitch`, :class:`RasterSwitch`; every wait goes on to
     it) that reports the raster's progress: the worked length done (m, counted from the raster's start, a skipped
@@ -551,8 +569,9 @@ class RasterProgress(HookedWaiter):
     open for its timeout less one poll; the arm's controller goes on along its path meanwhile). While the tool is
     on, each report adds the point the TCP reaches in that time at its measured speed: where a retry after LOCEM's
     death can go on without a gap. ``gaps_m``: for a raster that is one controller path, the path's length from
-    each stretch's end to the next one's start (run-outs and turn; blends make the true path shorter, so the point
-    is never ahead); the point then goes on into the following stretches, as the arm and the open valve do. Without
+    each stretch's end to the next one's start, counted as the length the arm covers at lane speed in the time it
+    takes (it slows down in the turn; counted long, so the point is never ahead); the point then goes on into the
+    following stretches, as the arm and the open valve do. Without
     it (one move per stretch: the arm stops at the stretch's end) the point is at most the stretch's end.
 
     Speeds come from the controller's own sample times (``sample_time``) when the arm gives them: the times the
@@ -648,7 +667,7 @@ class RasterProgress(HookedWaiter):
         the last samples run partly across the lane, at the path's speed all the same."""
         length = float(np.linalg.norm(self._lines[lane][1]))
         speed = self._speed()
-        travel = speed * self._hold_s
+        travel = speed * self._hold_s if speed > 0.0 else 0.0       # hold_s may be inf (no watchdog)
         if along < 0.0:                   # before the stretch: the tool reaches its start first
             travel, along = max(0.0, travel + along), 0.0
         along = min(along, length)
@@ -1107,11 +1126,7 @@ class WallCommands:
             ends.append((o + uu * w0 + up * t + n * offset, o + uu * w1 + up * t + n * offset))
             stretches.append((self.to_arm(ends[-1][0], n), self.to_arm(ends[-1][1], n)))
             starts.append(start_m)
-        # the path from each stretch's end to the next one's start: run-out, turn, run-up (unblended: the arm's
-        # blended path is shorter, so the point RasterProgress gives should LOCEM die is never ahead of the spray)
-        gaps = [float(np.linalg.norm(points[2 * i + 1] - ends[i][1])
-                      + np.linalg.norm(points[2 * i + 2] - points[2 * i + 1])
-                      + np.linalg.norm(ends[i + 1][0] - points[2 * i + 2])) for i in range(len(lanes) - 1)]
+        gaps = path_gaps(points, ends, speed, blend, spacing)
         by_path = tool in SWITCH_LEADS                   # switched along the path (RasterSwitch), with a lead-in
         if by_path:
             k0, _t, w0, w1, _s = lanes[0]
@@ -1164,7 +1179,7 @@ class WallCommands:
             return {"length_m": 0.0, "lanes": 0, "skipped_m": round(min(skip, total_m), 4), "duration_s": 0.0}
         guarded = GuardedWaiter(ctx, comp.check_link)
         # should LOCEM die, the compressor's watchdog keeps the valve open for its timeout less one poll
-        # (none: open until the stretch's end, the most the report then claims)
+        # (none: open until the arm stops, at the stretch's end or, on a path, the raster's end)
         hold_s = (max(0.0, comp.watchdog_timeout - 1.0 / comp.poll_rate) if comp.watchdog_timeout > 0
                   else float("inf"))
         live: Dict[str, Any] = {"skip": skip}
