@@ -117,18 +117,7 @@ def test_raster_progress_reports_the_length_worked_never_ahead_of_the_tool_and_e
     from locem_bridge.bridges.commands_wall import RasterProgress
     from locem_bridge.common.raster_progress import parse_progress_text
 
-    class Ctx(Rig):
-        def __init__(self):
-            super().__init__()
-            self.reports = []
-
-        def on_cancel(self, callback):
-            pass
-
-        def report(self, progress, text=""):
-            self.reports.append((self.clock.t, progress, text))
-
-    rig = Ctx()
+    rig = Reporting.over(Rig)()
     stretches = [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5])]
     switch = RasterSwitch(rig, rig, rig.switch, stretches, reach=0.05, clock=rig.clock)
     switch.switch_s = REQUEST
@@ -158,6 +147,24 @@ def test_raster_progress_reports_the_length_worked_never_ahead_of_the_tool_and_e
     assert rig.reports[-1][2] == "raster 1.600 of 1.600 m"          # the tool off: no "if LOCEM stops" part
     during = [t for t, _p, text in rig.reports if 1.0 < float(text.split()[1]) < 1.3]
     assert len(during) >= 2 and max(b - a for a, b in zip(during, during[1:])) <= RasterProgress.PERIOD_S + 2 * PERIOD
+
+
+class Reporting:
+    """A rig that is also the command's context: it keeps the progress reports (clock time, fraction, text)."""
+
+    def __init__(self):
+        super().__init__()
+        self.reports = []
+
+    def on_cancel(self, callback):
+        pass
+
+    def report(self, progress, text=""):
+        self.reports.append((self.clock.t, progress, text))
+
+    @staticmethod
+    def over(rig):
+        return type("Reporting" + rig.__name__, (Reporting, rig), {})
 
 
 class PathRig(Rig):
@@ -220,17 +227,7 @@ def test_on_a_path_the_point_reached_should_locem_die_goes_through_the_turn_into
 
     rng = np.random.default_rng(7)
 
-    class Ctx(PathRig):
-        def __init__(self):
-            super().__init__()
-            self.reports = []
-
-        def on_cancel(self, callback):
-            pass
-
-        def report(self, progress, text=""):
-            self.reports.append((self.clock.t, progress, text))
-
+    class Ctx(Reporting.over(PathRig)):
         def cached_state(self):
             taken = self.clock.t - AGE
             # the controller's stamp may be one 8 ms cycle older than the pose read after it; the poll's arrival

@@ -11,7 +11,7 @@ returns, the write is in RocksDB's write-ahead log, which a ``kill -9`` of this 
 """
 import re
 import threading
-from typing import Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Dict, Iterable, Iterator, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import pyoxigraph as ox
 from rdflib import BNode, Literal, URIRef
@@ -19,7 +19,7 @@ from rdflib.namespace import XSD
 from rdflib.term import Node
 
 from .errors import QueryError, StoreError
-from .store import ChangeSet, PreparedQuery, Quad, QueryResult, Triple, TripleStore
+from .store import IRI_CACHE_MAX, ChangeSet, PreparedQuery, Quad, QueryResult, Triple, TripleStore, cached_uri
 
 _XSD_STRING = str(XSD.string)
 _KIND_RE = re.compile(r"\b(ASK|SELECT|CONSTRUCT|DESCRIBE)\b", re.IGNORECASE)
@@ -43,7 +43,7 @@ def to_ox(term: Node):
     if isinstance(term, URIRef):
         n = _OX_CACHE.get(term)
         if n is None:
-            if len(_OX_CACHE) >= _IRI_CACHE_MAX:
+            if len(_OX_CACHE) >= IRI_CACHE_MAX:
                 _OX_CACHE.clear()
             n = _OX_CACHE[term] = ox.NamedNode(str(term))
         return n
@@ -58,20 +58,10 @@ def to_ox(term: Node):
     raise TypeError("not an RDF term: %r" % (term,))
 
 
-_IRI_CACHE: Dict[str, URIRef] = {}
-_IRI_CACHE_MAX = 200_000
-
-
 def from_ox(term) -> Node:
     """pyoxigraph term -> rdflib term (xsd:string literals become plain literals, as RDF 1.1 says they are)."""
     if isinstance(term, ox.NamedNode):
-        v = term.value
-        u = _IRI_CACHE.get(v)
-        if u is None:
-            if len(_IRI_CACHE) >= _IRI_CACHE_MAX:
-                _IRI_CACHE.clear()
-            u = _IRI_CACHE[v] = URIRef(v)
-        return u
+        return cached_uri(term.value)
     if isinstance(term, ox.BlankNode):
         return BNode(term.value)
     if isinstance(term, ox.Literal):
@@ -96,18 +86,37 @@ def query_kind(text: str) -> str:
     return m.group(1).upper()
 
 
-def projected_variables(text: str, prefixes: Mapping[str, str], variables: Sequence[str]) -> Tuple[str, ...]:
-    """The variables a SELECT query projects (parsed by rdflib's SPARQL parser)."""
+class CheckedQuery(NamedTuple):
+    """A query text checked once by rdflib's SPARQL 1.1 parser (see :func:`check_query`)."""
+
+    kind: str                       # ASK / SELECT / CONSTRUCT / DESCRIBE
+    prefixes: Dict[str, str]
+    variables: Tuple[str, ...]      # every variable named in the text, in order
+    projected: Tuple[str, ...]      # a SELECT's projected variables (() for the other kinds)
+    parsed: Any                     # rdflib's prepared query
+
+
+def check_query(text: str, name: str, prefixes: Mapping[str, str]) -> CheckedQuery:
+    """Parse ``text`` once now (rdflib's SPARQL 1.1 parser; nothing is evaluated, so SERVICE calls are not
+    made), so a broken query is reported at load time, not at the first decision:
+    :class:`~locem_bridge.pemkre.errors.QueryError` naming the query. Every store's ``prepare`` starts here."""
+    try:
+        kind = query_kind(text)
+    except QueryError as exc:
+        raise QueryError("query %s: %s" % (name, exc), name) from None
+    prefix_map = {k: str(v) for k, v in prefixes.items()}
     from rdflib.plugins.sparql import prepareQuery
 
     try:
-        q = prepareQuery(text, initNs=dict(prefixes))
-    except Exception:
-        return tuple(variables)  # oxigraph accepted it; be permissive rather than wrong
-    pv = q.algebra.get("PV")
-    if pv is None:
-        return tuple(variables)
-    return tuple(str(v) for v in pv)
+        parsed = prepareQuery(text, initNs=prefix_map)
+    except Exception as exc:
+        raise QueryError("query %s does not parse: %s" % (name, str(exc).splitlines()[0][:300]), name) from None
+    variables = tuple(dict.fromkeys(_VAR_RE.findall(text)))
+    projected: Tuple[str, ...] = ()
+    if kind == "SELECT":
+        pv = parsed.algebra.get("PV")
+        projected = tuple(str(v) for v in pv) if pv is not None else variables
+    return CheckedQuery(kind, prefix_map, variables, projected, parsed)
 
 
 class OxigraphStore(TripleStore):
@@ -130,23 +139,10 @@ class OxigraphStore(TripleStore):
 
     # ---------------------------------------------------------------- queries
     def prepare(self, text: str, name: str, prefixes: Mapping[str, str]) -> PreparedQuery:
-        try:
-            kind = query_kind(text)
-        except QueryError as exc:
-            raise QueryError("query %s: %s" % (name, exc), name) from None
-        prefix_map = {k: str(v) for k, v in prefixes.items()}
-        # Parse once now (rdflib's SPARQL 1.1 parser; nothing is evaluated, so SERVICE calls are not made) so a
-        # broken query is reported at load time, not at the first decision.
-        from rdflib.plugins.sparql import prepareQuery
-
-        try:
-            prepareQuery(text, initNs=prefix_map)
-        except Exception as exc:
-            raise QueryError("query %s does not parse: %s" % (name, str(exc).splitlines()[0][:300]), name) from None
-        variables = tuple(dict.fromkeys(_VAR_RE.findall(text)))
-        compiled = prefix_map if _PREFIXES_ARGUMENT else with_prefixes(text, prefix_map)
-        return PreparedQuery(name=name, text=text, kind=kind, variables=variables, compiled=compiled,
-                             projected=projected_variables(text, prefix_map, variables) if kind == "SELECT" else ())
+        q = check_query(text, name, prefixes)
+        compiled = q.prefixes if _PREFIXES_ARGUMENT else with_prefixes(text, q.prefixes)
+        return PreparedQuery(name=name, text=text, kind=q.kind, variables=q.variables, compiled=compiled,
+                             projected=q.projected)
 
     def run(self, query: PreparedQuery, bindings: Optional[Mapping[str, Node]] = None) -> QueryResult:
         self._check_bindings(query, bindings)

@@ -9,11 +9,10 @@ import threading
 from typing import Iterable, Iterator, Mapping, Optional, Sequence
 
 from rdflib import Dataset, URIRef
-from rdflib.plugins.sparql import prepareQuery
 from rdflib.term import Node
 
 from .errors import QueryError
-from .oxigraph_store import _VAR_RE, query_kind
+from .oxigraph_store import check_query
 from .store import ChangeSet, PreparedQuery, Quad, QueryResult, Triple, TripleStore
 
 
@@ -27,18 +26,9 @@ class RdflibStore(TripleStore):
         self._write_lock = threading.RLock()
 
     def prepare(self, text: str, name: str, prefixes: Mapping[str, str]) -> PreparedQuery:
-        try:
-            kind = query_kind(text)
-            compiled = prepareQuery(text, initNs=dict(prefixes))
-        except QueryError as exc:
-            raise QueryError("query %s: %s" % (name, exc), name) from None
-        except Exception as exc:
-            raise QueryError("query %s does not parse: %s" % (name, exc), name) from None
-        variables = tuple(dict.fromkeys(_VAR_RE.findall(text)))
-        pv = compiled.algebra.get("PV") if kind == "SELECT" else None
-        projected = tuple(str(v) for v in pv) if pv is not None else (variables if kind == "SELECT" else ())
-        return PreparedQuery(name=name, text=text, kind=kind, variables=variables, compiled=compiled,
-                             projected=projected)
+        q = check_query(text, name, prefixes)
+        return PreparedQuery(name=name, text=text, kind=q.kind, variables=q.variables, compiled=q.parsed,
+                             projected=q.projected)
 
     def run(self, query: PreparedQuery, bindings: Optional[Mapping[str, Node]] = None) -> QueryResult:
         self._check_bindings(query, bindings)

@@ -94,7 +94,7 @@ from rdflib.namespace import XSD
 from rdflib.term import Node
 
 from .errors import InvalidParameterError, QueryError, StoreError, StoreUnavailable
-from .oxigraph_store import _VAR_RE, query_kind
+from .oxigraph_store import check_query
 from .sparql_http import Answer, Endpoint, HttpStatusError, RetryPolicy
 from .sparql_text import iri_text, json_rows, term_text, unskolem, values_block, values_position
 from .store import (ASSERTED_GRAPHS, G_META, INFERRED_GRAPHS, ChangeSet, PreparedQuery, Quad, QueryResult, Triple,
@@ -237,29 +237,14 @@ class SparqlStore(TripleStore):
 
     # ---------------------------------------------------------------- queries
     def prepare(self, text: str, name: str, prefixes: Mapping[str, str]) -> PreparedQuery:
+        q = check_query(text, name, prefixes)
         try:
-            kind = query_kind(text)
-        except QueryError as exc:
-            raise QueryError("query %s: %s" % (name, exc), name) from None
-        prefix_map = {k: str(v) for k, v in prefixes.items()}
-        from rdflib.plugins.sparql import prepareQuery
-
-        try:
-            parsed = prepareQuery(text, initNs=prefix_map)
-        except Exception as exc:
-            raise QueryError("query %s does not parse: %s" % (name, str(exc).splitlines()[0][:300]), name) from None
-        variables = tuple(dict.fromkeys(_VAR_RE.findall(text)))
-        projected: Tuple[str, ...] = ()
-        if kind == "SELECT":
-            pv = parsed.algebra.get("PV")
-            projected = tuple(str(v) for v in pv) if pv is not None else variables
-        try:
-            prologue = "".join("PREFIX %s: %s\n" % (k, iri_text(v)) for k, v in prefix_map.items())
+            prologue = "".join("PREFIX %s: %s\n" % (k, iri_text(v)) for k, v in q.prefixes.items())
         except InvalidParameterError as exc:
             raise QueryError("query %s: a prefix is unusable: %s" % (name, exc), name) from None
         full = prologue + text
-        return PreparedQuery(name=name, text=text, kind=kind, variables=variables, projected=projected,
-                             compiled=_Compiled(full, values_position(full, kind)))
+        return PreparedQuery(name=name, text=text, kind=q.kind, variables=q.variables, projected=q.projected,
+                             compiled=_Compiled(full, values_position(full, q.kind)))
 
     def run(self, query: PreparedQuery, bindings: Optional[Mapping[str, Node]] = None) -> QueryResult:
         self._check_bindings(query, bindings)

@@ -13,6 +13,7 @@ from rdflib.namespace import XSD
 from rdflib.term import Node
 
 from .errors import InvalidParameterError, StoreError
+from .store import cached_uri
 
 _XSD_STRING = str(XSD.string)
 _IRI_BAD = re.compile(r'[\x00-\x20<>"{}|^`\\]')
@@ -159,8 +160,6 @@ def _skip_string(text: str, i: int) -> int:
 
 
 # ------------------------------------------------------------------------------------------------ results
-_IRI_CACHE: Dict[str, URIRef] = {}
-_IRI_CACHE_MAX = 200_000
 
 
 def json_term(value: object, where: str) -> Node:
@@ -175,12 +174,7 @@ def json_term(value: object, where: str) -> Node:
     if kind == "uri":
         if v.startswith(SKOLEM_PREFIX):
             return BNode(v[len(SKOLEM_PREFIX):])
-        u = _IRI_CACHE.get(v)
-        if u is None:
-            if len(_IRI_CACHE) >= _IRI_CACHE_MAX:
-                _IRI_CACHE.clear()
-            u = _IRI_CACHE[v] = URIRef(v)
-        return u
+        return cached_uri(v)
     if kind in ("literal", "typed-literal"):
         lang = value.get("xml:lang")
         if lang:

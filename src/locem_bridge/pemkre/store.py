@@ -54,6 +54,21 @@ ASSERTED_GRAPHS: Tuple[URIRef, ...] = (G_ONTOLOGY, G_WORLD, G_LOG, G_RESOURCES)
 INFERRED_GRAPHS: Tuple[URIRef, ...] = (G_SCHEMA_INFERRED, G_ABOX_INFERRED)
 
 
+#: the most IRIs :func:`cached_uri` keeps (then it starts afresh)
+IRI_CACHE_MAX = 200_000
+_IRI_CACHE: Dict[str, URIRef] = {}
+
+
+def cached_uri(value: str) -> URIRef:
+    """The URIRef for ``value``, one object per IRI: stores turn the same few thousand IRIs of their answers into
+    rdflib terms again and again (query results, quads)."""
+    u = _IRI_CACHE.get(value)
+    if u is None:
+        if len(_IRI_CACHE) >= IRI_CACHE_MAX:
+            _IRI_CACHE.clear()
+        u = _IRI_CACHE[value] = URIRef(value)
+    return u
+
 @dataclass
 class ChangeSet:
     """Quads to remove, then quads to add, applied atomically by :meth:`TripleStore.apply`; only if every quad of
