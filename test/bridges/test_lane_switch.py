@@ -215,6 +215,45 @@ def test_along_a_path_the_output_changes_at_each_stretchs_ends_whatever_the_loop
             assert d_off == pytest.approx(end + early, abs=0.002), (k, rig.changes)
 
 
+class JumpingStampRig(PathRig):
+    """A PathRig whose ``sample_time`` (the controller clock mapped onto the wall clock) is off by an offset that
+    changes from poll to poll by up to 8 ms, as a mapping renewed from the quickest answers is on a busy machine;
+    its ``sample_tick`` (the controller's clock) is exact."""
+
+    def __init__(self, seed):
+        super().__init__()
+        self.rng = np.random.default_rng(seed)
+
+    def cached_state(self):
+        stamp = self.clock.t - AGE
+        return {"tcp": list(self.at(stamp)) + [0.0, 0.0, 0.0], "sample_time": stamp - self.rng.uniform(0.0, 0.008),
+                "sample_tick": stamp - 37.0, "stamp": self.clock.t}
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_along_a_path_speeds_go_by_the_controller_clock_not_by_a_jumping_wall_mapping(seed):
+    """The TCP's speed between two samples comes from their ``sample_tick`` difference: with speeds from the
+    ``sample_time`` differences, whose offset jumps by up to 8 ms between polls 10 ms apart, this rig's output went
+    on up to 8 cm (a turn's worth at a time scale of 10) before a stretch. The stretch ends are then met within
+    the sample time's own error: its age up to 8 ms too long, the output changes up to 8 ms of travel earlier
+    than EARLY_S before each stretch and after it, each stretch switched once."""
+    stretches = [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5]),
+                 ([0.9, 0.1, 0.5], [0.3, 0.1, 0.5])]
+    ends = [(0.2, 0.5), (0.8, 1.1), (1.4 + 0.1 + 0.3, 1.4 + 0.1 + 0.9)]
+    rig = JumpingStampRig(seed)
+    lead, margin = SWITCH_LEADS["spray_gun"]
+    sw = RasterSwitch(rig, rig, rig.switch, stretches, reach=0.05, clock=rig.clock, lead_steps=lead,
+                      margin_steps=margin, path=PathRig.POINTS)
+    sw.switch_s = REQUEST
+    while rig.x(rig.clock.t) < 2.8:
+        sw.sleep(PERIOD)
+    assert [on for on, _d in rig.changes] == [True, False] * 3, rig.changes
+    early, aged = SPEED * RasterSwitch.EARLY_S, SPEED * 0.008
+    for (start, end), (_on, d_on), (_off, d_off) in zip(ends, rig.changes[::2], rig.changes[1::2]):
+        assert start - early - aged - 0.002 <= d_on <= start - early + 0.002, (seed, rig.changes)
+        assert end + early - aged - 0.002 <= d_off <= end + early + 0.002, (seed, rig.changes)
+
+
 def test_on_a_path_the_point_reached_should_locem_die_goes_through_the_turn_into_the_next_lanes():
     """A raster that is one controller path (``gaps_m``): should LOCEM die, the arm goes on along the path and the
     valve stays open for ``hold`` s, so the point each report gives runs on through the turn into the next

@@ -93,6 +93,47 @@ def test_the_lanes_of_two_touching_areas_stop_at_their_common_edge_and_run_on_at
     assert min(_along(s)[0] for s in _sections(over, "wall_1_area_2")) == pytest.approx(EDGE)
 
 
+def test_in_an_inside_corner_the_lanes_stop_at_the_corner_on_both_walls_and_not_at_an_outside_corner():
+    """An area running into an inside corner (120 degrees between the faces, as config/sites/corner120.yaml) whose
+    wall's neighbour has an area starting there: no run-in past the corner on either wall -- the fan stopped at
+    the corner lays its outer half on the other wall, as on the next section of its own (with a run-in on both,
+    corner120's wall_2 had a stripe of two coats along the corner: thickness CV 0.154). An outside corner, or
+    the other wall without an area at the corner, leaves the end open."""
+    wall_2 = {"id": "wall_2", "p0": [3.0, 3.0], "p1": [4.5, 0.402], "height": 2.0, "thickness": 0.0125,
+              "normal": [-0.866, -0.5, 0.0]}
+    d = [0.5, -0.866, 0.0]
+    a1 = _area("wall_1_area_1", 0.3, 3.0)
+    a2 = {"id": "wall_2_area_1", "wall": "wall_2", "origin": [3.0, 3.0, 0.1], "u": d, "width": 2.7, "height": 1.9}
+
+    def sections(areas, area_id, walls):
+        hdh = DataHandler(DataManager())
+        hdh.ingest_scan({"stamp": 1.0, "walls": walls, "joints": [], "areas": areas})
+        lib = TreeLibrary()
+        lib.load_string('<root BTCPP_format="4"><BehaviorTree ID="T"><GetAreaRaster area_id="%s" section_width="0.6" '
+                        'base_standoff="1.3" yaw_offset="0.0" edge_extension="%g" band_gap="0.15" sections="{s}" '
+                        'count="{c}"/></BehaviorTree></root>' % (area_id, RUN_IN))
+        ctx, bb = NodeContext(data_handler=hdh), Blackboard()
+        assert lib.build("T", ctx, bb).tick() == Status.SUCCESS, ctx.failures
+        return bb.get("s")
+
+    def ends(secs, origin, u):
+        """(first, last) along u from origin of the sections' lanes"""
+        along = [sum((sec["origin"][k] - origin[k]) * u[k] for k in range(2)) for sec in secs]
+        return min(along), max(a + sec["width"] for a, sec in zip(along, secs))
+
+    walls = [WALL, wall_2]
+    assert ends(sections([a1, a2], "wall_1_area_1", walls), [0.0, 3.0], [1.0, 0.0]) == \
+        (pytest.approx(0.3 - RUN_IN), pytest.approx(3.0))                 # the corner: no run-in; the outer end
+    assert ends(sections([a1, a2], "wall_2_area_1", walls), [3.0, 3.0], d) == \
+        (pytest.approx(0.0, abs=1e-3), pytest.approx(2.7 + RUN_IN, abs=1e-3))
+    assert ends(sections([a1], "wall_1_area_1", walls), [0.0, 3.0], [1.0, 0.0])[1] == pytest.approx(3.0 + RUN_IN)
+    # wall_2 turned the other way (behind wall_1: an outside corner): both ends of wall_1's area open
+    out = dict(wall_2, p1=[4.5, 5.598], normal=[0.866, -0.5, 0.0])
+    a2_out = dict(a2, u=[0.5, 0.866, 0.0])
+    assert ends(sections([a1, a2_out], "wall_1_area_1", [WALL, out]), [0.0, 3.0], [1.0, 0.0])[1] == \
+        pytest.approx(3.0 + RUN_IN)
+
+
 def test_an_end_adjoined_over_part_of_its_height_is_split_at_the_neighbours_top():
     # the neighbour covers 0.1 .. 1.0 m of the area's 0.1 .. 2.0 m right end: below its top the lanes stop at
     # the edge, above it they run on (nothing there coats the edge); the upper piece starts one lane above

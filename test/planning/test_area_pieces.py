@@ -120,6 +120,39 @@ def test_shared_ends_of_two_touching_areas_and_what_is_not_a_neighbour():
     assert shared_ends(a, [a, win], 0.02, 0.15) == ([], [(0.0, pytest.approx(0.8)), (pytest.approx(1.5), 1.9)])
 
 
+def test_an_end_in_an_inside_corner_is_shared_with_the_area_across_it_at_any_angle_not_at_an_outside_corner():
+    import math
+    # wall_1 runs +x along y = 3, the room below it (inward normal -y); wall_2 starts at its end (3, 3)
+    a = _area("a", 0.3, 3.0)
+    n = [0.0, -1.0, 0.0]
+
+    def across(deg, start=(3.0, 3.0), backwards=False, **kw):
+        """an area on wall_2 that leaves the corner ``deg`` degrees between the faces"""
+        th = math.radians(180.0 - deg)                   # turning into the room (toward -y)
+        d = [math.cos(th), -math.sin(th), 0.0]
+        w = 1.5
+        if backwards:                                    # its origin at the far end, u toward the corner
+            return dict({"id": "b", "wall": "wall_2", "origin": [start[0] + d[0] * w, start[1] + d[1] * w, 0.1],
+                         "u": [-d[0], -d[1], 0.0], "width": w, "height": 1.9}, **kw)
+        return dict({"id": "b", "wall": "wall_2", "origin": [start[0], start[1], 0.1], "u": d, "width": w,
+                     "height": 1.9}, **kw)
+    for deg in (60.0, 90.0, 120.0, 150.0, 180.0):
+        assert shared_ends(a, [a, across(deg)], 0.02, 0.15, normal=n) == ([], [(0.0, 1.9)]), deg
+        assert shared_ends(a, [a, across(deg, backwards=True)], 0.02, 0.15, normal=n) == ([], [(0.0, 1.9)]), deg
+    assert shared_ends(a, [a, across(120.0)], 0.02, 0.15) == ([], [])          # no normal: the same wall only
+    assert shared_ends(a, [a, across(240.0)], 0.02, 0.15, normal=n) == ([], [])  # outside corner: behind the wall
+    assert shared_ends(a, [a, across(120.0, start=(3.05, 3.0))], 0.02, 0.15, normal=n) == ([], [])  # 5 cm off
+    assert shared_ends(a, [a, across(120.0, start=(3.01, 2.995))], 0.02, 0.15, normal=n) == ([], [(0.0, 1.9)])
+    # the area across the corner on part of the height, a door at the corner's foot
+    low = dict(across(90.0), height=1.0)
+    assert shared_ends(a, [a, low], 0.02, 0.15, normal=n) == ([], [(0.0, pytest.approx(1.0))])
+    door = across(90.0, holes=[{"s": [0.0, 0.9], "t": [0.0, 1.0]}])
+    assert shared_ends(a, [a, door], 0.02, 0.15, normal=n) == ([], [(pytest.approx(1.0), 1.9)])
+    # the other end of the area: wall_0 comes in at (0.3, 3.0) from the room's side
+    c = {"id": "c", "wall": "wall_0", "origin": [0.3, 1.0, 0.1], "u": [0.0, 1.0, 0.0], "width": 2.0, "height": 1.9}
+    assert shared_ends(a, [a, c], 0.02, 0.15, normal=n) == ([(0.0, 1.9)], [])
+
+
 def _area(aid, s0, s1, t0=0.1, t1=2.0, wall="wall_1", **kw):
     return dict({"id": aid, "wall": wall, "origin": [s0, 3.0, t0], "u": [1.0, 0.0, 0.0], "width": s1 - s0,
                  "height": t1 - t0}, **kw)

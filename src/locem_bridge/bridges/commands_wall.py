@@ -267,7 +267,7 @@ class LaneSwitch(HookedWaiter):
         self._f_on, self._f_off = f_on, f_off
         self.on = False
         self.switched_on_at: Optional[float] = None
-        self._last: Optional[Tuple[float, np.ndarray]] = None     # (stamp, TCP position) of the previous sample
+        self._last: Optional[Tuple[float, np.ndarray]] = None     # (tick, TCP position) of the previous sample
         self._velocity = np.zeros(3)
         self.switch_s = 0.0                                        # running average of a switch request (s)
         self._before: List[Callable[[bool], None]] = []
@@ -331,27 +331,33 @@ class LaneSwitch(HookedWaiter):
         """The widening of a stretch ``length`` m long at each end, as a fraction of it (``margin_steps``)."""
         return self._margin_steps * self.step_m() / max(length, 1e-9)
 
-    def _sample(self) -> Optional[Tuple[np.ndarray, Optional[float]]]:
-        """The arm's latest TCP position (arm base frame) and when it was taken (wall time; None: unknown)."""
+    def _sample(self) -> Optional[Tuple[np.ndarray, Optional[float], Optional[float]]]:
+        """The arm's latest TCP position (arm base frame), when it was taken (wall time; None: unknown) and its
+        tick: the time between two samples is the difference of their ticks (``sample_tick``: the controller's
+        clock; velocities from ``sample_time`` differences took in each renewal of its mapping's offset, a few
+        milliseconds whenever the quickest answer leaves its window: against 20 ms between two polls, a speed off
+        by a tenth and more, which the switch's fast-rising speed keeps)."""
         state = self._arm.cached_state()
         tcp = state.get("tcp")
         if not tcp:
             return None
         stamp = state.get("sample_time", state.get("stamp"))
-        return np.asarray(tcp[:3], dtype=float), (float(stamp) if stamp is not None else None)
+        tick = state.get("sample_tick", stamp)
+        return (np.asarray(tcp[:3], dtype=float), (float(stamp) if stamp is not None else None),
+                (float(tick) if tick is not None else None))
 
     def _predicted_tcp(self) -> Optional[np.ndarray]:
         """The TCP position (arm base frame) expected when a switch requested now takes effect."""
         sample = self._sample()
         if sample is None:
             return None
-        p, stamp = sample
-        if stamp is None:
+        p, stamp, tick = sample
+        if stamp is None or tick is None:
             return p
-        if self._last is None or stamp > self._last[0]:       # a new sample
+        if self._last is None or tick > self._last[0]:        # a new sample
             if self._last is not None:
-                self._velocity = (p - self._last[1]) / (stamp - self._last[0])
-            self._last = (stamp, p)
+                self._velocity = (p - self._last[1]) / (tick - self._last[0])
+            self._last = (tick, p)
         lead = min(self.MAX_LEAD_S, max(0.0, self._clock() - stamp) + self.LATENCY_SHARE * self.switch_s)
         return p + self._velocity * lead
 
@@ -391,7 +397,8 @@ class RasterSwitch(LaneSwitch):
     still in the turn into a lane is judged on where the turn takes it, not on a straight line through its current
     direction (which at a time scale of 10, a turn and its run-up passed in one or two waits, pointed off the lane
     and switched on late). Two speeds are kept, one that follows a rise at once and a fall slowly, one the other
-    way round: switching on goes by the higher, switching off by the lower (a stalled controller's catch-up looks
+    way round: switching on goes by the higher, at least the fastest measured on a stretch so far (the lane speed
+    the arm regains right after a turn), switching off by the lower (a stalled controller's catch-up looks
     fast): an error then sprays a little more, never leaves a gap. A stretch switched off at its end is not
     switched on again. And the switching point is not left to the motion loop's next wait: a wait it falls into
     is cut there (:meth:`sleep`),
@@ -427,6 +434,7 @@ class RasterSwitch(LaneSwitch):
             self._cum = np.concatenate([[0.0], np.cumsum(lengths)])
             self._segment = 0                                        # the segment the TCP was last found on
             self._speeds = (0.0, 0.0)                                 # m/s of wall time: high, low
+            self._cruise = 0.0                     # m/s of wall time: the fastest measured with the tool on
             self._current = 0                                         # the stretch the output is on for
             self._next = 0                                            # the first stretch not yet worked
             self._due: Optional[float] = None                         # wall time of the next switching point
@@ -453,19 +461,22 @@ class RasterSwitch(LaneSwitch):
         sample = self._sample()
         if sample is None:
             return None
-        p, stamp = sample
+        p, stamp, tick = sample
         t = stamp if stamp is not None else self._clock()
+        tick = tick if tick is not None and stamp is not None else t
         last = min(len(self._lengths), self._segment + 4)
         k = min(range(self._segment, last), key=lambda i: self._distance(p, i))
         self._segment = k
         s = self._along(p, k)
-        if self._last is None or t > self._last[0]:           # a new sample (its 3-D velocity: hold_off's too)
+        if self._last is None or tick > self._last[0]:        # a new sample (its 3-D velocity: hold_off's too)
             if self._last is not None:
-                self._velocity = (p - self._last[1]) / (t - self._last[0])
+                self._velocity = (p - self._last[1]) / (tick - self._last[0])
                 v = float(np.linalg.norm(self._velocity))
                 hi, lo = self._speeds
                 self._speeds = (v if v > hi else 0.8 * hi + 0.2 * v, v if v < lo or lo == 0.0 else 0.8 * lo + 0.2 * v)
-            self._last = (t, p)
+                if self.on:
+                    self._cruise = max(self._cruise, v)
+            self._last = (tick, p)
         return s, t
 
     def sleep(self, seconds: float) -> None:
@@ -493,7 +504,10 @@ class RasterSwitch(LaneSwitch):
             return
         s, t = where
         now = self._clock()
-        speed = self._speeds[1] if self.on else self._speeds[0]
+        # off: the low speed; on: the high one, at least the lanes' speed so far (after a turn the arm speeds up
+        # again to it at once, while a speed measured in the turn was a fraction of it: the valve opened up to
+        # 12 cm into the lane at a time scale of 10)
+        speed = self._speeds[1] if self.on else max(self._speeds[0], self._cruise)
         lead = min(self.MAX_LEAD_S, max(0.0, now - t) + self.LATENCY_SHARE * self.switch_s)
         s_pred = s + speed * lead
         early = speed * self.EARLY_S               # on this much before each stretch, off this much after it
@@ -624,7 +638,7 @@ class RasterProgress(HookedWaiter):
         if not tcp:
             return None
         p = np.asarray(tcp[:3], dtype=float)
-        taken = state.get("sample_time", state.get("stamp"))
+        taken = state.get("sample_tick", state.get("sample_time", state.get("stamp")))   # see LaneSwitch._sample
         stamp = float(taken) if taken is not None else self._clock()
         if not self._track or stamp > self._track[-1][0]:
             self._track = [(t, q) for t, q in self._track if t >= stamp - self.TRACK_S] + [(stamp, p)]

@@ -209,8 +209,10 @@ class Arm(Backend):
     def cached_state(self) -> Dict[str, Any]:
         """The latest polled state, never blocking: ``q`` (rad), ``qd`` (rad/s), ``tcp`` (pose), ``stamp`` (wall
         time ``time.time()`` the poll's answer arrived at, s), optionally ``sample_time`` (wall time the sample
-        was taken at, from the controller's own clock: :mod:`locem_bridge.common.sample_clock`); ``{}`` before the
-        first poll. Read by the TCP-triggered tool switch of the wall commands and by ``joint_states``."""
+        was taken at, from the controller's own clock: :mod:`locem_bridge.common.sample_clock`) and
+        ``sample_tick`` (the controller's clock in wall seconds, its origin arbitrary: the time between two samples
+        exactly, which ``sample_time`` gives only up to the mapping's offset, renewed as answers come in);
+        ``{}`` before the first poll. Read by the TCP-triggered tool switch of the wall commands and by ``joint_states``."""
 
     @abc.abstractmethod
     def joint_positions(self) -> List[float]:

@@ -45,7 +45,7 @@ import subprocess
 import sys
 import threading
 import time
-from typing import Any, Dict, List, Mapping, Optional, Sequence
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from locem_bridge.locem.errors import Aborted
 
@@ -102,6 +102,7 @@ class UrRtdeArm(Arm):
         self._ids = 0
         self._state: Dict[str, Any] = {}
         self._sample_clock = SampleClock()
+        self._last_tick: Optional[Tuple[float, float]] = None       # (controller time, tick) of the last sample
         self._state_lock = threading.Lock()
         self._safety: Optional[str] = None           # latched safety stop (text), cleared only by reset()
         self._link_up = threading.Event()
@@ -210,6 +211,18 @@ class UrRtdeArm(Arm):
                 continue
             self._stop.wait(1.0 / self.poll_rate)
 
+    def _tick(self, device_t: float, wall_t: Optional[float]) -> Optional[float]:
+        """The sample's ``sample_tick``: the previous one plus the controller's time since it (at the sample clock's
+        rate, wall seconds per controller second); the sample's wall time when the controller's clock went back
+        (a new connection: never below the previous tick)."""
+        last = self._last_tick
+        if last is None or device_t < last[0] or wall_t is None:
+            tick = wall_t if last is None or wall_t is None else max(wall_t, last[1] + 1e-6)
+        else:
+            tick = last[1] + self._sample_clock.rate * (device_t - last[0])
+        self._last_tick = None if tick is None else (device_t, tick)
+        return tick
+
     def _poll(self) -> Dict[str, Any]:
         st = self._call("state")
         if not (st["receive_connected"] and st["control_connected"]):
@@ -220,6 +233,7 @@ class UrRtdeArm(Arm):
             if "timestamp" in st:                 # the controller's clock: when the sample was taken
                 self._sample_clock.add(st["timestamp"], now)
                 self._state["sample_time"] = self._sample_clock.wall(st["timestamp"])
+                self._state["sample_tick"] = self._tick(float(st["timestamp"]), self._state["sample_time"])
         fm = self._force
         if fm is not None and fm.get("recording"):
             fm["samples"].append(-float(sum(a * b for a, b in zip(st["tcp_force"][:3], fm["axis"]))))

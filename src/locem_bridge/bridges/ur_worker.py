@@ -24,7 +24,7 @@ import argparse
 import json
 import sys
 import time
-from typing import Any, Callable, Dict, List
+from typing import Any, Callable, Dict, List, Tuple
 
 
 def _connect(host: str, frequency: float) -> Dict[str, Any]:
@@ -42,6 +42,7 @@ def _connect(host: str, frequency: float) -> Dict[str, Any]:
 
 
 STOP_DECEL_J = 10.0          # rad/s^2, the safe-state stopJ at connect
+STAMP_READS = 3              # tries to read a stamp and a TCP pose of one package (see stamped_tcp)
 REALTIME_GUARD_S = 0.2       # no watchdog kick this long after a realtime command (see kicked_state)
 
 
@@ -71,9 +72,21 @@ def _ops(h: Dict[str, Any], watchdog: float = 0.0) -> Dict[str, Callable[..., An
             _arm_watchdog(c, watchdog)
         return result
 
+    def stamped_tcp() -> Tuple[float, List[float]]:
+        """The controller's timestamp and the TCP pose of ONE package: ur_rtde's receive thread may store a new
+        package between the two reads (the pose then one RTDE cycle newer than its stamp: 2 ms at 500 Hz, 8 ms at
+        125 Hz, against 20 ms between two polls), so the stamp is read before and after the pose and the read is
+        made again when they differ."""
+        for _ in range(STAMP_READS - 1):
+            before = float(r.getTimestamp())
+            tcp = list(r.getActualTCPPose())
+            if float(r.getTimestamp()) == before:
+                return before, tcp
+        return float(r.getTimestamp()), list(r.getActualTCPPose())
+
     def state() -> Dict[str, Any]:
-        # the controller's timestamp right before the TCP pose: a package arriving in between would stamp it late
-        return {"timestamp": float(r.getTimestamp()), "tcp": list(r.getActualTCPPose()), "q": list(r.getActualQ()),
+        stamp, tcp = stamped_tcp()
+        return {"timestamp": stamp, "tcp": tcp, "q": list(r.getActualQ()),
                 "qd": list(r.getActualQd()),
                 "safety_mode": int(r.getSafetyMode()), "safety_bits": int(r.getSafetyStatusBits()),
                 "robot_mode": int(r.getRobotMode()), "runtime_state": int(r.getRuntimeState()),

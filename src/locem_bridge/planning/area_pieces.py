@@ -32,8 +32,9 @@ below it, whatever its sides (after the gap it would get no lane of its own, or 
 spacing: above a door's columns, beside a window's top under the tool's band), and so is a strip on top of
 pieces side by side, into each of them.
 """
+import math
 from dataclasses import dataclass
-from typing import Any, Dict, List, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from .reach import interval_minus
 
@@ -175,7 +176,8 @@ def area_pieces(width: float, height: float, holes: Sequence[Hole], gap: float =
 
 
 def shared_ends(area: Dict[str, Any], others: Sequence[Dict[str, Any]], tolerance: float,
-                shortest: float = 0.0) -> Tuple[List[Stretch], List[Stretch]]:
+                shortest: float = 0.0, normal: Optional[Sequence[float]] = None
+                ) -> Tuple[List[Stretch], List[Stretch]]:
     """The stretches ``(t0, t1)`` (area coordinates) of ``area``'s ends at ``s = 0`` and ``s = width`` where
     another area of the same wall adjoins it: the arguments of :func:`area_pieces` ``shared_left`` and
     ``shared_right``. Areas are SCAN contract objects (``id, wall, origin, u, width, height``, optional
@@ -188,11 +190,21 @@ def shared_ends(area: Dict[str, Any], others: Sequence[Dict[str, Any]], toleranc
     there (an opening at the edge: nothing of the neighbour's lanes meets this end there, it stays open). A
     stretch no longer than ``shortest`` is left open; an end of a stretch within ``shortest`` of the area's
     bottom or top is moved there (no piece thinner than a lane spacing of its own: ``shortest`` is the lane
-    spacing or ``tolerance``, the larger)."""
+    spacing or ``tolerance``, the larger).
+
+    With the wall's inward ``normal`` (the side the tools work from), an end in an inside corner is shared too:
+    where an area of the wall across the corner begins within ``tolerance`` of the corner (of this end) and runs
+    away from it on the room's side of this wall (corners up to 180 degrees between the faces; not an outside
+    corner). A spray fan stopped at the corner lays its outer half on the wall across it, as it lays it on the
+    next section of its own wall: with a run-in on both sides the strip along the corner got two coats (a
+    120-degree corner: thickness CV 0.154 on the wall beside it)."""
     o, u = [float(x) for x in area["origin"]], [float(x) for x in area["u"]]
     width, height = float(area["width"]), float(area["height"])
     snap = max(shortest, tolerance)
     ends: Tuple[List[Stretch], List[Stretch]] = ([], [])
+    if normal is not None:
+        for side, stretches in enumerate(_corner_ends(area, others, tolerance, normal)):
+            ends[side].extend(stretches)
     for b in others:
         if b.get("id") == area.get("id") or b.get("wall") != area.get("wall"):
             continue
@@ -216,6 +228,45 @@ def shared_ends(area: Dict[str, Any], others: Sequence[Dict[str, Any]], toleranc
                     holes.append((c0 + float(h["t"][0]), c0 + float(h["t"][1])))
             ends[side].extend(interval_minus(lo, hi, holes))
     return _snapped(ends[0], height, snap), _snapped(ends[1], height, snap)
+
+
+def _corner_ends(area: Dict[str, Any], others: Sequence[Dict[str, Any]], tolerance: float,
+                 normal: Sequence[float]) -> Tuple[List[Stretch], List[Stretch]]:
+    """The stretches of ``area``'s two ends an area of another wall adjoins across an inside corner (see
+    :func:`shared_ends`), unsnapped."""
+    o, u = [float(x) for x in area["origin"]], [float(x) for x in area["u"]]
+    width, height = float(area["width"]), float(area["height"])
+    nxy = math.hypot(float(normal[0]), float(normal[1]))
+    ends: Tuple[List[Stretch], List[Stretch]] = ([], [])
+    if nxy < 1e-9:
+        return ends
+    nx, ny = float(normal[0]) / nxy, float(normal[1]) / nxy
+    corners = ((o[0], o[1]), (o[0] + u[0] * width, o[1] + u[1] * width))
+    for b in others:
+        if b.get("id") == area.get("id") or b.get("wall") == area.get("wall"):
+            continue
+        bo, bu, bw = [float(x) for x in b["origin"]], [float(x) for x in b["u"]], float(b["width"])
+        c0 = bo[2] - o[2]
+        lo, hi = max(0.0, c0), min(height, c0 + float(b["height"]))
+        if hi - lo <= tolerance:
+            continue
+        for side, (cx, cy) in enumerate(corners):
+            # this end's own direction away from the area (the line runs on that way past the end)
+            ax, ay = (-u[0], -u[1]) if side == 0 else (u[0], u[1])
+            for k, sign in ((0, 1.0), (1, -1.0)):
+                ex, ey = bo[0] + bu[0] * bw * k, bo[1] + bu[1] * bw * k
+                if math.hypot(ex - cx, ey - cy) > tolerance:
+                    continue
+                dx, dy = bu[0] * sign, bu[1] * sign          # b runs away from the corner this way
+                # into the room (an inside corner) or straight on; not behind this wall (an outside corner)
+                into = dx * nx + dy * ny
+                if into < -0.02 or (into <= 0.02 and dx * ax + dy * ay < 0.0):
+                    continue
+                holes = [(c0 + float(h["t"][0]), c0 + float(h["t"][1])) for h in b.get("holes", [])
+                         if min(float(h["s"][0]), float(h["s"][1])) <= (tolerance if k == 0 else bw - tolerance)
+                         and max(float(h["s"][0]), float(h["s"][1])) >= (tolerance if k == 0 else bw - tolerance)]
+                ends[side].extend(interval_minus(lo, hi, holes))
+    return ends
 
 
 def _snapped(stretches: Sequence[Stretch], length: float, snap: float) -> List[Stretch]:

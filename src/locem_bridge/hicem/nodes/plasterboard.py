@@ -484,7 +484,9 @@ class GetAreaRaster(Leaf):
                    "lanes stop exactly at it, as two sections of one area meet, and run no edge_extension onto the "
                    "neighbour, whose own lanes coat its side: the two areas lay one coat across their common "
                    "edge (an end adjoined over part of its height is split there; "
-                   "locem_bridge.planning.area_pieces.shared_ends). So is the bottom where another area of the "
+                   "locem_bridge.planning.area_pieces.shared_ends). So is an end in an inside corner where an area "
+                   "of the wall across the corner begins: the fan stopped at the corner lays its outer half on the "
+                   "other wall, as on a next section. So is the bottom where another area of the "
                    "wall ends right below it (stacked areas): its lanes there begin one band_gap above the edge, "
                    "on which the lower area's top lane lies (area_pieces.shared_bottom).")
     #: m, how far a pad kept ``hole_margin`` (its radius) off a hole reaches over the hole's edge (the frame's outer
@@ -502,7 +504,8 @@ class GetAreaRaster(Leaf):
                    "beyond the area's ends and a hole's edges (spray run-in at the outer edges; sections meet "
                    "exactly in between)"),
         input_port("neighbours", BOOL, "true", "", "true: an end of the area that another stored area of the same "
-                   "wall adjoins (within neighbour_tolerance, over part of the height or all of it) is shared: no "
+                   "wall adjoins, or one of the wall across an inside corner (within neighbour_tolerance, over part "
+                   "of the height or all of it) is shared: no "
                    "edge_extension past it, the neighbour's lanes cover its side; a bottom another area ends right "
                    "below (within neighbour_tolerance) begins one band_gap above the edge; overlapping areas are each "
                    "worked whole; false: every end of the area is open (each area on its own)"),
@@ -581,7 +584,7 @@ class GetAreaRaster(Leaf):
         if tol < 0:
             raise PortError("%s: neighbour_tolerance must be >= 0 m, got %g" % (self.name, tol))
         others = hdh.features("area") if self.get("neighbours") else []
-        shared: Any = shared_ends(a, others, tol, gap)
+        shared: Any = shared_ends(a, others, tol, gap, normal=n)
         stacked = shared_bottom(a, others, tol, gap)
         sections: List[Dict[str, Any]] = []
         smallest = max(0.0, self.get("min_manual")) if reach is not None else 0.0
