@@ -204,7 +204,7 @@ class _Waiter:
         pass
 
 
-def test_at_time_scale_10_every_lane_is_sprayed_from_its_first_centimetre_to_its_last(robot, core):
+def test_at_time_scale_10_every_lane_is_sprayed_to_within_3_cm_of_its_ends(robot, core):
     """The whole stretch of every lane, the FIRST included, is crossed by the spray axis with the valve open: at
     time scale 10 a lane passes in a few tens of milliseconds of wall time, about as long as the path request takes
     to be answered; a raster path that started from rest right before its first lane had passed 10-15 cm of that

@@ -226,7 +226,7 @@ class LaneSwitch(HookedWaiter):
     decision is therefore taken on the TCP predicted ``age + LATENCY_SHARE x switch duration`` ahead along its
     measured velocity (both in wall time; the switch duration is a running average of the requests' own
     durations), at most ``MAX_LEAD_S``. Age and velocity go by when each sample was taken (the state's
-    ``sample_time``, from the controller's clock), not by when the poll's answer arrived: on a busy machine that
+    ``sample_time`` and ``sample_tick``, from the controller's clock), not by when the poll's answer arrived: on a busy machine that
     varies by tens of milliseconds from poll to poll, and a velocity from it by several times.
 
     Step: the decision is only taken at the loop's waits, one step apart, so the output changes up to one step of
@@ -397,8 +397,8 @@ class RasterSwitch(LaneSwitch):
     still in the turn into a lane is judged on where the turn takes it, not on a straight line through its current
     direction (which at a time scale of 10, a turn and its run-up passed in one or two waits, pointed off the lane
     and switched on late). Two speeds are kept, one that follows a rise at once and a fall slowly, one the other
-    way round: switching on goes by the higher, at least the fastest measured on a stretch so far (the lane speed
-    the arm regains right after a turn), switching off by the lower (a stalled controller's catch-up looks
+    way round: switching on goes by the higher, at least the high speed measured on the stretches so far (the
+    lane speed the arm regains right after a turn), switching off by the lower (a stalled controller's catch-up looks
     fast): an error then sprays a little more, never leaves a gap. A stretch switched off at its end is not
     switched on again. And the switching point is not left to the motion loop's next wait: a wait it falls into
     is cut there (:meth:`sleep`),
@@ -434,7 +434,7 @@ class RasterSwitch(LaneSwitch):
             self._cum = np.concatenate([[0.0], np.cumsum(lengths)])
             self._segment = 0                                        # the segment the TCP was last found on
             self._speeds = (0.0, 0.0)                                 # m/s of wall time: high, low
-            self._cruise = 0.0                     # m/s of wall time: the fastest measured with the tool on
+            self._cruise = 0.0                     # m/s of wall time: the speed with the tool on, as "high"
             self._current = 0                                         # the stretch the output is on for
             self._next = 0                                            # the first stretch not yet worked
             self._due: Optional[float] = None                         # wall time of the next switching point
@@ -474,8 +474,8 @@ class RasterSwitch(LaneSwitch):
                 v = float(np.linalg.norm(self._velocity))
                 hi, lo = self._speeds
                 self._speeds = (v if v > hi else 0.8 * hi + 0.2 * v, v if v < lo or lo == 0.0 else 0.8 * lo + 0.2 * v)
-                if self.on:
-                    self._cruise = max(self._cruise, v)
+                if self.on:                        # follows a rise at once, a fall slowly (a spike fades)
+                    self._cruise = v if v > self._cruise else 0.9 * self._cruise + 0.1 * v
             self._last = (tick, p)
         return s, t
 
@@ -588,7 +588,7 @@ class RasterProgress(HookedWaiter):
     following stretches, as the arm and the open valve do. Without
     it (one move per stretch: the arm stops at the stretch's end) the point is at most the stretch's end.
 
-    Speeds come from the controller's own sample times (``sample_time``) when the arm gives them: the times the
+    Speeds come from the controller's own clock (``sample_tick``, else ``sample_time``) when the arm gives it: the times the
     poll answers arrived at jitter on a busy machine, and the slowest of a few jittered speeds was a fraction of
     the true one (a retry then sprayed again what the arm had sprayed on its way after LOCEM died)."""
 

@@ -213,11 +213,11 @@ class UrRtdeArm(Arm):
 
     def _tick(self, device_t: float, wall_t: Optional[float]) -> Optional[float]:
         """The sample's ``sample_tick``: the previous one plus the controller's time since it (at the sample clock's
-        rate, wall seconds per controller second); the sample's wall time when the controller's clock went back
-        (a new connection: never below the previous tick)."""
+        rate, wall seconds per controller second); when the controller's clock went back (a new connection) the
+        sample's wall time, at least a second after the previous tick (no speed across the restart)."""
         last = self._last_tick
         if last is None or device_t < last[0] or wall_t is None:
-            tick = wall_t if last is None or wall_t is None else max(wall_t, last[1] + 1e-6)
+            tick = wall_t if last is None or wall_t is None else max(wall_t, last[1] + 1.0)
         else:
             tick = last[1] + self._sample_clock.rate * (device_t - last[0])
         self._last_tick = None if tick is None else (device_t, tick)

@@ -42,7 +42,7 @@ def _connect(host: str, frequency: float) -> Dict[str, Any]:
 
 
 STOP_DECEL_J = 10.0          # rad/s^2, the safe-state stopJ at connect
-STAMP_READS = 3              # tries to read a stamp and a TCP pose of one package (see stamped_tcp)
+STAMP_READS = 3              # reads of a stamp and a TCP pose: all but the last checked to be of one package
 REALTIME_GUARD_S = 0.2       # no watchdog kick this long after a realtime command (see kicked_state)
 
 

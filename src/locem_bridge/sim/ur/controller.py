@@ -20,6 +20,9 @@ DASHBOARD_PORT, SCRIPT_PORT, RTDE_PORT = 29999, 30003, 30004
 DEFAULT_Q = (0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0)
 
 
+#: s of controller time the arm is moved by in one step (a cycle that catches up on many moves in several)
+MAX_STEP_S = 0.05
+
 class UrControllerStandIn:
     """A protocol-level UR e-Series controller on one loopback address (dashboard, script and RTDE servers).
 
@@ -140,8 +143,15 @@ class UrControllerStandIn:
             # share the time between them. Moved by each cycle's wall time instead, the arm ran ahead of the
             # stamps by every late cycle's delay: speeds a client measured from the stamps came out at up to 2.4
             # times the true one (at a time scale of 10 the valve opened in the turn before a lane)
+            # (a long catch-up in steps of at most MAX_STEP_S: each step's motion is its clock's time)
+            clock, left = (self._cycles_before + tick) * period, cycles * period
             try:
-                arm.tick(min(cycles * period, 0.05), self.time_scale, (self._cycles_before + tick) * period)
+                while True:
+                    step = min(left, MAX_STEP_S)
+                    left -= step
+                    arm.tick(step, self.time_scale, clock - left)
+                    if left <= 1e-12:
+                        break
             except Exception:
                 LOG.exception("UR stand-in: control cycle failed")
             net = self._net
