@@ -365,7 +365,7 @@ class UrRtdeArm(Arm):
         start = time.monotonic()
         args = list(target) if waypoints else [target, speed, accel]     # a path: target = [rows]
         if not self._call(op, *args, timeout=call_timeout):
-            self._raise_if_safety()
+            self._raise_if_safety(fresh=True)
             if waypoints:
                 self._restart_script()
                 raise DeviceFault("UR controller refused the %d-waypoint path and halted its control script "
@@ -427,7 +427,15 @@ class UrRtdeArm(Arm):
         except (LinkDown, DeviceFault) as exc:
             log.warning("UR controller %s: control script not restarted: %s", self.host, exc.message)
 
-    def _raise_if_safety(self) -> None:
+    def _raise_if_safety(self, fresh: bool = False) -> None:
+        """SafetyStop when a safety stop is latched; ``fresh``: after a state read of its own (a motion refused
+        because a protective stop came between two of the 50 Hz polls is reported as that stop, not as a
+        refusal the operator cannot act on)."""
+        if fresh and not self._safety:
+            try:
+                self._poll()
+            except (LinkDown, DeviceFault):
+                pass                          # the refusal is the news; the poll thread handles the link
         if self._safety:
             raise SafetyStop("arm %s; the motion was stopped by the controller; remove the cause and send RESET_ARM"
                              % self._safety, device="arm")
