@@ -190,27 +190,33 @@ class PathRig(Rig):
         return {"tcp": list(self.at(stamp)) + [0.0, 0.0, 0.0], "stamp": stamp}
 
 
+# stretches in distance along the path: lane 1 x 0.0..0.3 and 0.6..0.9; lane 2 (from 1.5 + 0.1 on) x 0.9..0.3
+PATH_STRETCHES = [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5]), ([0.9, 0.1, 0.5], [0.3, 0.1, 0.5])]
+PATH_ENDS = [(0.2, 0.5), (0.8, 1.1), (1.4 + 0.1 + 0.3, 1.4 + 0.1 + 0.9)]      # the same along the path
+
+
+def _switch_along_path(rig):
+    """A spray gun's RasterSwitch over PATH_STRETCHES along the rig's path to 2.8 m; each stretch switched once."""
+    lead, margin = SWITCH_LEADS["spray_gun"]
+    sw = RasterSwitch(rig, rig, rig.switch, PATH_STRETCHES, reach=0.05, clock=rig.clock, lead_steps=lead,
+                      margin_steps=margin, path=PathRig.POINTS)
+    sw.switch_s = REQUEST
+    while rig.x(rig.clock.t) < 2.8:
+        sw.sleep(PERIOD)
+    assert [on for on, _d in rig.changes] == [True, False] * 3, rig.changes
+
+
 def test_along_a_path_the_output_changes_at_each_stretchs_ends_whatever_the_loop_phase():
     """RasterSwitch given the path: the waits a switching point falls into are cut there, so over 20 loop phases
     the output goes on EARLY_S of travel before each stretch starts and off as much after it ends (within 2 mm,
     not one loop step: SPEED x PERIOD = 2 cm), the second lane (after the turn) as exactly as the first, each
     switched once."""
-    # stretches in distance along the path: lane 1 x 0.0..0.3 and 0.6..0.9; lane 2 (from 1.5 + 0.1 on) x 0.9..0.3
-    stretches = [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5]),
-                 ([0.9, 0.1, 0.5], [0.3, 0.1, 0.5])]
-    ends = [(0.2, 0.5), (0.8, 1.1), (1.4 + 0.1 + 0.3, 1.4 + 0.1 + 0.9)]
     early = SPEED * RasterSwitch.EARLY_S
     for k in range(20):
         rig = PathRig()
         rig.t0 -= k / 20 * PERIOD
-        lead, margin = SWITCH_LEADS["spray_gun"]
-        sw = RasterSwitch(rig, rig, rig.switch, stretches, reach=0.05, clock=rig.clock, lead_steps=lead,
-                          margin_steps=margin, path=PathRig.POINTS)
-        sw.switch_s = REQUEST
-        while rig.x(rig.clock.t) < 2.8:
-            sw.sleep(PERIOD)
-        assert [on for on, _d in rig.changes] == [True, False] * 3, rig.changes
-        for (start, end), (_on, d_on), (_off, d_off) in zip(ends, rig.changes[::2], rig.changes[1::2]):
+        _switch_along_path(rig)
+        for (start, end), (_on, d_on), (_off, d_off) in zip(PATH_ENDS, rig.changes[::2], rig.changes[1::2]):
             assert d_on == pytest.approx(start - early, abs=0.002), (k, rig.changes)
             assert d_off == pytest.approx(end + early, abs=0.002), (k, rig.changes)
 
@@ -237,19 +243,10 @@ def test_along_a_path_speeds_go_by_the_controller_clock_not_by_a_jumping_wall_ma
     on up to 8 cm (a turn's worth at a time scale of 10) before a stretch. The stretch ends are then met within
     the sample time's own error: its age up to 8 ms too long, the output changes up to 8 ms of travel earlier
     than EARLY_S before each stretch and after it, each stretch switched once."""
-    stretches = [([0.0, 0, 0.5], [0.3, 0, 0.5]), ([0.6, 0, 0.5], [0.9, 0, 0.5]),
-                 ([0.9, 0.1, 0.5], [0.3, 0.1, 0.5])]
-    ends = [(0.2, 0.5), (0.8, 1.1), (1.4 + 0.1 + 0.3, 1.4 + 0.1 + 0.9)]
     rig = JumpingStampRig(seed)
-    lead, margin = SWITCH_LEADS["spray_gun"]
-    sw = RasterSwitch(rig, rig, rig.switch, stretches, reach=0.05, clock=rig.clock, lead_steps=lead,
-                      margin_steps=margin, path=PathRig.POINTS)
-    sw.switch_s = REQUEST
-    while rig.x(rig.clock.t) < 2.8:
-        sw.sleep(PERIOD)
-    assert [on for on, _d in rig.changes] == [True, False] * 3, rig.changes
+    _switch_along_path(rig)
     early, aged = SPEED * RasterSwitch.EARLY_S, SPEED * 0.008
-    for (start, end), (_on, d_on), (_off, d_off) in zip(ends, rig.changes[::2], rig.changes[1::2]):
+    for (start, end), (_on, d_on), (_off, d_off) in zip(PATH_ENDS, rig.changes[::2], rig.changes[1::2]):
         assert start - early - aged - 0.002 <= d_on <= start - early + 0.002, (seed, rig.changes)
         assert end + early - aged - 0.002 <= d_off <= end + early + 0.002, (seed, rig.changes)
 

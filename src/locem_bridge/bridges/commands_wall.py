@@ -463,7 +463,7 @@ class RasterSwitch(LaneSwitch):
             return None
         p, stamp, tick = sample
         t = stamp if stamp is not None else self._clock()
-        tick = tick if tick is not None and stamp is not None else t
+        tick = t if tick is None else tick
         last = min(len(self._lengths), self._segment + 4)
         k = min(range(self._segment, last), key=lambda i: self._distance(p, i))
         self._segment = k
