@@ -80,14 +80,27 @@ def test_two_main_jobs_at_once_each_on_its_own_devices(tmp_path):
     """Two ``python -m locem_bridge.ros.main_job`` started together on one machine (a one-joint, one-area site at
     time scale 5): both finish with every process succeeded and the outcome goals met, on different device
     addresses, into different run folders, and every base GOTO of both succeeded (one timed out where it stood when
-    one run's CAN master reached the other's drives) - or the second refuses at once with its reason."""
+    one run's CAN master reached the other's drives) - or the second refuses at once with its reason.
+
+    Two whole simulated sites on a 2-core machine stall a process for more than the default robot's 200 ms CAN
+    heartbeat consumer time (measured 205-247 ms: the base stopped in a GOTO, a process failed); both runs use the
+    default robot with a consumer time of 4 x 100 ms, as an integrator would set it for a machine this loaded."""
+    import yaml
+    robot_yaml = os.path.join(REPO, "config", "robots", "rbkairos_ur10e.yaml")
+    with open(robot_yaml, encoding="utf-8") as f:
+        robot = yaml.safe_load(f)
+    base = robot["robot"]["base"]
+    base["drives"]["consumer_timeout_factor"] = 4.0
+    base["eds"] = os.path.join(os.path.dirname(robot_yaml), base["eds"])
+    loaded_robot = tmp_path / "rbkairos_ur10e_loaded_machine.yaml"
+    loaded_robot.write_text(yaml.safe_dump(robot), encoding="utf-8")
     jobs = []
     for name in ("a", "b"):
         home = tmp_path / name
         home.mkdir()
         env = dict(os.environ, ROS_HOME=str(home / "ros_home"), ROS_LOG_DIR=str(home / "log"))
         cmd = [sys.executable, "-m", "locem_bridge.ros.main_job", "--site", ONE_JOINT, "--results-dir",
-               str(tmp_path / "results"), "--time-scale", "5", "--timeout", "300",
+               str(tmp_path / "results"), "--time-scale", "5", "--timeout", "300", "--robot", str(loaded_robot),
                "--launch-arg", "state_dir:=%s" % home]
         jobs.append((time.monotonic(), subprocess.Popen(cmd, cwd=str(home), env=env, stdout=subprocess.PIPE,
                                                         stderr=subprocess.STDOUT, universal_newlines=True)))

@@ -313,6 +313,44 @@ def _line(x0, x1, y, z, step=0.01):
     return [[x0 + (x1 - x0) * i / n, y, z] for i in range(n + 1)]
 
 
+def test_a_controller_catching_up_in_a_burst_coats_its_stretch_like_the_rest(rig):
+    """A controller stalled by a busy machine moves the arm on by the cycles it missed, in a burst of steps that
+    reach the world at one wall time; they carry the controller's motion clock, and the stretch passed in the
+    burst gets the coat of its real duration, like the rest of the lane (timed by the world clock, it got none)."""
+    world, arm, comp, wall = rig
+    world.set_base_pose(1.8, 2.3, np.pi / 2)
+    world.mount_tool("spray_gun")
+    comp.set_setpoint(4.5)
+    comp.set_motor(True)
+    wall.t += 20.0
+    speed, y = 0.3, 3.3
+    q = world.ik_tcp([1.4, y, 1.4], [0, 1, 0], world.joint_positions())
+    arm.set_joint_positions(q, motion_time=50.0)       # the controller's clock has its own origin
+    world.step()
+    comp.set_valve(True)
+    motion, late = 50.0, []
+    for p in _line(1.4, 2.2, y, 1.4):
+        q = world.ik_tcp(p, [0, 1, 0], q)
+        motion += 0.01 / speed
+        if 1.75 <= p[0] <= 1.95:                        # the controller stalls here: the wall goes on, no samples
+            wall.t += 0.01 / speed
+            late.append(q)
+            continue
+        for q_late in late:                             # ... then catches up: a burst of steps at one wall time
+            arm.set_joint_positions(q_late, motion_time=motion - 0.01 / speed * (len(late) - late.index(q_late)))
+        late = []
+        wall.t += 0.01 / speed
+        arm.set_joint_positions(q, motion_time=motion)
+        world.step()
+    comp.set_valve(False)
+    m = world.outcome.maps["wall_1"]
+    row = m.thickness[int(1.4 / m.grid)]
+    burst = row[int(1.78 / m.grid):int(1.93 / m.grid)]
+    steady = np.concatenate([row[int(1.55 / m.grid):int(1.7 / m.grid)], row[int(2.0 / m.grid):int(2.1 / m.grid)]])
+    assert steady.min() > 0.0
+    assert burst.mean() == pytest.approx(steady.mean(), rel=0.15), (burst.mean(), steady.mean())
+
+
 @pytest.mark.parametrize("resume_at, gap, double", [(1.80, 0.0, 0.0), (1.75, 0.0, 0.05), (1.85, 0.05, 0.0)])
 def test_a_spray_lane_interrupted_and_resumed_shows_its_seam(rig, resume_at, gap, double):
     """The valve closes mid-lane at x 1.8 and opens again at ``resume_at``: the seam there shows the stretch

@@ -2,7 +2,9 @@
 
 The world mirrors the arm; it never moves it. Any object with the :class:`ArmStateSource` shape works:
 ``joint_positions() -> 6 floats (rad)`` and ``digital_output(index) -> bool``; ``add_step_listener(fn)`` is
-optional (``fn(q)`` called by the source at every motion step, so fast motions are sampled densely).
+optional (``fn(q, motion_time)`` called by the source at every motion step, so fast motions are sampled densely;
+``motion_time`` is the source's own motion clock in sim seconds, or None when it has none: a controller that moves
+its arm in bursts on a busy machine says by it how long each step took).
 
 - :class:`KinematicArm` is a settable source for scripts and tests (no controller, no protocol): set joint
   positions or interpolate a Cartesian line through a solver the world provides.
@@ -35,20 +37,22 @@ class KinematicArm:
         self._lock = threading.Lock()
         self._q: List[float] = list(q) if q is not None else [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
         self._do = [False] * 8
-        self._listeners: List[Callable[[Sequence[float]], None]] = []
+        self._listeners: List[Callable[[Sequence[float], Optional[float]], None]] = []
 
     def joint_positions(self) -> List[float]:
         with self._lock:
             return list(self._q)
 
-    def set_joint_positions(self, q: Sequence[float]) -> None:
+    def set_joint_positions(self, q: Sequence[float], motion_time: Optional[float] = None) -> None:
+        """Set the joint positions (rad) and call the step listeners; ``motion_time`` (sim s) is this step's time on
+        the arm's own motion clock, as a controller reports it, or None (the world then times the step itself)."""
         if len(q) != 6:
             raise ValueError("q must have 6 joint positions, found %d" % len(q))
         with self._lock:
             self._q = [float(x) for x in q]
             listeners = list(self._listeners)
         for fn in listeners:
-            fn(list(q))
+            fn(list(q), motion_time)
 
     def digital_output(self, index: int) -> bool:
         with self._lock:
@@ -60,11 +64,11 @@ class KinematicArm:
         with self._lock:
             self._do[index] = bool(value)
 
-    def add_step_listener(self, fn: Callable[[Sequence[float]], None]) -> None:
+    def add_step_listener(self, fn: Callable[[Sequence[float], Optional[float]], None]) -> None:
         with self._lock:
             self._listeners.append(fn)
 
-    def remove_step_listener(self, fn: Callable[[Sequence[float]], None]) -> None:
+    def remove_step_listener(self, fn: Callable[[Sequence[float], Optional[float]], None]) -> None:
         with self._lock:
             if fn in self._listeners:
                 self._listeners.remove(fn)
@@ -74,7 +78,7 @@ class UrArmSource:
     """Adapter: the UR controller stand-in (:class:`locem_bridge.sim.ur.UrControllerStandIn`) as an arm source.
 
     Joint positions and standard digital outputs come from the stand-in; its per-control-cycle listener
-    (``ArmSnapshot``) feeds the world's step listener with ``snapshot.q``.
+    (``ArmSnapshot``) feeds the world's step listener with ``snapshot.q`` and ``snapshot.motion_time``.
     """
 
     def __init__(self, ur: Any) -> None:
@@ -87,13 +91,13 @@ class UrArmSource:
     def digital_output(self, index: int) -> bool:
         return bool(self.ur.get_standard_digital_outputs()[index])
 
-    def add_step_listener(self, fn: Callable[[Sequence[float]], None]) -> None:
+    def add_step_listener(self, fn: Callable[[Sequence[float], Optional[float]], None]) -> None:
         def on_snapshot(snapshot: Any) -> None:
-            fn(snapshot.q)
+            fn(snapshot.q, snapshot.motion_time)
         self._wrapped[fn] = on_snapshot
         self.ur.add_step_listener(on_snapshot)
 
-    def remove_step_listener(self, fn: Callable[[Sequence[float]], None]) -> None:
+    def remove_step_listener(self, fn: Callable[[Sequence[float], Optional[float]], None]) -> None:
         cb = self._wrapped.pop(fn, None)
         if cb is not None:
             self.ur.remove_step_listener(cb)

@@ -54,6 +54,7 @@ from .site import Site, Wall
 log = logging.getLogger(__name__)
 
 BASE_SUBSTEP = 0.01    # sim s: the base pose is integrated through wheel angles at most this far apart
+MOTION_CLOCK_SLACK_WALL_S = 1.0   # wall s: a controller motion clock further behind the world's is re-anchored
 
 
 
@@ -117,6 +118,7 @@ class World:
         # arm samples (joint positions, tool process on at that moment) from the controller's step listener
         self._samples: Deque[Tuple[List[float], bool, float]] = deque(maxlen=2000)
         self._last_sample: Optional[List[float]] = None
+        self._motion_anchor: Optional[float] = None      # world time - controller motion time (_sample_time)
         # map <- UR controller base as (rotation, origin), set by _place_robot (from _build on), read by
         # arm_base_pose and, on the controller's thread, wall_contact
         self._ur_base_in_map: Optional[Tuple[np.ndarray, np.ndarray]] = None
@@ -518,15 +520,20 @@ class World:
             return self.scanner.scan(self.base_pose(), stamp=self.clock.now())
 
     # -- stepping ----------------------------------------------------------------------------------------------
-    def _on_arm_step(self, q: Sequence[float]) -> None:
+    def _on_arm_step(self, q: Sequence[float], motion_time: Optional[float] = None) -> None:
         """Controller step listener (the controller's thread): queue the joint sample together with whether the
-        tool's process is on at this moment and the sim time, so a valve or output switched between two world steps
+        tool's process is on at this moment and its sim time, so a valve or output switched between two world steps
         takes effect at the right place along the path (a world step spans many controller cycles, the more so when
         time-scaled) and each stretch of the path gets the time the tool took over it (a busy machine's controller
         cycles are not evenly spread over a world step: a stretch passed in one late cycle got only its share of
-        the step, a thin stripe of spray across the lane)."""
+        the step, a thin stripe of spray across the lane).
+
+        A sample's time is the controller's own ``motion_time`` when it gives one (see :meth:`_sample_time`): a
+        controller that woke up late moves the arm on by the cycles it missed, in a burst of steps that all come in
+        at nearly one wall time; timed by the world clock, that stretch got no coat at all."""
         q = [float(x) for x in q]
         last = self._samples[-1][0] if self._samples else self._last_sample
+        t = self._sample_time(motion_time)
         if last is not None and max(abs(a - b) for a, b in zip(last, q)) <= 1e-9:
             return                                       # controller idling: nothing new
         self._last_sample = q
@@ -534,7 +541,21 @@ class World:
             on = self.tool_active()
         except Exception:                                # a stand-in shutting down: judged at the step instead
             on = False
-        self._samples.append((q, on, self.clock.now()))
+        self._samples.append((q, on, t))
+
+    def _sample_time(self, motion_time: Optional[float]) -> float:
+        """Sim time of a controller sample: the world clock, or, given the controller's ``motion_time``, that
+        clock on the world's time line (anchored where the controller was least behind the world clock, so a
+        sample is never timed in the future; re-anchored when the two drift apart by more than
+        ``MOTION_CLOCK_SLACK_WALL_S``, e.g. a controller restarted after a pause)."""
+        now = self.clock.now()
+        if motion_time is None:
+            return now
+        offset = now - float(motion_time)
+        anchor = self._motion_anchor
+        if anchor is None or offset < anchor or offset - anchor > self.clock.wall_to_sim(MOTION_CLOCK_SLACK_WALL_S):
+            self._motion_anchor = anchor = offset
+        return anchor + float(motion_time)
 
     def step(self) -> None:
         """Advance the world to ``clock()`` (see the module docstring)."""
