@@ -373,6 +373,42 @@ def test_an_engine_restarted_on_the_server_runs_the_process_as_on_the_embedded_s
     assert restarted.store.value(SITE.wall_1_joint_2, PPR.tapingStatus) == PPR.processed
 
 
+def test_while_the_server_is_away_the_engine_answers_not_ready_naming_it_and_loses_nothing(sparql_store,
+                                                                                          oxigraph_server, make_engine):
+    """The server killed (SIGKILL) in the middle of a process: every call of the engine fails with code NOT_READY
+    in one line naming the endpoint and the reason, and changes nothing; the server back, the same calls (a status
+    report with its request id) are applied once and the process runs on to the end it has on the embedded store."""
+    embedded = make_engine()
+    embedded.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    expected = run_process(embedded, _decide)
+    engine = ProcessEngine(sparql_store(retry=QUICK), clock=FakeClock())
+    engine.start_process(str(PLB.TapingProcess), {"validateLines": False}, request_id="start-1")
+    scan = engine.next_action()
+    engine.set_task_status(scan.task, "in_progress", request_id="r-1")
+    oxigraph_server.kill()
+    try:
+        calls = [lambda: engine.next_action(),
+                 lambda: engine.set_task_status(scan.task, *_decide(scan), request_id="r-2"),
+                 lambda: engine.start_process(str(PLB.TapingProcess), {"validateLines": False}, request_id="start-1",
+                                              abort_running=True)]
+        for call in calls:
+            with pytest.raises(StoreUnavailable) as err:
+                call()
+            msg = _one_line(err.value)
+            assert err.value.code == "NOT_READY", msg
+            assert oxigraph_server.base_url in msg and err.value.endpoint and err.value.reason, msg
+    finally:
+        oxigraph_server.start()
+    assert engine.next_action().task == scan.task                  # still the SCAN, still in progress
+    engine.set_task_status(scan.task, *_decide(scan), request_id="r-2")
+    again = engine.set_task_status(scan.task, *_decide(scan), request_id="r-2")
+    assert again.repeated
+    # the start sent again with its request id (HICEM's retry) answers the same process, which runs on
+    assert engine.start_process(str(PLB.TapingProcess), {"validateLines": False}, request_id="start-1",
+                                abort_running=True) == engine.current_process()
+    assert [(scan.action_type, scan.params())] + run_process(engine, _decide) == expected
+
+
 def test_blank_nodes_shared_by_the_ontology_and_schema_graphs_stay_shared_on_the_server(sparql_store, make_engine):
     from rdflib import BNode
 

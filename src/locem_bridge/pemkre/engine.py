@@ -481,6 +481,9 @@ class ProcessEngine:
                     if self._v(sp0, _P_realizes) != iri:
                         raise InvalidParameterError("request id %r already started <%s>, a process realizing "
                                                     "<%s>, not <%s>" % (rid, sp0, self._v(sp0, _P_realizes), iri))
+                    # a start whose write landed but whose answer was lost (the store raised NOT_READY): the
+                    # process it started is the current one, as if the first call had been answered
+                    self._active = self._find_running() or self._active or sp0
                     return str(sp0)
             if options is not None:
                 _json_depth(options, "options", MAX_JSON_DEPTH)

@@ -127,9 +127,12 @@ class StoreUnavailable(StoreError):
     :meth:`~locem_bridge.pemkre.sparql_store.SparqlStore.was_applied`). A remote store also raises it while a
     write it could not settle is unknown, and while the quads of a conditional change stay claimed by another
     client (``applied=False``: nothing was written; try again later).
+
+    Its code is ``NOT_READY``: PEMKRE cannot decide now, the same call made again later is answered (every call
+    that changes something carries a request id, so one that was applied and whose answer was lost is applied once).
     """
 
-    code = "STORE_UNAVAILABLE"
+    code = "NOT_READY"
 
     def __init__(self, message: str, endpoint: str = "", reason: str = "", applied: Optional[bool] = False,
                  token: str = "", timed_out: bool = False) -> None:

@@ -9,8 +9,10 @@ fills requests by field name, so it needs only these fields (a missing one is a 
   ``detail``; ``<pemkre>/update_world``: ``scan`` (SCAN result JSON text).
 A response with ``success`` false raises :class:`PemkreCallError` with PEMKRE's message at once.
 
-Calls outlive a PEMKRE restart (respawned in about 2 s): while the service is away -- not registered, its
-registration left by a killed node (connection refused), or the connection dropped mid-call -- the call is sent
+Calls outlive a PEMKRE restart (respawned in about 2 s) and a store that is away: while the service is away --
+not registered, its registration left by a killed node (connection refused), or the connection dropped mid-call
+-- or PEMKRE answers ``NOT_READY`` (its SPARQL server cannot be reached; the reply names the endpoint and the
+reason) the call is sent
 again with backoff (``backoff_s`` doubling up to ``max_backoff_s``) until ``deadline_s`` after its start, then
 :class:`PemkreUnavailableError` names the peer, the call and the last reason (HICEM's controller then waits
 for PEMKRE and calls again, see :mod:`locem_bridge.hicem.controller`). A call is sent again after it may have
@@ -33,6 +35,8 @@ from locem_bridge.common.next_action import NextAction
 from locem_bridge.hicem.errors import PemkreCallError
 from locem_bridge.hicem.interfaces import PemkreClient, PemkreUnavailableError, status_request_id
 
+#: PEMKRE's reply code while its store cannot be reached (pemkre.errors.StoreUnavailable): the call is made again
+NOT_READY = "NOT_READY"
 #: rospy's ServiceException texts for a request that provably never left this node (no service to send it to)
 _NOT_SENT = ("unavailable", "unable to connect to service", "unable to contact master")
 #: ... and for one that may have reached the service (connection lost after sending)
@@ -108,6 +112,10 @@ class RosPemkreClient(PemkreClient):
             remaining = self.deadline_s - (time.monotonic() - t0)
             try:
                 resp = self._once(name, fields, remaining)
+                if getattr(resp, "code", "") == NOT_READY and not getattr(resp, "success", True):
+                    # PEMKRE is there but its store is not (a SPARQL server away): like PEMKRE away; nothing
+                    # was applied, or a write whose answer was lost is applied once by the request id
+                    raise _Away("PEMKRE answered NOT_READY: %s" % getattr(resp, "message", ""), sent=False)
                 break
             except _Away as away:
                 label = "%s%s" % (name, (" (%s)" % what) if what else "")

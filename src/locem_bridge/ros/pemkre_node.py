@@ -14,7 +14,9 @@ skill matching         ``~match``                      ``locem_bridge/PemkreMatc
 Lifecycle: ``main()`` inits the node, then :meth:`PemkreNode.start` opens the store and loads the ontologies
 (connecting late: nothing is advertised before the engine is ready, so ``wait_for_service`` is the readiness
 signal) and advertises the services; ``shutdown`` closes the store. Every reply carries ``success``, ``code``
-(``OK`` or the PEMKRE error code) and ``message``; a refused call changes nothing.
+(``OK`` or the PEMKRE error code) and ``message``; a refused call changes nothing. ``NOT_READY``: the store cannot
+be reached now (a SPARQL server away; the message names the endpoint and the reason): the same call, made again
+later with the same request id, is answered.
 
 Parameters: ``~store_path`` (directory of the persistent store; default ``$ROS_HOME/pemkre_store``),
 ``~store`` (``journal`` default, ``rocksdb``, ``memory``, ``sparql``: a SPARQL 1.1 server at ``~query_url`` and
@@ -60,6 +62,8 @@ def _guard(response_cls: Callable[[], Any], body: Callable[[Any, Any], None]) ->
             resp.success, resp.code = True, "OK"
         except PemkreError as exc:
             resp.success, resp.code, resp.message = False, exc.code, str(exc)
+            if exc.code == "NOT_READY":      # the store is away (a SPARQL server): the caller asks again
+                rospy.logwarn_throttle(5.0, "PEMKRE not ready: %s" % exc)
         except Exception as exc:  # a bug must not kill the node; it is reported to the caller
             rospy.logerr("PEMKRE internal error: %r", exc)
             resp.success, resp.code, resp.message = False, "INTERNAL_ERROR", "%s: %s" % (type(exc).__name__, exc)
