@@ -6,15 +6,21 @@ Prints, side by side and measured in the same run:
                 materialised once, incremental ABox inference;
   * rocksdb  -- the same engine on OxigraphStore (oxigraph's RocksDB backend)          } store choice
   * rdflib   -- the same engine on rdflib's in-memory Dataset + rdflib's SPARQL engine }
+  * server   -- the same engine on SparqlStore: a real SPARQL 1.1 server (`oxigraph serve` on a loopback port,
+                started here), one HTTP update per change }
   * naive    -- the baseline of the issue: rdflib in memory and a full owlrl OWL 2 RL closure of ontologies +
                 world + log before every decision (bounded: a closure over --closure-cap seconds is reported as
                 '>cap' and that configuration stops).
 World sizes count wall features (half joint lines, half wall areas, one wall per 20 features). Each sample is one
 decision of the taping process with every line pending (after each sample the line is reset, untimed), so the
 world never shrinks. Goals of the issue: next_action p99 <= 10 ms at 1,000 features and <= 50 ms at 10,000;
-status update p99 <= 5 ms; cost growing no faster than linearly.
+status update p99 <= 5 ms; cost growing no faster than linearly. Issue 20: the server's cost per decision
+(next_action + its two status updates, p50) <= 3x the embedded store's at 10,000 features; next_action p99
+<= 20 ms at 100,000 features on the embedded store.
 
 usage: python3 bench/bench_pemkre.py [--sizes 10,100,1000,10000] [--samples 200] [--budget 20] [--closure-cap 60]
+                                    [--configs ours,rocksdb,rdflib,naive,server]
+e.g. issue 20's table: --sizes 1000,10000,100000 --configs ours,server
 """
 import argparse
 import gc
@@ -26,7 +32,8 @@ import tempfile
 import time
 from typing import Dict, List, Optional
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src"))
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(REPO, "src"))
 
 from rdflib import Graph, Literal, URIRef  # noqa: E402
 
@@ -64,6 +71,7 @@ class Result:
     def __init__(self) -> None:
         self.next: List[float] = []
         self.status: List[float] = []
+        self.decision: List[float] = []      # next_action + its two status updates
         self.note = ""
         self.world_s = float("nan")
         self.triples = 0
@@ -103,11 +111,28 @@ def reset_line(engine, task: str) -> None:
     engine.store.apply(engine.reasoner.infer(engine.store, cs))
 
 
+def _server_store(path: str):
+    """A SparqlStore on a fresh ``oxigraph serve`` (the tests' helper, test/pemkre/oxigraph_server.py)."""
+    sys.path.insert(0, os.path.join(REPO, "test", "pemkre"))
+    from oxigraph_server import OxigraphServer  # noqa: E402
+    from locem_bridge.pemkre.sparql_store import SparqlStore  # noqa: E402
+
+    server = OxigraphServer(path).start()
+    store = SparqlStore(server.query_url, server.update_url)
+    closing = store.close
+
+    def close() -> None:
+        closing()
+        server.kill()
+    store.close = close  # type: ignore[assignment]
+    return store
+
+
 def run_config(kind: str, n: int, samples: int, budget: float, cap: float, tmp: str) -> Result:
     res = Result()
     path = os.path.join(tmp, "%s_%d" % (kind, n))
     store = {"ours": lambda: JournaledStore(path), "rocksdb": lambda: OxigraphStore(path),
-             "rdflib": RdflibStore, "naive": RdflibStore}[kind]()
+             "rdflib": RdflibStore, "naive": RdflibStore, "server": lambda: _server_store(path)}[kind]()
     try:
         engine = ProcessEngine(store, reasoning_max_seconds=600, reasoning_max_triples=10 ** 8)
         naive = None
@@ -155,6 +180,7 @@ def run_config(kind: str, n: int, samples: int, budget: float, cap: float, tmp: 
             if i >= warm:
                 res.next.append(dt)
                 res.status += [t2 - t1, t3 - t2]
+                res.decision.append(t3 - t)
     finally:
         gc.unfreeze()
         store.close()
@@ -295,6 +321,31 @@ def main() -> int:
                       % (goal * 1e3, n, p99 * 1e3, "met" if p99 <= goal else "MISSED"))
         worst = max(pct(r.status, 99) for r in results["ours"].values())
         print("goal status update p99 <= 5 ms (worst size): %.2f ms -> %s" % (worst * 1e3, "met" if worst <= 0.005 else "MISSED"))
+    if "ours" in configs and "server" in configs:
+        print()
+        print("issue 20: the SPARQL server vs the embedded store (ours), measured in this run:")
+        for n in sizes:
+            o, r = results["ours"].get(n), results["server"].get(n)
+            if o and r and o.decision and r.decision:
+                print("  %6d features: next_action p50/p99 ours %.2f/%.2f ms, server %.2f/%.2f ms; status p50/p99 "
+                      "ours %.2f/%.2f ms, server %.2f/%.2f ms; decision p50 ratio server/ours x%.2f"
+                      % (n, pct(o.next, 50) * 1e3, pct(o.next, 99) * 1e3, pct(r.next, 50) * 1e3, pct(r.next, 99) * 1e3,
+                         pct(o.status, 50) * 1e3, pct(o.status, 99) * 1e3, pct(r.status, 50) * 1e3,
+                         pct(r.status, 99) * 1e3, pct(r.decision, 50) / pct(o.decision, 50)))
+        if 10000 in results["server"] and results["server"][10000].decision and results["ours"][10000].decision:
+            ratio = pct(results["server"][10000].decision, 50) / pct(results["ours"][10000].decision, 50)
+            print("goal server cost per decision <= 3x the embedded store's at 10000 features: x%.2f -> %s"
+                  % (ratio, "met" if ratio <= 3.0 else "MISSED"))
+        for c in ("ours", "server"):
+            a, b = sizes[0], sizes[-1]
+            ra, rb = results[c].get(a), results[c].get(b)
+            if ra and rb and ra.next and rb.next:
+                print("  growth %s %d -> %d features: next_action p99 x%.2f, status p99 x%.2f"
+                      % (c, a, b, pct(rb.next, 99) / pct(ra.next, 99), pct(rb.status, 99) / pct(ra.status, 99)))
+    if 100000 in results.get("ours", {}) and results["ours"][100000].next:
+        p99 = pct(results["ours"][100000].next, 99)
+        print("goal next_action p99 <= 20 ms at 100000 features (embedded): %.2f ms -> %s"
+              % (p99 * 1e3, "met" if p99 <= 0.020 else "MISSED"))
     print()
     print("index aging (why the engine calls store.maintain() after each change; it acts every 10,000 removals):", index_aging(tempfile.mkdtemp(prefix="bench_pemkre_")))
     print()
