@@ -194,7 +194,7 @@ def owlrl_closure_time(n: int, cap: float) -> str:
     for t in loaded.schema:
         g.add(t)
     tmp = RdflibStore()
-    e = ProcessEngine(tmp)
+    e = ProcessEngine(tmp, reasoning_max_seconds=600, reasoning_max_triples=10 ** 8)
     e.update_world(world(n), max_seconds=600)
     for s, p, o, _ in tmp.quads(None, None, None, ASSERTED_GRAPHS):
         g.add((s, p, o))

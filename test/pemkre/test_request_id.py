@@ -94,6 +94,36 @@ def test_a_retried_start_returns_the_same_process(make_engine):
     assert quads_snapshot(e.store) == before
 
 
+def test_a_start_written_whose_answer_was_lost_is_the_current_process_when_retried(make_engine):
+    """The store wrote the start, then failed to say so (NOT_READY: a SPARQL server's answer lost): HICEM's
+    retry with the same request id answers that process and the engine runs it (it was not the current one in
+    memory: the first call raised)."""
+    from locem_bridge.pemkre.errors import StoreUnavailable
+
+    e = make_engine()
+    first = e.start_process(str(PLB.SprayingProcess), request_id="job-8-spraying")
+    for a in iter(e.next_action, None):                # run the first process to its end
+        if a.status != "action":
+            break
+        e.set_task_status(a.task, "in_progress")
+        e.set_task_status(a.task, "succeeded")
+    real_apply = e.store.apply
+
+    def apply_then_lose_the_answer(cs):
+        real_apply(cs)
+        raise StoreUnavailable("SPARQL update endpoint x: connection reset after the write was sent", "x",
+                               "connection reset", applied=None)
+
+    e.store.apply = apply_then_lose_the_answer
+    with pytest.raises(StoreUnavailable):
+        e.start_process(TAPING, {"validateLines": False}, abort_running=True, request_id="job-8-taping")
+    e.store.apply = real_apply
+    assert e.current_process() == first                 # the engine did not learn of the start
+    sp = e.start_process(TAPING, {"validateLines": False}, abort_running=True, request_id="job-8-taping")
+    assert sp != first and e.current_process() == sp and e.active_process() == sp
+    assert e.next_action().action_type in ("SCAN", "GET_TOOL")
+
+
 @pytest.mark.parametrize("kind", sorted(STORES))
 def test_a_retried_report_is_applied_once_across_a_reopened_store(tmp_path, clock, kind):
     path = str(tmp_path / kind)

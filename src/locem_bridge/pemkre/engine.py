@@ -483,7 +483,7 @@ class ProcessEngine:
                                                     "<%s>, not <%s>" % (rid, sp0, self._v(sp0, _P_realizes), iri))
                     # a start whose write landed but whose answer was lost (the store raised NOT_READY): the
                     # process it started is the current one, as if the first call had been answered
-                    self._active = self._find_running() or self._active or sp0
+                    self._active = self._find_running()
                     return str(sp0)
             if options is not None:
                 _json_depth(options, "options", MAX_JSON_DEPTH)

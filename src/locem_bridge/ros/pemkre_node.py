@@ -16,7 +16,8 @@ Lifecycle: ``main()`` inits the node, then :meth:`PemkreNode.start` opens the st
 signal) and advertises the services; ``shutdown`` closes the store. Every reply carries ``success``, ``code``
 (``OK`` or the PEMKRE error code) and ``message``; a refused call changes nothing. ``NOT_READY``: the store cannot
 be reached now (a SPARQL server away; the message names the endpoint and the reason): the same call, made again
-later with the same request id, is answered.
+later with the same request id, is answered. At start the node waits for a store it cannot reach (one line per
+attempt naming the endpoint); a store that answers wrongly is a configuration error (one line, see ros/startup.py).
 
 Parameters: ``~store_path`` (directory of the persistent store; default ``$ROS_HOME/pemkre_store``),
 ``~store`` (``journal`` default, ``rocksdb``, ``memory``, ``sparql``: a SPARQL 1.1 server at ``~query_url`` and
@@ -43,7 +44,7 @@ from locem_bridge.pemkre import ProcessEngine
 from locem_bridge.pemkre.engine import load_json
 from locem_bridge.pemkre.errors import PemkreError
 from locem_bridge.pemkre.robot_model import match_robot
-from locem_bridge.pemkre.store_factory import open_store
+from locem_bridge.pemkre.store_factory import open_store, open_store_waiting
 from locem_bridge.pemkre.terms import bindings_from_strings
 from locem_bridge.ros.params import package_share, param
 from locem_bridge.srv import (PemkreMatchProcess, PemkreMatchProcessResponse, PemkreNextAction,
@@ -177,8 +178,10 @@ def main() -> None:
     robot_file = param("robot", "")
 
     def factory() -> ProcessEngine:
-        store = open_store(kind, path, param("fsync", False), param("fresh", False),
-                           query_url=param("query_url", ""), update_url=param("update_url", ""))
+        store = open_store_waiting(lambda: open_store(kind, path, param("fsync", False), param("fresh", False),
+                                                      query_url=param("query_url", ""),
+                                                      update_url=param("update_url", "")),
+                                   kind, log=rospy.logwarn, stop=rospy.is_shutdown)
         try:
             engine = ProcessEngine(store, files,
                                    site_namespace=param("site_namespace", "") or None,

@@ -54,7 +54,6 @@ from .site import Site, Wall
 log = logging.getLogger(__name__)
 
 BASE_SUBSTEP = 0.01    # sim s: the base pose is integrated through wheel angles at most this far apart
-MOTION_CLOCK_SLACK_WALL_S = 1.0   # wall s: a controller motion clock further behind the world's is re-anchored
 
 
 
@@ -119,6 +118,7 @@ class World:
         self._samples: Deque[Tuple[List[float], bool, float]] = deque(maxlen=2000)
         self._last_sample: Optional[List[float]] = None
         self._motion_anchor: Optional[float] = None      # world time - controller motion time (_sample_time)
+        self._arm_clock: Optional[float] = None          # the latest sample's time on that line (every tick)
         # map <- UR controller base as (rotation, origin), set by _place_robot (from _build on), read by
         # arm_base_pose and, on the controller's thread, wall_contact
         self._ur_base_in_map: Optional[Tuple[np.ndarray, np.ndarray]] = None
@@ -545,17 +545,19 @@ class World:
 
     def _sample_time(self, motion_time: Optional[float]) -> float:
         """Sim time of a controller sample: the world clock, or, given the controller's ``motion_time``, that
-        clock on the world's time line (anchored where the controller was least behind the world clock, so a
-        sample is never timed in the future; re-anchored when the two drift apart by more than
-        ``MOTION_CLOCK_SLACK_WALL_S``, e.g. a controller restarted after a pause)."""
+        clock on the world's time line, anchored where the controller was least behind the world clock (a sample
+        is never timed in the future; a controller that falls behind -- a stall, a restart -- keeps its own
+        spacing, so the steps of a catch-up burst get their true durations). The world then times what it does
+        without a sample (an arm at rest, a trailing pose) on the same line (:attr:`_arm_clock`)."""
         now = self.clock.now()
         if motion_time is None:
             return now
         offset = now - float(motion_time)
-        anchor = self._motion_anchor
-        if anchor is None or offset < anchor or offset - anchor > self.clock.wall_to_sim(MOTION_CLOCK_SLACK_WALL_S):
-            self._motion_anchor = anchor = offset
-        return anchor + float(motion_time)
+        if self._motion_anchor is None or offset < self._motion_anchor:
+            self._motion_anchor = offset
+        t = self._motion_anchor + float(motion_time)
+        self._arm_clock = t
+        return t
 
     def step(self) -> None:
         """Advance the world to ``clock()`` (see the module docstring)."""
@@ -592,20 +594,23 @@ class World:
             qs: List[Tuple[List[float], bool, float]] = []
             while self._samples:
                 qs.append(self._samples.popleft())
+            # what has no sample of its own is timed on the samples' line (the controller's motion clock, when it
+            # gives one): mixed with the world clock, a segment after it would get no time
+            t_now = now if self._arm_clock is None else self._arm_clock
             if self.arm_source is not None:
                 q_now = [float(x) for x in self.arm_source.joint_positions()]
                 if not qs or max(abs(a - b) for a, b in zip(qs[-1][0], q_now)) > 1e-9:
-                    qs.append((q_now, active, now))
+                    qs.append((q_now, active, max(t_now, qs[-1][2]) if qs else t_now))
             if qs and max(abs(a - b) for a, b in zip(qs[-1][0], self._q)) <= 1e-9 and len(qs) == 1:
                 qs = []
             if not (moved or qs or self._dirty or active):
-                self._tcp_prev_t = now                   # idle: nothing changed, nothing to measure
+                self._tcp_prev_t = t_now                 # idle: nothing changed, nothing to measure
                 return
             self._dirty = False
             if moved:
                 self._place_robot()
             if not qs:
-                qs = [(self._q, active, now)]
+                qs = [(self._q, active, t_now)]
             elif self.mounted_tool is None:
                 qs = [qs[-1]]                            # nothing to measure along the way
             # thin out dense controller steps: keep every sample that moved the TCP >= 2 mm; a segment lasts from

@@ -1,0 +1,70 @@
+"""PEMKRE's node opening a SPARQL server's store (``store_factory.open_store_waiting``, as ros/pemkre_node.py does): it waits for a server
+it cannot reach, one line per attempt, and opens the store once the server answers; a server that answers wrongly
+is one configuration line naming the endpoint. A real ``oxigraph serve`` and a real HTTP server answering HTML."""
+import http.server
+import threading
+
+import pytest
+from oxigraph_server import OxigraphServer, free_port
+
+from locem_bridge.common.config_errors import ConfigError
+from locem_bridge.pemkre.store_factory import open_store, open_store_waiting
+
+
+def test_the_node_waits_for_a_server_that_is_not_up_yet_then_opens_its_store(tmp_path):
+    port = free_port()
+    server = OxigraphServer(str(tmp_path / "data"), port=port)
+    waits, lines = [], []
+
+    def sleep(seconds):                                  # the server comes up during the node's second wait
+        waits.append(seconds)
+        if len(waits) == 2:
+            server.start()
+
+    try:
+        store = open_store_waiting(lambda: open_store("sparql", "", query_url=server.query_url,
+                                                      update_url=server.update_url), "sparql",
+                                   log=lines.append, first_delay_s=0.01, sleep=sleep)
+        try:
+            assert store.count() == 0
+        finally:
+            store.close()
+    finally:
+        server.kill()
+    assert waits == [0.01, 0.02]                         # two attempts failed, the third opened the store
+    assert len(lines) == 2 and all(server.query_url in line and "\n" not in line for line in lines), lines
+
+
+def test_a_server_answering_html_is_one_configuration_line_naming_the_endpoint():
+    class Html(http.server.BaseHTTPRequestHandler):
+        def do_POST(self):
+            body = b"<html><body>Welcome to nginx</body></html>"
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):
+            pass
+
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Html)
+    threading.Thread(target=httpd.serve_forever, args=(0.05,), daemon=True).start()
+    url = "http://127.0.0.1:%d/sparql" % httpd.server_address[1]
+    slept = []
+    try:
+        with pytest.raises(ConfigError) as err:
+            open_store_waiting(lambda: open_store("sparql", "", query_url=url, update_url=url), "sparql",
+                               log=slept.append, sleep=slept.append)
+    finally:
+        httpd.shutdown()
+        httpd.server_close()
+    line = err.value.one_line()
+    assert "\n" not in line and url in line and "html" in line.lower(), line
+    assert slept == []                                   # not waited for: it will not heal by waiting
+
+
+def test_a_store_kind_that_does_not_exist_is_one_configuration_line_naming_the_kinds():
+    with pytest.raises(ConfigError) as err:
+        open_store_waiting(lambda: open_store("postgres", "/tmp/x"), "postgres", log=print)
+    assert "journal" in err.value.one_line() and "sparql" in err.value.one_line()
