@@ -8,6 +8,7 @@ import sys
 import textwrap
 
 import pytest
+from rdflib import URIRef
 from pemkre_testkit import quads_snapshot, scan_result
 
 from locem_bridge.pemkre import PLB, PPR, JournaledStore, OxigraphStore, ProcessEngine
@@ -119,8 +120,15 @@ def test_a_start_written_whose_answer_was_lost_is_the_current_process_when_retri
         e.start_process(TAPING, {"validateLines": False}, abort_running=True, request_id="job-8-taping")
     e.store.apply = real_apply
     assert e.current_process() == first                 # the engine did not learn of the start
+
+    def taping_runs():
+        return sorted(str(s) for s, _, _, _ in e.store.quads(None, None, URIRef(TAPING), None) if "/log/" in str(s))
+
+    written = taping_runs()
+    assert len(written) == 1                            # ... but the store holds it
     sp = e.start_process(TAPING, {"validateLines": False}, abort_running=True, request_id="job-8-taping")
-    assert sp != first and e.current_process() == sp and e.active_process() == sp
+    assert sp == written[0] and taping_runs() == written    # that one, not a second
+    assert e.current_process() == sp and e.active_process() == sp
     assert e.next_action().action_type in ("SCAN", "GET_TOOL")
 
 

@@ -31,7 +31,8 @@ def test_the_node_waits_for_a_server_that_is_not_up_yet_then_opens_its_store(tmp
             store.close()
     finally:
         server.kill()
-    assert waits == [0.01, 0.02]                         # two attempts failed, the third opened the store
+    assert waits == [0.01, 0.02]                         # two attempts failed, the third opened the store (slices
+                                                         # of at most 0.1 s)
     assert len(lines) == 2 and all(server.query_url in line and "\n" not in line for line in lines), lines
 
 
@@ -68,3 +69,34 @@ def test_a_store_kind_that_does_not_exist_is_one_configuration_line_naming_the_k
     with pytest.raises(ConfigError) as err:
         open_store_waiting(lambda: open_store("postgres", "/tmp/x"), "postgres", log=print)
     assert "journal" in err.value.one_line() and "sparql" in err.value.one_line()
+
+
+def test_a_gateway_answering_503_is_waited_for_and_a_stop_ends_the_wait_without_a_configuration_error():
+    from locem_bridge.pemkre.errors import StoreError
+
+    class Gateway(http.server.BaseHTTPRequestHandler):
+        def do_POST(self):
+            body = b"Service Unavailable"
+            self.send_response(503)
+            self.send_header("Content-Type", "text/plain")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):
+            pass
+
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Gateway)
+    threading.Thread(target=httpd.serve_forever, args=(0.05,), daemon=True).start()
+    url = "http://127.0.0.1:%d/sparql" % httpd.server_address[1]
+    lines = []
+    try:
+        with pytest.raises(StoreError) as err:            # stopped on the 3rd line: no ConfigError, nothing counted
+            open_store_waiting(lambda: open_store("sparql", "", query_url=url, update_url=url), "sparql",
+                               log=lines.append, stop=lambda: len(lines) >= 3, first_delay_s=0.01,
+                               sleep=lambda s: None)
+    finally:
+        httpd.shutdown()
+        httpd.server_close()
+    assert not isinstance(err.value, ConfigError) and "503" in str(err.value), err.value
+    assert len(lines) == 3 and all(url in line for line in lines), lines

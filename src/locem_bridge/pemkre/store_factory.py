@@ -16,6 +16,7 @@ from typing import Any, Callable
 from locem_bridge.common.config_errors import ConfigError
 
 from .errors import StoreError, StoreUnavailable
+from .sparql_http import TRANSIENT_STATUSES, HttpStatusError
 from .journal_store import JournaledStore
 from .oxigraph_store import OxigraphStore
 from .store import TripleStore
@@ -56,21 +57,33 @@ def open_store_waiting(opener: Callable[[], TripleStore], kind: str, log: Callab
                        stop: Callable[[], bool] = lambda: False, first_delay_s: float = 0.5, max_delay_s: float = 5.0,
                        sleep: Callable[[float], None] = time.sleep) -> TripleStore:
     """The store from ``opener()`` (e.g. :func:`open_store`), for a node starting up. While its server cannot be
-    reached (StoreUnavailable) it waits and tries again (``first_delay_s`` doubling up to ``max_delay_s``), one
-    ``log`` line per attempt naming the endpoint and the reason, until ``stop()``; the node offers nothing
-    meanwhile. A SPARQL server that answers wrongly (HTML, HTTP errors, two URLs of different datasets) or a bad
-    store setting (ValueError) does not heal by waiting: :class:`ConfigError`, one line (ros/startup.py). An
-    embedded store's own StoreError (e.g. its lock while the previous process exits) is raised as it is."""
+    reached (StoreUnavailable, or a gateway's 502/503/504 in front of it) it waits and tries again
+    (``first_delay_s`` doubling up to ``max_delay_s``), one ``log`` line per attempt naming the endpoint and the
+    reason, until ``stop()`` (then the last StoreUnavailable is raised: not a configuration error); the node
+    offers nothing meanwhile. A SPARQL server that answers wrongly (HTML, other HTTP errors, two URLs of different
+    datasets) or a bad store setting (ValueError) does not heal by waiting: :class:`ConfigError`, one line
+    (ros/startup.py). An embedded store's own StoreError (e.g. its lock while the previous process exits) is
+    raised as it is."""
     delay, attempts = first_delay_s, 0
     while True:
         attempts += 1
         try:
             return opener()
-        except StoreUnavailable as exc:
+        except (StoreUnavailable, HttpStatusError) as exc:
+            if isinstance(exc, HttpStatusError) and exc.status not in TRANSIENT_STATUSES:
+                if kind != "sparql":
+                    raise
+                raise ConfigError("store %s: %s" % (kind, exc), key="~store") from None
             if stop():
-                raise ConfigError("store %s not reachable when the node was stopped: %s" % (kind, exc)) from None
+                raise
             log("PEMKRE waiting for its store (attempt %d, next in %.1f s): %s" % (attempts, delay, exc))
-            sleep(delay)
+            waited = 0.0
+            while waited < delay and not stop():      # in slices: a shutdown is not held up
+                step = min(0.1, delay - waited)
+                sleep(step)
+                waited += step
+            if stop():
+                raise
             delay = min(max_delay_s, delay * 2)
         except (StoreError, ValueError) as exc:
             if isinstance(exc, StoreError) and kind != "sparql":

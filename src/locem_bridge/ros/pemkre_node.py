@@ -42,7 +42,7 @@ from locem_bridge.common.config_errors import ConfigError
 from locem_bridge.common.folders import folder_files, split_folders
 from locem_bridge.pemkre import ProcessEngine
 from locem_bridge.pemkre.engine import load_json
-from locem_bridge.pemkre.errors import PemkreError
+from locem_bridge.pemkre.errors import PemkreError, StoreError
 from locem_bridge.pemkre.robot_model import match_robot
 from locem_bridge.pemkre.store_factory import open_store, open_store_waiting
 from locem_bridge.pemkre.terms import bindings_from_strings
@@ -201,7 +201,12 @@ def main() -> None:
         return engine
 
     node = PemkreNode(factory)
-    node.start()
+    try:
+        node.start()
+    except StoreError:
+        if rospy.is_shutdown():          # stopped while it waited for its store: nothing to report
+            return
+        raise
     rospy.on_shutdown(node.shutdown)
     # The ontologies, compiled model and caches live as long as the node: move them out of the cyclic garbage
     # collector's reach so a full collection does not pause a decision (measured in bench/bench_pemkre.py).

@@ -551,6 +551,7 @@ class World:
         without a sample (an arm at rest, a trailing pose) on the same line (:attr:`_arm_clock`)."""
         now = self.clock.now()
         if motion_time is None:
+            self._arm_clock = None                       # a source without a motion clock: the world's own
             return now
         offset = now - float(motion_time)
         if self._motion_anchor is None or offset < self._motion_anchor:
@@ -591,12 +592,13 @@ class World:
                     self._tcp_prev = None            # the TCP moved with the mount: no painting along that jump
                     moved = True
             active = self.tool_active()
+            # what has no sample of its own is timed on the samples' line (the controller's motion clock, when it
+            # gives one): mixed with the world clock, a segment after it would get no time (read before the queue
+            # is drained: a sample queued meanwhile is later than it)
+            t_now = now if self._arm_clock is None else self._arm_clock
             qs: List[Tuple[List[float], bool, float]] = []
             while self._samples:
                 qs.append(self._samples.popleft())
-            # what has no sample of its own is timed on the samples' line (the controller's motion clock, when it
-            # gives one): mixed with the world clock, a segment after it would get no time
-            t_now = now if self._arm_clock is None else self._arm_clock
             if self.arm_source is not None:
                 q_now = [float(x) for x in self.arm_source.joint_positions()]
                 if not qs or max(abs(a - b) for a, b in zip(qs[-1][0], q_now)) > 1e-9:
