@@ -11,6 +11,25 @@ from locem_bridge.common.config_errors import ConfigError
 from locem_bridge.pemkre.store_factory import open_store, open_store_waiting
 
 
+def _answering(status, media, body):
+    """A real HTTP server on a free loopback port answering every POST with ``status``, ``media`` and ``body``
+    (shut it down and close it when done)."""
+    class Handler(http.server.BaseHTTPRequestHandler):
+        def do_POST(self):
+            self.send_response(status)
+            self.send_header("Content-Type", media)
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):
+            pass
+
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    threading.Thread(target=httpd.serve_forever, args=(0.05,), daemon=True).start()
+    return httpd
+
+
 def test_the_node_waits_for_a_server_that_is_not_up_yet_then_opens_its_store(tmp_path):
     port = free_port()
     server = OxigraphServer(str(tmp_path / "data"), port=port)
@@ -37,20 +56,7 @@ def test_the_node_waits_for_a_server_that_is_not_up_yet_then_opens_its_store(tmp
 
 
 def test_a_server_answering_html_is_one_configuration_line_naming_the_endpoint():
-    class Html(http.server.BaseHTTPRequestHandler):
-        def do_POST(self):
-            body = b"<html><body>Welcome to nginx</body></html>"
-            self.send_response(200)
-            self.send_header("Content-Type", "text/html")
-            self.send_header("Content-Length", str(len(body)))
-            self.end_headers()
-            self.wfile.write(body)
-
-        def log_message(self, *args):
-            pass
-
-    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Html)
-    threading.Thread(target=httpd.serve_forever, args=(0.05,), daemon=True).start()
+    httpd = _answering(200, "text/html", b"<html><body>Welcome to nginx</body></html>")
     url = "http://127.0.0.1:%d/sparql" % httpd.server_address[1]
     slept = []
     try:
@@ -74,20 +80,7 @@ def test_a_store_kind_that_does_not_exist_is_one_configuration_line_naming_the_k
 def test_a_gateway_answering_503_is_waited_for_and_a_stop_ends_the_wait_without_a_configuration_error():
     from locem_bridge.pemkre.errors import StoreError
 
-    class Gateway(http.server.BaseHTTPRequestHandler):
-        def do_POST(self):
-            body = b"Service Unavailable"
-            self.send_response(503)
-            self.send_header("Content-Type", "text/plain")
-            self.send_header("Content-Length", str(len(body)))
-            self.end_headers()
-            self.wfile.write(body)
-
-        def log_message(self, *args):
-            pass
-
-    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Gateway)
-    threading.Thread(target=httpd.serve_forever, args=(0.05,), daemon=True).start()
+    httpd = _answering(503, "text/plain", b"Service Unavailable")
     url = "http://127.0.0.1:%d/sparql" % httpd.server_address[1]
     lines = []
     try:

@@ -46,6 +46,15 @@ def _pass(world, arm, wall, points, normal, speed=0.2):
     return q
 
 
+def _spray_ready(world, comp, wall):
+    """Base before wall_1, spray gun mounted, compressor at 4.5 bar (20 s of sim time to build it up)."""
+    world.set_base_pose(1.8, 2.3, np.pi / 2)
+    world.mount_tool("spray_gun")
+    comp.set_setpoint(4.5)
+    comp.set_motor(True)
+    wall.t += 20.0
+
+
 def _vertical(x, y, z0, z1, step=0.01):
     return [[x, y, z] for z in np.arange(z0, z1 + 1e-9, step)]
 
@@ -318,11 +327,7 @@ def test_a_controller_catching_up_in_a_burst_coats_its_stretch_like_the_rest(rig
     reach the world at one wall time; they carry the controller's motion clock, and the stretch passed in the
     burst gets the coat of its real duration, like the rest of the lane (timed by the world clock, it got none)."""
     world, arm, comp, wall = rig
-    world.set_base_pose(1.8, 2.3, np.pi / 2)
-    world.mount_tool("spray_gun")
-    comp.set_setpoint(4.5)
-    comp.set_motor(True)
-    wall.t += 20.0
+    _spray_ready(world, comp, wall)
     speed, y = 0.3, 3.3
     q = world.ik_tcp([1.4, y, 1.4], [0, 1, 0], world.joint_positions())
     arm.set_joint_positions(q, motion_time=50.0)       # the controller's clock has its own origin
@@ -356,11 +361,7 @@ def test_a_spray_lane_interrupted_and_resumed_shows_its_seam(rig, resume_at, gap
     """The valve closes mid-lane at x 1.8 and opens again at ``resume_at``: the seam there shows the stretch
     never sprayed (resumed ahead) or sprayed twice (resumed behind), within a pass-map cell."""
     world, arm, comp, wall = rig
-    world.set_base_pose(1.8, 2.3, np.pi / 2)
-    world.mount_tool("spray_gun")
-    comp.set_setpoint(4.5)
-    comp.set_motor(True)
-    wall.t += 20.0
+    _spray_ready(world, comp, wall)
     _pass(world, arm, wall, [[1.4, 3.3, 1.4]], [0, 1, 0])
     comp.set_valve(True)
     _pass(world, arm, wall, _line(1.4, 1.8, 3.3, 1.4), [0, 1, 0], speed=0.3)
