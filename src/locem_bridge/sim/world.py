@@ -512,15 +512,6 @@ class World:
             return bool(self.arm_source is not None and self.arm_source.digital_output(sw["index"]))
         return bool(self.compressor is not None and self.compressor.spraying())
 
-    def tool_active_at(self, t: float) -> bool:
-        """:meth:`tool_active` at sim time ``t`` (now or a little earlier): the spray valve's state at that time (see
-        :meth:`CompressorModel.valve_open_at`); a digital output is set in the controller's own cycle, so its
-        state now is its state at the controller's latest sample."""
-        name = self.mounted_tool
-        if name is None or self.compressor is None or self.tools_cfg[name]["switch"]["source"] == "ur_digital_out":
-            return self.tool_active()
-        return bool(self.compressor.spraying_at(t))
-
     # -- perception --------------------------------------------------------------------------------------------
     def scan(self) -> Dict[str, Any]:
         """SCAN result (contract JSON shape) from the current base pose (under the world's lock: the scanner reads
@@ -531,11 +522,11 @@ class World:
     # -- stepping ----------------------------------------------------------------------------------------------
     def _on_arm_step(self, q: Sequence[float], motion_time: Optional[float] = None) -> None:
         """Controller step listener (the controller's thread): queue the joint sample together with whether the
-        tool's process was on at the sample's sim time (:meth:`tool_active_at`) and that time, so a valve or output
-        switched between two world steps takes effect at the right place along the path (a world step spans many
-        controller cycles, the more so when time-scaled) and each stretch of the path gets the time the tool took
-        over it (a busy machine's controller cycles are not evenly spread over a world step: a stretch passed in
-        one late cycle got only its share of the step, a thin stripe of spray across the lane).
+        tool's process is on at this moment and its sim time, so a valve or output switched between two world steps
+        takes effect at the right place along the path (a world step spans many controller cycles, the more so when
+        time-scaled) and each stretch of the path gets the time the tool took over it (a busy machine's controller
+        cycles are not evenly spread over a world step: a stretch passed in one late cycle got only its share of
+        the step, a thin stripe of spray across the lane).
 
         A sample's time is the controller's own ``motion_time`` when it gives one (see :meth:`_sample_time`): a
         controller that woke up late moves the arm on by the cycles it missed, in a burst of steps that all come in
@@ -547,7 +538,7 @@ class World:
             return                                       # controller idling: nothing new
         self._last_sample = q
         try:
-            on = self.tool_active_at(t)
+            on = self.tool_active()
         except Exception:                                # a stand-in shutting down: judged at the step instead
             on = False
         self._samples.append((q, on, t))
@@ -611,8 +602,7 @@ class World:
             if self.arm_source is not None:
                 q_now = [float(x) for x in self.arm_source.joint_positions()]
                 if not qs or max(abs(a - b) for a, b in zip(qs[-1][0], q_now)) > 1e-9:
-                    t_q = max(t_now, qs[-1][2]) if qs else t_now
-                    qs.append((q_now, self.tool_active_at(t_q), t_q))
+                    qs.append((q_now, active, max(t_now, qs[-1][2]) if qs else t_now))
             if qs and max(abs(a - b) for a, b in zip(qs[-1][0], self._q)) <= 1e-9 and len(qs) == 1:
                 qs = []
             if not (moved or qs or self._dirty or active):

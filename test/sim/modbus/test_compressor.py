@@ -241,21 +241,3 @@ def test_bad_watchdog_values_are_refused_and_nothing_is_half_applied(served):
     assert client.read_holding_registers(0, count=2, device_id=DEV).registers == [300, 60000]
     assert not client.write_register(1, 0, device_id=DEV).isError()           # off again
     assert server.state()["watchdog"]["timeout_ms"] == 0
-
-
-def test_the_valve_state_at_an_earlier_time_is_what_it_was_then(robot_cfg):
-    """The world pairs each arm pose with the valve state at that pose's own time: opened at 1 s, closed at 3 s,
-    opened again at 5 s of sim time, asked at 6 s about each moment, the model answers what the valve was then."""
-    wall = [0.0]
-    clock = SimClock(1.0, wall=lambda: wall[0])
-    model = CompressorModel(copy.deepcopy(robot_cfg["robot"]["compressor"]), clock.now)
-    model.set_setpoint(4.5)
-    model.set_motor(True)
-    for at, open_ in ((1.0, True), (3.0, False), (5.0, True)):
-        wall[0] = at
-        model.set_valve(open_)
-    wall[0] = 6.0
-    assert [model.valve_open_at(t) for t in (0.5, 1.0, 2.9, 3.0, 4.9, 5.0, 6.0)] == \
-        [False, True, True, False, False, True, True]
-    wall[0] = 30.0                                     # the pressure built up: compound comes out while open
-    assert model.spraying() and model.spraying_at(29.0) and not model.spraying_at(4.0)

@@ -55,7 +55,7 @@ import math
 import threading
 import time
 from collections import deque
-from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Deque, Dict, List, Optional, Sequence
 
 from ..errors import DeviceStandInError
 
@@ -114,7 +114,6 @@ class CompressorModel:
         self.fault_code = FAULT_NONE
         self._regulator_stuck = False
         self._history: Deque[Dict[str, Any]] = deque(maxlen=HISTORY_LENGTH)
-        self._valve_changes: Deque[Tuple[float, bool]] = deque(maxlen=HISTORY_LENGTH)   # (sim time, new state)
 
     # -- physics -------------------------------------------------------------------------------------------
     def update(self) -> None:
@@ -159,26 +158,6 @@ class CompressorModel:
             self.update()
             return self.valve_open and self.pressure_in_range
 
-    def valve_open_at(self, t: float) -> bool:
-        """Whether the valve was open at sim time ``t`` (now or earlier), from the valve's changes: the simulated
-        world pairs an arm pose with the valve state at that pose's own time (a controller catching up after a
-        stall moves the arm on in a burst; judged by the valve's state at the burst, the lane's last stretch went
-        without its coat whenever the valve had closed meanwhile)."""
-        with self._lock:
-            state = self.valve_open
-            for when, value in reversed(self._valve_changes):
-                if when <= t:
-                    break
-                state = not value                # the state before that change
-            return state
-
-    def spraying_at(self, t: float) -> bool:
-        """:meth:`spraying` at sim time ``t`` (now or earlier): the valve's state then, the pressure's now (it
-        changes with a time constant far longer than the spans looked back over)."""
-        with self._lock:
-            self.update()
-            return self.valve_open_at(t) and self.pressure_in_range
-
     # -- commands ------------------------------------------------------------------------------------------
     def set_motor(self, on: bool, cause: str = "modbus") -> None:
         with self._lock:
@@ -192,7 +171,6 @@ class CompressorModel:
             self.update()
             if self.valve_open != bool(open_):
                 self._note("valve_open", bool(open_), cause)
-                self._valve_changes.append((self._clock(), bool(open_)))
             self.valve_open = bool(open_)
 
     def safe_stop(self, cause: str) -> None:
