@@ -204,6 +204,19 @@ def _node(env, module, *args, timeout=60.0):
     return done, time.monotonic() - started
 
 
+def _store_of_another_site(tmp_path):
+    """A PEMKRE store folder that holds another site's data (claimed by ``another_bay``)."""
+    from locem_bridge.pemkre import JournaledStore
+    from locem_bridge.pemkre.store_factory import claim_site
+    path = str(tmp_path / "claimed_pemkre_store")
+    store = JournaledStore(path)
+    try:
+        claim_site(store, "another_bay", path)
+    finally:
+        store.close()
+    return path
+
+
 def _node_cases(tmp_path):
     bad_robot = _robot(tmp_path, _misspelt_compressor)
     bad_site = _site(tmp_path, lambda d: d["simulation"].update(outcomes={}))
@@ -211,6 +224,7 @@ def _node_cases(tmp_path):
     onto = _case_turtle(tmp_path)[0][1].split(":=", 1)[1]
     job = tmp_path / "job.yaml"
     job.write_text("steps:\n  - {name: taping}\n")
+    claimed = _store_of_another_site(tmp_path)
     return [
         ("locem_node", "locem", ["_robot_config:=" + bad_robot], "%s: robot.compresor: unknown key" % bad_robot),
         ("locem_node", "locem", ["_robot_config:=" + ROBOT, "_site_config:=" + bad_site, "_devices:=scanner"],
@@ -219,6 +233,9 @@ def _node_cases(tmp_path):
         ("sim_node", "sim", ["_site:=" + SITE, "_robot:=" + bad_robot], "%s: robot.compresor: unknown key" % bad_robot),
         ("hicem_node", "hicem", ["_params_file:=" + params], "%s: hhlc.tick_period_s: must be a finite number" % params),
         ("pemkre_node", "pemkre", ["_ontology_dir:=" + onto, "_store:=memory"], "%s/process.ttl: line " % onto),
+        ("pemkre_node", "pemkre", ["_store:=journal", "_store_path:=" + claimed, "_site:=" + SITE],
+         "%s: site: the store holds the data of site 'another_bay', not of this launch's site 'default'"
+         % claimed),
         ("job_node", "job", ["_job:=%s" % job], "%s: steps[0]: needs a name and a process" % job),
     ]
 

@@ -7,21 +7,30 @@ SPARQL 1.1 server at ``query_url`` / ``update_url``; ``path`` and ``fsync`` unus
 ``fresh`` starts from an empty store: it removes the store folder first, or on a server drops PEMKRE's named graphs
 (those under :data:`~locem_bridge.pemkre.vocab.GRAPHS`; other graphs on the server are left alone). The caller
 closes the store it opened.
+
+A store belongs to one site (:func:`claim_site`): the first PEMKRE started on it with a site name records it; a
+PEMKRE of another site is refused before it reads or writes anything else (one configuration line naming the
+store and both sites).
 """
 import os
 import shutil
 import time
-from typing import Any, Callable
+from typing import Any, Callable, List
 
 from locem_bridge.common.config_errors import ConfigError
+
+from rdflib import Literal
 
 from .errors import StoreError, StoreUnavailable
 from .sparql_http import TRANSIENT_STATUSES, HttpStatusError
 from .journal_store import JournaledStore
 from .oxigraph_store import OxigraphStore
-from .store import TripleStore
+from .store import G_META, ChangeSet, TripleStore
+from .vocab import META
 
 STORE_KINDS = ("journal", "rocksdb", "memory", "sparql")
+#: the triple recording whose site a store holds: (META.store, META.site, "name") in the meta graph
+SITE_SUBJECT, SITE_PREDICATE = META.store, META.site
 
 
 def open_store(kind: str, path: str, fsync: bool = False, fresh: bool = False, query_url: str = "",
@@ -89,3 +98,29 @@ def open_store_waiting(opener: Callable[[], TripleStore], kind: str, log: Callab
             if isinstance(exc, StoreError) and kind != "sparql":
                 raise
             raise ConfigError("store %s: %s" % (kind, exc), key="~store") from None
+
+
+def claim_site(store: TripleStore, site: str, where: str) -> bool:
+    """Make sure ``store`` holds the data of ``site`` (a site's name) before PEMKRE uses it: a store that names no
+    site yet (empty, or written before sites were recorded) is claimed for it (True); one that names ``site`` is
+    used as it is (False); one that names another site is refused with a :class:`ConfigError` naming ``where``
+    (the store's folder or endpoint) and both sites, and nothing is written. Two PEMKREs of different sites that
+    claim one empty store at the same moment: both see two names afterwards and both are refused."""
+    if not isinstance(site, str) or not site.strip():
+        raise ConfigError("the site's name must be a non-empty string, got %r" % (site,), key="site")
+
+    def held() -> List[str]:
+        return sorted(str(o) for o in store.objects(SITE_SUBJECT, SITE_PREDICATE, (G_META,)))
+
+    names = held()
+    if not names:
+        store.apply(ChangeSet(add=[(SITE_SUBJECT, SITE_PREDICATE, Literal(site), G_META)]))
+        names = held()
+        if names == [site]:
+            return True
+    if names != [site]:
+        raise ConfigError("the store holds the data of site %s, not of this launch's site %r: PEMKRE starts no "
+                          "process on it" % (" and ".join(repr(n) for n in names), site), file=where, key="site",
+                          allowed="a store (folder or server dataset) of site %r or an empty one; fresh:=true "
+                                  "empties this one" % site)
+    return False

@@ -26,7 +26,9 @@ Parameters: ``~store_path`` (directory of the persistent store; default ``$ROS_H
 Turtle loaded beside it, separated by ``:`` or ``,``), ``~trees_dir`` and ``~extra_trees_dirs`` (the tree folders
 HICEM runs, for the robot's resource model), ``~robot`` (the robot YAML: its resource model -- generated from it,
 the LOCEM registry and the tree folders -- is loaded into the store and every process is matched to the robot's
-skills; empty = no matching), ``~site_namespace``, ``~log_namespace``,
+skills; empty = no matching), ``~site`` (the site YAML whose name the store must hold: a store holding another
+site's data is refused in one configuration line before anything is read or written; empty = not checked),
+``~site_namespace``, ``~log_namespace``,
 ``~reasoning_max_seconds``, ``~fresh`` (delete the store first: tests and demos only).
 """
 import gc
@@ -44,7 +46,7 @@ from locem_bridge.pemkre import ProcessEngine
 from locem_bridge.pemkre.engine import load_json
 from locem_bridge.pemkre.errors import PemkreError, StoreError
 from locem_bridge.pemkre.robot_model import match_robot
-from locem_bridge.pemkre.store_factory import open_store, open_store_waiting
+from locem_bridge.pemkre.store_factory import claim_site, open_store, open_store_waiting
 from locem_bridge.pemkre.terms import bindings_from_strings
 from locem_bridge.ros.params import package_share, param
 from locem_bridge.srv import (PemkreMatchProcess, PemkreMatchProcessResponse, PemkreNextAction,
@@ -52,6 +54,7 @@ from locem_bridge.srv import (PemkreMatchProcess, PemkreMatchProcessResponse, Pe
                               PemkreSetTaskStatus, PemkreSetTaskStatusResponse, PemkreStartProcess,
                               PemkreStartProcessResponse, PemkreUpdateWorld, PemkreUpdateWorldResponse)
 from locem_bridge.ros.startup import config_guard
+from locem_bridge.sim.config import load_site
 
 
 def _guard(response_cls: Callable[[], Any], body: Callable[[Any, Any], None]) -> Callable[[Any], Any]:
@@ -176,12 +179,22 @@ def main() -> None:
         split_folders(param("extra_trees_dirs", ""))
     folder_files(tree_dirs, ".xml", "trees folder")
     robot_file = param("robot", "")
+    site_file = param("site", "")
+    # the site this store must hold (its name, from the same site YAML the launch gives the world and scanner)
+    site = load_site(site_file)["site"]["name"] if site_file else None
+    where = param("query_url", "") if kind == "sparql" else (path if kind != "memory" else "the memory store")
 
     def factory() -> ProcessEngine:
         store = open_store_waiting(lambda: open_store(kind, path, param("fsync", False), param("fresh", False),
                                                       query_url=param("query_url", ""),
                                                       update_url=param("update_url", "")),
                                    kind, log=rospy.logwarn, stop=rospy.is_shutdown)
+        try:
+            if site is not None and claim_site(store, site, where):
+                rospy.loginfo("PEMKRE: store %s now holds site %r", where, site)
+        except Exception:
+            store.close()
+            raise
         try:
             engine = ProcessEngine(store, files,
                                    site_namespace=param("site_namespace", "") or None,
