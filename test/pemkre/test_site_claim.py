@@ -37,7 +37,7 @@ def test_an_on_disk_store_is_claimed_once_and_refuses_another_site_after_a_resta
         line = _refused(store, "bay_b", path)
         assert line == ("%s: site: the store holds the data of site 'bay_a', not of this launch's site 'bay_b': "
                         "PEMKRE starts no process on it (allowed: a store (folder or server dataset) of site "
-                        "'bay_b' or an empty one; fresh:=true empties this one)" % path), line
+                        "'bay_b' or an empty one (pemkre.launch fresh:=true empties one))" % path), line
     finally:
         store.close()
 
@@ -62,20 +62,39 @@ class _Rival:
     def objects(self, *args, **kwargs):
         return self._store.objects(*args, **kwargs)
 
+    def value(self, *args, **kwargs):
+        return self._store.value(*args, **kwargs)
+
     def apply(self, changes):
         self._store.apply(ChangeSet(add=[(SITE_SUBJECT, SITE_PREDICATE, Literal(self._rival), G_META)]))
         self._store.apply(changes)
 
 
-def test_two_sites_claiming_one_empty_store_at_once_are_both_refused(tmp_path):
+def test_of_two_sites_claiming_one_empty_store_at_once_the_one_that_wrote_last_takes_its_claim_back(tmp_path):
+    """Another site's PEMKRE claims the store between our read and our write: we read back two names, take ours
+    back and are refused; the other keeps the store (its restart uses it as its own)."""
     path = str(tmp_path / "pemkre_store")
     store = JournaledStore(path)
     try:
         with pytest.raises(ConfigError) as info:
             claim_site(_Rival(store, "bay_b"), "bay_a", path)
         assert "holds the data of site 'bay_a' and 'bay_b', not of this launch's site 'bay_a'" in str(info.value)
-        line = _refused(store, "bay_b", path)                   # the rival, reading after both writes, too
-        assert "site 'bay_a' and 'bay_b', not of this launch's site 'bay_b'" in line, line
+        assert [str(o) for o in store.objects(SITE_SUBJECT, SITE_PREDICATE, (G_META,))] == ["bay_b"]
+        assert claim_site(store, "bay_b", path) is False
+        assert "holds the data of site 'bay_b', not of this launch's site 'bay_a'" in _refused(store, "bay_a", path)
+    finally:
+        store.close()
+
+
+def test_a_store_a_pemkre_used_without_naming_its_site_is_refused(tmp_path, clock):
+    """A store whose data names no site (a PEMKRE started without site:= loaded its ontologies and ran on it) is
+    not known to hold this site's data: refused, nothing written."""
+    path = str(tmp_path / "pemkre_store")
+    store = JournaledStore(path)
+    try:
+        ProcessEngine(store, clock=clock)
+        line = _refused(store, "bay_a", path)
+        assert line.startswith("%s: site: the store holds the data of a site it does not name" % path), line
     finally:
         store.close()
 

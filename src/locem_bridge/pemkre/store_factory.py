@@ -101,26 +101,35 @@ def open_store_waiting(opener: Callable[[], TripleStore], kind: str, log: Callab
 
 
 def claim_site(store: TripleStore, site: str, where: str) -> bool:
-    """Make sure ``store`` holds the data of ``site`` (a site's name) before PEMKRE uses it: a store that names no
-    site yet (empty, or written before sites were recorded) is claimed for it (True); one that names ``site`` is
-    used as it is (False); one that names another site is refused with a :class:`ConfigError` naming ``where``
-    (the store's folder or endpoint) and both sites, and nothing is written. Two PEMKREs of different sites that
-    claim one empty store at the same moment: both see two names afterwards and both are refused."""
+    """Make sure ``store`` holds the data of ``site`` (a site's name) before PEMKRE uses it: an empty store is
+    claimed for it (True); one that names ``site`` is used as it is (False); one that names another site, or one
+    a PEMKRE has used without naming its site (its ontologies loaded, no site recorded), is refused with a
+    :class:`ConfigError` naming ``where`` (the store's folder or endpoint) and what it holds, and nothing is
+    written. Two PEMKREs of different sites claiming one empty server dataset at the same moment: the one that
+    reads back only its own name keeps it; one that reads back two takes its own back and is refused."""
     if not isinstance(site, str) or not site.strip():
-        raise ConfigError("the site's name must be a non-empty string, got %r" % (site,), key="site")
+        raise ConfigError("the site's name must be a non-empty string, got %r" % (site,), key="site.name")
+    allowed = ("a store (folder or server dataset) of site %r or an empty one (pemkre.launch fresh:=true empties "
+               "one)" % site)
+    mine = (SITE_SUBJECT, SITE_PREDICATE, Literal(site), G_META)
 
     def held() -> List[str]:
         return sorted(str(o) for o in store.objects(SITE_SUBJECT, SITE_PREDICATE, (G_META,)))
 
     names = held()
     if not names:
-        store.apply(ChangeSet(add=[(SITE_SUBJECT, SITE_PREDICATE, Literal(site), G_META)]))
+        if store.value(META.ontology, META.schemaHash, (G_META,)) is not None:
+            raise ConfigError("the store holds the data of a site it does not name (a PEMKRE started without a "
+                              "site used it), not known to be this launch's site %r: PEMKRE starts no process on "
+                              "it" % site, file=where, key="site", allowed=allowed)
+        store.apply(ChangeSet(add=[mine]))
         names = held()
         if names == [site]:
             return True
+        if site in names:                        # another site claimed it at the same moment: ours goes back
+            store.apply(ChangeSet(remove=[mine]))
     if names != [site]:
         raise ConfigError("the store holds the data of site %s, not of this launch's site %r: PEMKRE starts no "
                           "process on it" % (" and ".join(repr(n) for n in names), site), file=where, key="site",
-                          allowed="a store (folder or server dataset) of site %r or an empty one; fresh:=true "
-                                  "empties this one" % site)
+                          allowed=allowed)
     return False

@@ -27,7 +27,8 @@ Turtle loaded beside it, separated by ``:`` or ``,``), ``~trees_dir`` and ``~ext
 HICEM runs, for the robot's resource model), ``~robot`` (the robot YAML: its resource model -- generated from it,
 the LOCEM registry and the tree folders -- is loaded into the store and every process is matched to the robot's
 skills; empty = no matching), ``~site`` (the site YAML whose name the store must hold: a store holding another
-site's data is refused in one configuration line before anything is read or written; empty = not checked),
+site's data, or a PEMKRE's without a site, is refused in one configuration line before anything is read or
+written; an empty store is claimed; empty = not checked),
 ``~site_namespace``, ``~log_namespace``,
 ``~reasoning_max_seconds``, ``~fresh`` (delete the store first: tests and demos only).
 """
@@ -191,7 +192,10 @@ def main() -> None:
                                    kind, log=rospy.logwarn, stop=rospy.is_shutdown)
         try:
             if site is not None and claim_site(store, site, where):
-                rospy.loginfo("PEMKRE: store %s now holds site %r", where, site)
+                rospy.loginfo("PEMKRE: %s now holds site %r", where, site)
+        except ConfigError as exc:
+            store.close()
+            raise exc.in_file(site_file)       # a bad name is the site file's; a refused store names itself
         except Exception:
             store.close()
             raise
