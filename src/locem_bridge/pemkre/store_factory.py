@@ -17,9 +17,9 @@ import shutil
 import time
 from typing import Any, Callable, List
 
-from locem_bridge.common.config_errors import ConfigError
-
 from rdflib import Literal
+
+from locem_bridge.common.config_errors import ConfigError
 
 from .errors import StoreError, StoreUnavailable
 from .sparql_http import TRANSIENT_STATUSES, HttpStatusError

@@ -183,11 +183,12 @@ def main() -> None:
     site_file = param("site", "")
     # the site this store must hold (its name, from the same site YAML the launch gives the world and scanner)
     site = load_site(site_file)["site"]["name"] if site_file else None
-    where = param("query_url", "") if kind == "sparql" else (path if kind != "memory" else "the memory store")
+    query_url = param("query_url", "")
+    where = query_url if kind == "sparql" else (path if kind != "memory" else "the memory store")
 
     def factory() -> ProcessEngine:
         store = open_store_waiting(lambda: open_store(kind, path, param("fsync", False), param("fresh", False),
-                                                      query_url=param("query_url", ""),
+                                                      query_url=query_url,
                                                       update_url=param("update_url", "")),
                                    kind, log=rospy.logwarn, stop=rospy.is_shutdown)
         try:
