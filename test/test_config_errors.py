@@ -217,6 +217,19 @@ def _store_of_another_site(tmp_path):
     return path
 
 
+def _rocksdb_store_of_another_site(tmp_path):
+    """An embedded (RocksDB) store folder, as HICEM's embedded PEMKRE opens, holding another site's data."""
+    from locem_bridge.pemkre import OxigraphStore
+    from locem_bridge.pemkre.store_factory import claim_site
+    path = str(tmp_path / "claimed_hicem_pemkre_store")
+    store = OxigraphStore(path)
+    try:
+        claim_site(store, "another_bay", path)
+    finally:
+        store.close()
+    return path
+
+
 def _node_cases(tmp_path):
     bad_robot = _robot(tmp_path, _misspelt_compressor)
     bad_site = _site(tmp_path, lambda d: d["simulation"].update(outcomes={}))
@@ -225,6 +238,7 @@ def _node_cases(tmp_path):
     job = tmp_path / "job.yaml"
     job.write_text("steps:\n  - {name: taping}\n")
     claimed = _store_of_another_site(tmp_path)
+    claimed_rocksdb = _rocksdb_store_of_another_site(tmp_path)
     return [
         ("locem_node", "locem", ["_robot_config:=" + bad_robot], "%s: robot.compresor: unknown key" % bad_robot),
         ("locem_node", "locem", ["_robot_config:=" + ROBOT, "_site_config:=" + bad_site, "_devices:=scanner"],
@@ -236,6 +250,10 @@ def _node_cases(tmp_path):
         ("pemkre_node", "pemkre", ["_store:=journal", "_store_path:=" + claimed, "_site:=" + SITE],
          "%s: site: the store holds the data of site 'another_bay', not of this launch's site 'default'"
          % claimed),
+        ("hicem_node", "hicem", ["_pemkre:=embedded", "_pemkre_store:=" + claimed_rocksdb, "_site:=" + SITE,
+                                 "_params_file:=" + os.path.join(REPO, "config", "hicem", "plasterboard.yaml")],
+         "%s: site: the store holds the data of site 'another_bay', not of this launch's site 'default'"
+         % claimed_rocksdb),
         ("job_node", "job", ["_job:=%s" % job], "%s: steps[0]: needs a name and a process" % job),
     ]
 

@@ -49,9 +49,10 @@ from ..common.task_status import TASK_STATUSES
 from .errors import (BindingError, ConditionError, InvalidParameterError, InvalidStatusError, OntologyError,
                      ProcessModelError, QueryError, TaskStateError, UnknownProcessError, UnknownQueryError,
                      UnknownTaskError, UnmatchableProcessError)
+from .first_member import FirstMember, Unanswerable
 from .matching import ARG, SKILL, TEMPLATE, MatchingQueries, NodeMatch, ProcessMatch, SkillCatalog, match_process
-from .ontology import (AbstractProcess, FlowNode, ProcessModel, Transition, compile_model, default_ontology_files,
-                       load_files)
+from .ontology import (AbstractProcess, FlowNode, Parameter, ProcessModel, Transition, compile_model,
+                       default_ontology_files, load_files)
 from .reasoning import IncrementalReasoner, SchemaRules, bounded_closure, inferred_part
 from .store import (G_LOG, G_META, G_ONTOLOGY, G_RESOURCES, G_SCHEMA_INFERRED, G_WORLD, ChangeSet, QueryResult,
                     TripleStore)
@@ -287,6 +288,18 @@ class ProcessEngine:
             cs.remove += [(s, p, o, G_META) for s, p, o, _ in store.quads(META.ontology, META.seedHash, None, (G_META,))]
             cs.add.append((META.ontology, META.seedHash, Literal(loaded.seed_hash), G_META))
             store.apply(cs)
+        # parameters declared as "the first member of a class by an order property": kept indexed on an embedded
+        # store (pemkre/first_member.py), built here so the first decision does not pay for it
+        self._firsts: Dict[Tuple[URIRef, URIRef], FirstMember] = {}
+        for ap in self.model.processes.values():
+            for fnode in ap.nodes.values():
+                for prm in fnode.parameters:
+                    if prm.first_of is not None and prm.first_of not in self._firsts:
+                        index = self._firsts[prm.first_of] = FirstMember(store, *prm.first_of)
+                        try:
+                            index.first()
+                        except Unanswerable:
+                            pass
         self._active: Optional[URIRef] = self._find_running()
         # capability matching (pemkre/matching.py): off until a resource model is loaded
         self._matching = False
@@ -430,11 +443,22 @@ class ProcessEngine:
     def _bind_for_match(self, node: FlowNode, prm: Any) -> Optional[Node]:
         """A task parameter's value in the current world (no process yet: ?process and ?task stay unbound)."""
         try:
-            rows = self.store.select(prm.query, None)
+            value = self._parameter_value(prm, None)
         except QueryError:
             return None
-        value = rows[0].get("value") if rows else None
         return None if isinstance(value, BNode) else value
+
+    def _parameter_value(self, prm: Parameter, binds: Optional[Mapping[str, Node]]) -> Optional[Node]:
+        """The value of a task parameter now: from its index when it has one that can answer, else the first
+        ?value of its binding query (QueryError when that fails)."""
+        index = self._firsts.get(prm.first_of) if prm.first_of is not None else None
+        if index is not None:
+            try:
+                return index.first()
+            except Unanswerable:
+                pass
+        rows = self.store.select(prm.query, binds)
+        return rows[0].get("value") if rows else None
 
     def _match(self, ap: AbstractProcess) -> ProcessMatch:
         return match_process(self._catalog_now(), ap, self._bind_for_match, self._robot)
@@ -637,11 +661,10 @@ class ProcessEngine:
         for prm in node.parameters:
             binds = {k: v for k, v in (("process", sp), ("task", task)) if prm.query.bindable(k)}
             try:
-                rows = self.store.select(prm.query, binds)
+                value = self._parameter_value(prm, binds)
             except QueryError as exc:
                 raise BindingError("binding query of parameter %r (<%s>) of task node <%s> failed: %s"
                                    % (prm.name, prm.iri, node.iri, exc), str(prm.iri)) from None
-            value = rows[0].get("value") if rows else None
             if value is None:
                 if prm.required:
                     raise BindingError("parameter %r of task node <%s> has no value: its binding query <%s> "

@@ -163,6 +163,7 @@ class JournaledStore(OxigraphStore):
                 self._store.remove(oq)
             self._store.extend(add)
             self.removals += len(rem)
+        self._written(changes)
 
     def replace_graph(self, graph: URIRef, triples: Iterable[Triple]) -> None:
         g = self._g(graph)
@@ -172,6 +173,7 @@ class JournaledStore(OxigraphStore):
             if self._store.contains_named_graph(g):
                 self._store.clear_graph(g)
             self._store.extend(quads)
+        self._written(None)
 
     def maintain(self) -> None:
         """After ``rebuild_after_removals`` removals: rebuild the in-memory indexes from the live quads (removed

@@ -19,6 +19,7 @@ from rdflib.term import Node
 from ..common.paths import shipped_dir
 from ..common.task_status import TASK_STATUSES
 from .errors import OntologyError, OntologySyntaxError, ProcessModelError, QueryError
+from .first_member import query_text as first_member_query
 from .store import PreparedQuery, TripleStore
 from .vocab import PREFIXES, PROC
 
@@ -108,6 +109,9 @@ class Parameter:
     prop: URIRef
     query: PreparedQuery
     required: bool = True
+    #: (class, order property) of a parameter declared with proc:selectsMemberOf / proc:orderedBy: its value is
+    #: the class's member with the lowest order (``query`` is the equivalent SELECT; see pemkre/first_member.py)
+    first_of: Optional[Tuple[URIRef, URIRef]] = None
 
 
 @dataclass
@@ -302,9 +306,21 @@ def compile_model(g: Graph, store: TripleStore, prefixes: Mapping[str, str]) -> 
                 for prm in sorted(g.objects(n, PROC.hasParameter)):
                     prop = g.value(prm, PROC.parameterProperty)
                     text = _str(g, prm, PROC.bindingQuery)
+                    member_of, ordered_by = g.value(prm, PROC.selectsMemberOf), g.value(prm, PROC.orderedBy)
+                    first_of: Optional[Tuple[URIRef, URIRef]] = None
+                    if member_of is not None or ordered_by is not None:
+                        if text is not None or not isinstance(member_of, URIRef) or not isinstance(ordered_by, URIRef):
+                            raise ProcessModelError(
+                                "parameter <%s> of <%s> needs either proc:bindingQuery or both proc:selectsMemberOf "
+                                "(a class IRI) and proc:orderedBy (a property IRI), not %s" % (prm, n, ", ".join(
+                                    name for name, v in (("proc:bindingQuery", text), ("proc:selectsMemberOf", member_of),
+                                                         ("proc:orderedBy", ordered_by)) if v is not None)))
+                        first_of = (member_of, ordered_by)
+                        text = first_member_query(member_of, ordered_by)
                     if prop is None or text is None:
                         raise ProcessModelError("parameter <%s> of <%s> needs proc:parameterProperty and "
-                                                "proc:bindingQuery" % (prm, n))
+                                                "proc:bindingQuery (or proc:selectsMemberOf and proc:orderedBy)"
+                                                % (prm, n))
                     name = re.split(r"[#/]", str(prop))[-1]
                     if name in names:
                         raise ProcessModelError("task node <%s> has two parameters named %r" % (n, name))
@@ -313,7 +329,8 @@ def compile_model(g: Graph, store: TripleStore, prefixes: Mapping[str, str]) -> 
                     if q.kind != "SELECT" or "value" not in q.projected:
                         raise ProcessModelError("binding query of <%s> must be a SELECT returning ?value" % prm)
                     _check_projection(q, ("process", "task"), prm)
-                    node.parameters.append(Parameter(prm, name, prop, q, _bool(g, prm, PROC.required, True)))  # type: ignore
+                    node.parameters.append(Parameter(prm, name, prop, q, _bool(g, prm, PROC.required, True),  # type: ignore
+                                                     first_of))
                 node.effects = [effect(e) for e in sorted(g.objects(n, PROC.hasEffect))]
                 for ef in node.all_effects():
                     for pn in (ef.subject_param, ef.value_param):

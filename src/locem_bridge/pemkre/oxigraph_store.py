@@ -130,6 +130,7 @@ class OxigraphStore(TripleStore):
                              % (path, exc)) from exc
         self.path = path
         self.persistent = path is not None
+        self.sole_writer = True  # one process per store (RocksDB's lock) or in memory
         self._graph_cache: Dict[URIRef, ox.NamedNode] = {}
         self._closed = False
         #: held by each write, so a conditional change's check and its write are one step for this process
@@ -227,6 +228,7 @@ class OxigraphStore(TripleStore):
             except Exception as exc:
                 raise StoreError("store write failed (nothing was written): %s" % exc) from None
             self.removals += len(changes.remove)
+        self._written(changes)
 
     def replace_graph(self, graph: URIRef, triples: Iterable[Triple]) -> None:
         g = self._g(graph)
@@ -235,6 +237,8 @@ class OxigraphStore(TripleStore):
             self._store.extend([ox.Quad(to_ox(s), to_ox(p), to_ox(o), g) for s, p, o in triples])
         except Exception as exc:
             raise StoreError("cannot replace graph %s: %s" % (graph, exc)) from None
+        finally:
+            self._written(None)
 
     def flush(self) -> None:
         if self.persistent:

@@ -20,6 +20,7 @@ class RdflibStore(TripleStore):
     """An in-memory rdflib ``Dataset`` whose default graph is the union of the named graphs."""
 
     persistent = False
+    sole_writer = True
 
     def __init__(self) -> None:
         self.dataset = Dataset(default_union=True)
@@ -70,12 +71,14 @@ class RdflibStore(TripleStore):
                 self.dataset.graph(g).remove((s, p, o))
             for s, p, o, g in changes.add:
                 self.dataset.graph(g).add((s, p, o))
+        self._written(changes)
 
     def replace_graph(self, graph: URIRef, triples: Iterable[Triple]) -> None:
         gr = self.dataset.graph(graph)
         gr.remove((None, None, None))
         for t in triples:
             gr.add(t)
+        self._written(None)
 
     def count(self, graph: Optional[URIRef] = None) -> int:
         if graph is None:

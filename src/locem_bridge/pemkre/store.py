@@ -16,6 +16,11 @@ checked in the same transaction as the write (the embedded stores under their wr
 two writers: the loser gets :class:`~locem_bridge.pemkre.errors.StoreConflict` naming the quad that was not there,
 and nothing of its change is written.
 
+*Watching writes.* A store that is the only way into its dataset (:attr:`TripleStore.sole_writer`: the embedded
+stores) tells :meth:`TripleStore.watch` callbacks about every applied change, and about every replaced graph
+(with ``None``: anything may have changed), so an index kept beside the store (:mod:`~locem_bridge.pemkre.first_member`)
+stays exact. A store other clients write to (the SPARQL store) cannot, and says so.
+
 Backends: :class:`~locem_bridge.pemkre.journal_store.JournaledStore` and
 :class:`~locem_bridge.pemkre.oxigraph_store.OxigraphStore` (embedded, one process per store),
 :class:`~locem_bridge.pemkre.rdflib_store.RdflibStore` (in memory) and
@@ -23,7 +28,7 @@ Backends: :class:`~locem_bridge.pemkre.journal_store.JournaledStore` and
 """
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
 
 from rdflib import BNode, Literal, URIRef
 from rdflib.term import Node
@@ -143,6 +148,23 @@ class TripleStore(ABC):
 
     #: True when an applied change survives a crash and a restart.
     persistent: bool = False
+    #: True when every write to the dataset goes through this object (then :meth:`watch` sees them all).
+    sole_writer: bool = False
+
+    def watch(self, callback: "Callable[[Optional[ChangeSet]], None]") -> bool:
+        """Call ``callback(changes)`` after each applied change and ``callback(None)`` after each replaced graph,
+        in the writing thread, once the write is done. Returns False (and never calls) on a store that is not
+        the :attr:`sole_writer` of its dataset: what other clients write it cannot see."""
+        if not self.sole_writer:
+            return False
+        watchers = self.__dict__.setdefault("_watchers", [])
+        watchers.append(callback)
+        return True
+
+    def _written(self, changes: Optional["ChangeSet"]) -> None:
+        """Tell the watchers about a write that is done (concrete stores call this after each write)."""
+        for callback in self.__dict__.get("_watchers", ()):
+            callback(changes)
 
     @abstractmethod
     def prepare(self, text: str, name: str, prefixes: Mapping[str, str]) -> PreparedQuery:

@@ -83,6 +83,7 @@ class PROC(DefinedNamespace):
     onTaskFailure: URIRef
     optionName: URIRef
     optionProperty: URIRef
+    orderedBy: URIRef
     outgoing: URIRef
     parameterProperty: URIRef
     partOfProcess: URIRef
@@ -94,6 +95,7 @@ class PROC(DefinedNamespace):
     required: URIRef
     resultFormat: URIRef
     running: URIRef
+    selectsMemberOf: URIRef
     sequenceNumber: URIRef
     source: URIRef
     startNode: URIRef

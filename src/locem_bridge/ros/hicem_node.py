@@ -37,6 +37,7 @@ from typing import Any, Dict, Optional
 import rospkg
 import rospy
 
+from locem_bridge.common.config_errors import ConfigError
 from locem_bridge.common.folders import split_folders
 from locem_bridge.common.program_state import Method, Transition
 from locem_bridge.hicem.config import load_params
@@ -70,7 +71,20 @@ def _pemkre_client(kind: str) -> Any:
         from locem_bridge.pemkre.ontology import default_ontology_dir
         files = folder_files([default_ontology_dir()] +
                              split_folders(param("extra_ontology_dirs", "")), ".ttl", "ontology folder")
-        engine = ProcessEngine(open_store("rocksdb", store_path), files)
+        store = open_store("rocksdb", store_path)
+        site_file = param("site", "")
+        if site_file:  # the store holds this site's data or none (as the PEMKRE node checks its store)
+            from locem_bridge.pemkre.store_factory import claim_site
+            from locem_bridge.sim.config import load_site
+            try:
+                claim_site(store, load_site(site_file)["site"]["name"], store_path)
+            except ConfigError as exc:
+                store.close()
+                raise exc.in_file(site_file)
+            except Exception:
+                store.close()
+                raise
+        engine = ProcessEngine(store, files)
         # matched to the skills of ~robot (its resource model from the same tree folders HICEM runs), as the node;
         # only when ~robot is set: a test node with its own trees and no robot runs unmatched, as before
         from locem_bridge.pemkre.robot_model import match_robot
@@ -94,9 +108,10 @@ class HicemNode:
         params = load_params(params_file, robot_file)
         library = TreeLibrary(params.node_registry())
         library.load_directories(tree_dirs)
-        self.locem = RosLocemClient(locem_ns, wait_s=param("locem_wait", 10.0))
         # times each PEMKRE call into $LOCEM_CALL_LOG when set (bench/bench_job.py); otherwise the client itself
+        # (before waiting for LOCEM: an embedded PEMKRE refuses a store of another site at once)
         self.pemkre = instrument_from_env(_pemkre_client(param("pemkre", "ros")))
+        self.locem = RosLocemClient(locem_ns, wait_s=param("locem_wait", 10.0))
         self.ex = create_executive(self.pemkre, self.locem, hdict,
                                    params_file=params_file, trees_dir=trees_dir, params=params, library=library)
         self.ctrl = self.ex.controller

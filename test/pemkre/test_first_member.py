@@ -1,0 +1,135 @@
+"""The index of "the first member of a class by an order property" (pemkre/first_member.py) gives the answer of its
+SPARQL query after any sequence of writes, on every embedded store; where it cannot (a store other clients write
+to, an order value that is not a number) it says why and the engine runs the query; the engine picks the next
+pending line from it, also after a restart on the same store."""
+import random
+
+import pytest
+from rdflib import RDF, Literal, URIRef
+from rdflib.namespace import XSD
+
+from locem_bridge.pemkre import PLB, PPR, JournaledStore, OxigraphStore, ProcessEngine, RdflibStore
+from locem_bridge.pemkre.first_member import FirstMember, Unanswerable, query_text
+from locem_bridge.pemkre.store import G_ABOX_INFERRED, G_LOG, G_WORLD, ChangeSet
+
+EX = "https://ex.example/"
+C = URIRef(EX + "Pending")
+ORDER = URIRef(EX + "order")
+
+
+def _open(kind, path):
+    return {"journal": lambda: JournaledStore(path), "oxigraph": lambda: OxigraphStore(path),
+            "rdflib": RdflibStore}[kind]()
+
+
+def _query_answer(store, q):
+    rows = store.select(q)
+    return rows[0]["value"] if rows else None
+
+
+@pytest.mark.parametrize("kind", ["journal", "oxigraph", "rdflib"])
+def test_the_index_answers_as_its_query_after_any_writes(kind, tmp_path):
+    store = _open(kind, str(tmp_path / "s"))
+    try:
+        q = store.prepare(query_text(C, ORDER), "first pending", {})
+        index = FirstMember(store, C, ORDER)
+        assert index.usable and index.first() is None
+        rng = random.Random(7)
+        subjects = [URIRef(EX + "f%02d" % i) for i in range(25)]
+        checked = 0
+        for step in range(600):
+            s = rng.choice(subjects)
+            graph = rng.choice([G_WORLD, G_ABOX_INFERRED])
+            cs = ChangeSet()
+            roll = rng.random()
+            if roll < 0.35:    # becomes a member (in one graph or the other)
+                cs.add.append((s, RDF.type, C, graph))
+            elif roll < 0.6:   # stops being a member there
+                cs.remove += [q4 for q4 in store.quads(s, RDF.type, C, None)][:1]
+            elif roll < 0.85:  # an order value changes (integers and decimals, ties on purpose)
+                cs.remove += list(store.quads(s, ORDER, None, None))
+                value = rng.choice([Literal(rng.randint(0, 9)), Literal("%d.5" % rng.randint(0, 9), datatype=XSD.decimal)])
+                cs.add.append((s, ORDER, value, G_WORLD))
+            elif roll < 0.95:  # a second order value beside the first
+                cs.add.append((s, ORDER, Literal(rng.randint(0, 12)), G_WORLD))
+            else:              # a whole graph replaced: the index builds again
+                kept = [(a, b, c) for a, b, c, _ in store.quads(None, None, None, (G_ABOX_INFERRED,))
+                        if rng.random() < 0.7]
+                store.replace_graph(G_ABOX_INFERRED, kept)
+            if cs:
+                store.apply(cs)
+            assert index.first() == _query_answer(store, q), "step %d" % step
+            checked += 1
+        assert checked == 600
+        # what it holds stays bounded by what is stored (each stale entry leaves once)
+        assert len(index) <= sum(1 for _ in store.quads(None, ORDER, None, None))
+    finally:
+        store.close()
+
+
+def test_an_order_value_that_is_not_a_number_makes_the_index_step_aside(tmp_path):
+    store = JournaledStore(str(tmp_path / "s"))
+    try:
+        index = FirstMember(store, C, ORDER)
+        a, b = URIRef(EX + "a"), URIRef(EX + "b")
+        store.apply(ChangeSet(add=[(a, RDF.type, C, G_WORLD), (a, ORDER, Literal(2), G_WORLD),
+                                   (b, RDF.type, C, G_WORLD), (b, ORDER, Literal("first"), G_WORLD)]))
+        with pytest.raises(Unanswerable, match=r"ex.example/b> has the order value .first., which is not a number"):
+            index.first()
+        assert not index.usable
+    finally:
+        store.close()
+
+
+def test_a_store_other_clients_write_to_is_left_to_the_query(sparql_store):
+    store = sparql_store()
+    index = FirstMember(store, C, ORDER)
+    assert not index.usable and "not the only writer" in index.why_not
+    with pytest.raises(Unanswerable, match="not the only writer"):
+        index.first()
+
+
+def _scan(n):
+    return {"stamp": 1.0, "walls": [{"id": "w", "p0": [0, 0], "p1": [4.8, 0], "height": 2.5}],
+            "joints": [{"id": "j%d" % i, "wall": "w", "kind": "vertical", "start": [0.6 * i, 0, 0],
+                        "end": [0.6 * i, 0, 2.5], "width": 0.05} for i in range(n)],
+            "areas": []}
+
+
+def test_the_engine_issues_lines_in_scan_order_from_the_index_and_after_a_restart(tmp_path, clock):
+    path = str(tmp_path / "db")
+    store = JournaledStore(path)
+    engine = ProcessEngine(store, clock=clock)
+    assert engine._firsts and all(ix.usable for ix in engine._firsts.values())
+    engine.update_world(_scan(6))
+    engine.start_process(str(PLB.TapingProcess), {"validateLines": False})
+    lines = []
+    while True:
+        a = engine.next_action()
+        if a.action_type == "TAPE_LINE":
+            lines.append(engine.store.value(URIRef(a.task), PLB.line, (G_LOG,)))
+            if len(lines) == 3:
+                break
+        engine.set_task_status(a.task, "in_progress")
+        engine.set_task_status(a.task, "succeeded")
+    assert [str(x).rsplit("/", 1)[-1] for x in lines] == ["j0", "j1", "j2"]
+    # j2's task is issued, not finished: PEMKRE dies here and starts again on the same store
+    store.close()
+    store = JournaledStore(path)
+    try:
+        engine = ProcessEngine(store, clock=clock)
+        a = engine.next_action()
+        assert a.action_type == "TAPE_LINE" and engine.store.value(URIRef(a.task), PLB.line, (G_LOG,)) == lines[2]
+        engine.set_task_status(a.task, "in_progress")
+        engine.set_task_status(a.task, "succeeded")
+        a = engine.next_action()
+        assert str(engine.store.value(URIRef(a.task), PLB.line, (G_LOG,))).endswith("/j3")
+        # a line made pending again by hand comes first again (the index was fed by the write)
+        j0 = lines[0]
+        st = list(store.quads(j0, PPR.tapingStatus, None, (G_WORLD,)))
+        store.apply(engine.reasoner.infer(store, ChangeSet(remove=st, add=[(j0, PPR.tapingStatus, PPR.unprocessed,
+                                                                             G_WORLD)])))
+        index = engine._firsts[(PPR.TapingPending, PPR.scanOrder)]
+        assert index.first() == j0
+    finally:
+        store.close()
