@@ -5,7 +5,7 @@ pending line from it, also after a restart on the same store."""
 import random
 
 import pytest
-from rdflib import RDF, Literal, URIRef
+from rdflib import RDF, BNode, Literal, URIRef
 from rdflib.namespace import XSD
 
 from locem_bridge.pemkre import PLB, PPR, JournaledStore, OxigraphStore, ProcessEngine, RdflibStore
@@ -27,8 +27,9 @@ def _query_answer(store, q):
     return rows[0]["value"] if rows else None
 
 
-@pytest.mark.parametrize("kind", ["journal", "oxigraph", "rdflib"])
-def test_the_index_answers_as_its_query_after_any_writes(kind, tmp_path):
+@pytest.mark.parametrize("kind,fraction", [("journal", XSD.decimal), ("oxigraph", XSD.double),
+                                            ("rdflib", XSD.decimal), ("rdflib", XSD.double)])
+def test_the_index_answers_as_its_query_after_any_writes(kind, fraction, tmp_path):
     store = _open(kind, str(tmp_path / "s"))
     try:
         q = store.prepare(query_text(C, ORDER), "first pending", {})
@@ -48,35 +49,80 @@ def test_the_index_answers_as_its_query_after_any_writes(kind, tmp_path):
                 cs.remove += [q4 for q4 in store.quads(s, RDF.type, C, None)][:1]
             elif roll < 0.85:  # an order value changes (integers and decimals, ties on purpose)
                 cs.remove += list(store.quads(s, ORDER, None, None))
-                value = rng.choice([Literal(rng.randint(0, 9)), Literal("%d.5" % rng.randint(0, 9), datatype=XSD.decimal)])
+                value = rng.choice([Literal(rng.randint(0, 9)), Literal("%d.5" % rng.randint(0, 9), datatype=fraction)])
                 cs.add.append((s, ORDER, value, G_WORLD))
-            elif roll < 0.95:  # a second order value beside the first
+            elif roll < 0.93:  # a second order value beside the first
                 cs.add.append((s, ORDER, Literal(rng.randint(0, 12)), G_WORLD))
+            elif roll < 0.95 and kind == "rdflib":  # a blank node member (no parameter value: neither answers it)
+                b = BNode()
+                cs.add += [(b, RDF.type, C, G_WORLD), (b, ORDER, Literal(-1), G_WORLD)]
             else:              # a whole graph replaced: the index builds again
                 kept = [(a, b, c) for a, b, c, _ in store.quads(None, None, None, (G_ABOX_INFERRED,))
                         if rng.random() < 0.7]
                 store.replace_graph(G_ABOX_INFERRED, kept)
             if cs:
                 store.apply(cs)
-            assert index.first() == _query_answer(store, q), "step %d" % step
+            try:
+                got = index.first()
+            except Unanswerable as exc:
+                assert "mix decimals and doubles" in str(exc)  # only with doubles; see the test below
+                continue
+            assert got == _query_answer(store, q), "step %d" % step
             checked += 1
-        assert checked == 600
+        assert checked >= 300, checked
         # what it holds stays bounded by what is stored (each stale entry leaves once)
         assert len(index) <= sum(1 for _ in store.quads(None, ORDER, None, None))
     finally:
         store.close()
 
 
-def test_an_order_value_that_is_not_a_number_makes_the_index_step_aside(tmp_path):
+def test_values_it_cannot_compare_make_the_index_step_aside_until_they_are_gone(tmp_path):
+    store = JournaledStore(str(tmp_path / "s"))
+    try:
+        q = store.prepare(query_text(C, ORDER), "first pending", {})
+        index = FirstMember(store, C, ORDER)
+        a, b, c, d, e, f = (URIRef(EX + x) for x in "abcdef")
+        # a non-member's odd value changes nothing
+        store.apply(ChangeSet(add=[(a, RDF.type, C, G_WORLD), (a, ORDER, Literal(2), G_WORLD),
+                                   (c, ORDER, Literal("whatever"), G_WORLD)]))
+        assert index.first() == a
+        store.apply(ChangeSet(add=[(b, RDF.type, C, G_WORLD), (b, ORDER, Literal("first"), G_WORLD)]))
+        with pytest.raises(Unanswerable, match=r"ex.example/b> has the order value .first., which is not a number"):
+            index.first()
+        store.apply(ChangeSet(remove=[(b, ORDER, Literal("first"), G_WORLD)], add=[(b, ORDER, Literal(1), G_WORLD)]))
+        assert index.first() == b == _query_answer(store, q)
+        # NaN is no number either
+        store.apply(ChangeSet(add=[(d, RDF.type, C, G_WORLD), (d, ORDER, Literal("NaN", datatype=XSD.double), G_WORLD)]))
+        with pytest.raises(Unanswerable, match="not a number"):
+            index.first()
+        store.apply(ChangeSet(remove=[(d, RDF.type, C, G_WORLD)]))
+        assert index.first() == b
+        # decimals and doubles mixed: SPARQL compares them as doubles, so the query answers
+        store.apply(ChangeSet(add=[(f, RDF.type, C, G_WORLD), (f, ORDER, Literal("0.1", datatype=XSD.double), G_WORLD),
+                                   (e, RDF.type, C, G_WORLD), (e, ORDER, Literal("0.1", datatype=XSD.decimal), G_WORLD)]))
+        with pytest.raises(Unanswerable, match="mix decimals and doubles"):
+            index.first()
+        store.apply(ChangeSet(remove=[(e, RDF.type, C, G_WORLD)]))
+        assert index.first() == f == _query_answer(store, q)
+    finally:
+        store.close()
+
+
+def test_a_watcher_that_fails_does_not_fail_the_write_and_the_index_builds_again(tmp_path, monkeypatch):
     store = JournaledStore(str(tmp_path / "s"))
     try:
         index = FirstMember(store, C, ORDER)
         a, b = URIRef(EX + "a"), URIRef(EX + "b")
-        store.apply(ChangeSet(add=[(a, RDF.type, C, G_WORLD), (a, ORDER, Literal(2), G_WORLD),
-                                   (b, RDF.type, C, G_WORLD), (b, ORDER, Literal("first"), G_WORLD)]))
-        with pytest.raises(Unanswerable, match=r"ex.example/b> has the order value .first., which is not a number"):
-            index.first()
-        assert not index.usable
+        store.apply(ChangeSet(add=[(a, RDF.type, C, G_WORLD), (a, ORDER, Literal(5), G_WORLD)]))
+        assert index.first() == a
+
+        def broken(*args, **kwargs):
+            raise OSError("disk gone")
+        monkeypatch.setattr(index, "_push", broken)
+        store.apply(ChangeSet(add=[(b, RDF.type, C, G_WORLD), (b, ORDER, Literal(1), G_WORLD)]))  # no exception
+        assert any(True for _ in store.quads(b, ORDER, Literal(1), None))
+        monkeypatch.undo()
+        assert index.first() == b
     finally:
         store.close()
 

@@ -6,20 +6,27 @@ and sorts every member: at 100,000 features it cost hundreds of milliseconds per
 with ``proc:selectsMemberOf`` and ``proc:orderedBy`` (ontologies/process.ttl) is answered instead by
 :class:`FirstMember`, a heap of (order, member) entries that is
 
-* **built** once from the store (one query over the class) when the engine starts or after a graph was replaced;
+* **built** once from the store (the class's members and their order values) when the engine starts, after a
+  graph was replaced, and whenever it could not follow a write;
 * **fed** by every change the store applies (:meth:`~locem_bridge.pemkre.store.TripleStore.watch`): an added
-  ``rdf:type`` of the class or an added order value pushes the subject's entries; nothing is removed on a write;
+  ``rdf:type`` of the class pushes the subject's order values, an added order value of a member pushes that value;
+  nothing is removed on a write;
 * **checked when read**: the top entry counts only if its subject still is a member and still has that order
-  value (two index lookups); stale entries are popped. Each subject leaves the heap once per time it stops being a
-  member, so a decision costs the same at any world size.
+  value (two index lookups); stale entries are popped. An entry is pushed once while it is queued, so the heap
+  holds at most one entry per (member since the last build, order value), and choosing costs the same at any
+  world size.
 
 The answer is the one of the equivalent query (:func:`query_text`): the lowest order, numerically, ties broken by
-the member's IRI. Only order values that are numbers can be kept; a store with another kind of value there, or a
-store that is not the only writer of its data (a SPARQL server other clients write to), is answered by the query
-(:attr:`FirstMember.usable` is False then, with the reason in :attr:`FirstMember.why_not`).
+the member's IRI (blank nodes are no parameter values: neither answers them). Order values must be numbers of one
+kind of arithmetic: integers with decimals, or integers with floats/doubles (SPARQL compares a decimal with a
+double as doubles, Python exactly). A value that is not a number (or NaN), or decimals mixed with doubles, or a
+store that is not the only writer of its data (a SPARQL server other clients write to), and the index steps aside:
+:attr:`FirstMember.why_not` says why, :meth:`FirstMember.first` raises :class:`Unanswerable` and the caller runs
+the query. Once the offending values are gone the index builds again and answers.
 """
 import heapq
 import itertools
+import math
 import threading
 from decimal import Decimal
 from typing import List, Optional, Set, Tuple, Union
@@ -40,10 +47,10 @@ _Entry = Tuple[Number, str, int, URIRef, Literal]
 
 
 def query_text(cls: URIRef, order: URIRef) -> str:
-    """The SPARQL SELECT with the same answer as :meth:`FirstMember.first` (the order values are joined from a
+    """The SPARQL SELECT with the answer of :meth:`FirstMember.first` wherever that can answer (the order values are joined from a
     sub-query, so a server hashes the two sets instead of one lookup per member)."""
-    return ("SELECT ?value WHERE { ?value a %s . { SELECT ?value ?order WHERE { ?value %s ?order } } } "
-            "ORDER BY ?order ?value LIMIT 1" % (cls.n3(), order.n3()))
+    return ("SELECT ?value WHERE { ?value a %s . { SELECT ?value ?order WHERE { ?value %s ?order } } "
+            "FILTER(isIRI(?value)) } ORDER BY ?order ?value LIMIT 1" % (cls.n3(), order.n3()))
 
 
 def _number(value: Node) -> Optional[Number]:
@@ -52,6 +59,8 @@ def _number(value: Node) -> Optional[Number]:
         return None
     v = value.toPython()
     if isinstance(v, bool) or not isinstance(v, (int, float, Decimal)):
+        return None
+    if (isinstance(v, float) and math.isnan(v)) or (isinstance(v, Decimal) and not v.is_finite()):
         return None
     return v
 
@@ -68,10 +77,21 @@ class FirstMember:
         self._seq = itertools.count()
         self._lock = threading.Lock()
         self._stale = True
-        #: why the index cannot answer (then the caller runs the query); "" while it can
-        self.why_not = ""
-        if not store.watch(self._on_write):
-            self.why_not = "the store is not the only writer of its data"
+        #: (subject, value) pairs of members whose order value the index cannot compare (see the module docstring)
+        self._odd: Set[Tuple[URIRef, Literal]] = set()
+        self._kinds: Set[type] = set()    # Decimal and/or float among the values pushed since the last build
+        self._sole = store.watch(self._on_write)
+
+    @property
+    def why_not(self) -> str:
+        """Why the index cannot answer now ("" while it can)."""
+        if not self._sole:
+            return "the store is not the only writer of its data"
+        for subject, value in sorted(self._odd):
+            return "%s has the order value %s, which is not a number" % (subject.n3(), value.n3())
+        if Decimal in self._kinds and float in self._kinds:
+            return "the order values mix decimals and doubles"
+        return ""
 
     @property
     def usable(self) -> bool:
@@ -83,27 +103,35 @@ class FirstMember:
             return
         number = _number(value)
         if number is None:
-            self.why_not = "%s has the order value %s, which is not a number" % (subject.n3(), value.n3())
+            self._odd.add((subject, value))  # type: ignore[arg-type]
             return
+        if not isinstance(number, int):
+            self._kinds.add(type(number))
         self._queued.add((subject, value))  # type: ignore[arg-type]
         heapq.heappush(self._heap, (number, str(subject), next(self._seq), subject, value))  # type: ignore[arg-type]
 
+    def _is_member(self, subject: Node) -> bool:
+        return any(True for _ in self.store.quads(subject, RDF.type, self.cls, None))
+
     def _on_write(self, changes: Optional[ChangeSet]) -> None:
         with self._lock:
-            if changes is None:  # a whole graph was replaced: build again when next read
+            if changes is None or self._stale:  # a whole graph was replaced: build again when next read
                 self._stale = True
                 return
-            if self._stale or not self.usable:
-                return
-            for s, p, o, _ in changes.add:
-                if p == self.order:
-                    self._push(s, o)
-                elif p == RDF.type and o == self.cls:
-                    for _, _, value, _ in self.store.quads(s, self.order, None, None):
-                        self._push(s, value)
+            try:
+                for s, p, o, _ in changes.add:
+                    if p == self.order:
+                        if isinstance(s, URIRef) and self._is_member(s):
+                            self._push(s, o)
+                    elif p == RDF.type and o == self.cls:
+                        for _, _, value, _ in self.store.quads(s, self.order, None, None):
+                            self._push(s, value)
+            except Exception:
+                self._stale = True  # could not follow this write: build again when next read
+                raise
 
     def _build(self) -> None:
-        self._heap, self._queued, self.why_not = [], set(), ""
+        self._heap, self._queued, self._odd, self._kinds = [], set(), set(), set()
         members = {s for s, _, _, _ in self.store.quads(None, RDF.type, self.cls, None)}
         for s in members:
             for _, _, value, _ in self.store.quads(s, self.order, None, None):
@@ -119,7 +147,13 @@ class FirstMember:
         """The member with the lowest order (ties: the lowest IRI), or None when the class has no ordered member.
         Raises :class:`Unanswerable` when the index cannot answer (then run :func:`query_text`)."""
         with self._lock:
-            if self._stale and self.store.sole_writer:
+            if self._sole and not self._stale and (
+                    self._kinds == {Decimal, float}
+                    or (self._odd and not any(self._holds(s, v) for s, v in self._odd))):
+                # values it could not compare: build again to see whether they are gone (a mix of decimals and
+                # doubles costs one build per read while it lasts; the answer is then the query's)
+                self._stale = True
+            if self._stale and self._sole:
                 self._build()
             if not self.usable:
                 raise Unanswerable("the first %s by %s: %s" % (self.cls.n3(), self.order.n3(), self.why_not))
@@ -132,5 +166,5 @@ class FirstMember:
             return None
 
     def __len__(self) -> int:
-        """Entries held (members, plus stale entries not yet popped)."""
+        """Entries held: at most one per (member since the last build, order value)."""
         return len(self._heap)

@@ -26,6 +26,8 @@ Backends: :class:`~locem_bridge.pemkre.journal_store.JournaledStore` and
 :class:`~locem_bridge.pemkre.rdflib_store.RdflibStore` (in memory) and
 :class:`~locem_bridge.pemkre.sparql_store.SparqlStore` (a remote SPARQL 1.1 server, any number of clients).
 """
+import logging
+import weakref
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
@@ -34,6 +36,8 @@ from rdflib import BNode, Literal, URIRef
 from rdflib.term import Node
 
 from .vocab import GRAPHS
+
+_log = logging.getLogger(__name__)
 
 Term = Union[URIRef, BNode, Literal]
 Triple = Tuple[Node, Node, Node]
@@ -153,18 +157,30 @@ class TripleStore(ABC):
 
     def watch(self, callback: "Callable[[Optional[ChangeSet]], None]") -> bool:
         """Call ``callback(changes)`` after each applied change and ``callback(None)`` after each replaced graph,
-        in the writing thread, once the write is done. Returns False (and never calls) on a store that is not
-        the :attr:`sole_writer` of its dataset: what other clients write it cannot see."""
+        in the writing thread, once the write is done. A bound method is held weakly (an index that is gone stops
+        being called). A callback that raises is logged and never fails the write, which is done: the callback
+        must recover by itself (the first-member index builds again). Returns False (and never calls) on a store
+        that is not the :attr:`sole_writer` of its dataset: what other clients write it cannot see."""
         if not self.sole_writer:
             return False
-        watchers = self.__dict__.setdefault("_watchers", [])
-        watchers.append(callback)
+        ref = weakref.WeakMethod(callback) if hasattr(callback, "__self__") else (lambda: callback)  # type: ignore
+        self.__dict__.setdefault("_watchers", []).append(ref)
         return True
 
     def _written(self, changes: Optional["ChangeSet"]) -> None:
         """Tell the watchers about a write that is done (concrete stores call this after each write)."""
-        for callback in self.__dict__.get("_watchers", ()):
-            callback(changes)
+        refs = self.__dict__.get("_watchers")
+        if not refs:
+            return
+        for ref in list(refs):
+            callback = ref()
+            if callback is None:
+                refs.remove(ref)
+                continue
+            try:
+                callback(changes)
+            except Exception:  # the write is done; a watcher's failure is its own (logged, not the writer's)
+                _log.exception("a store watcher failed after a write")
 
     @abstractmethod
     def prepare(self, text: str, name: str, prefixes: Mapping[str, str]) -> PreparedQuery:

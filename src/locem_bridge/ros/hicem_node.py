@@ -84,12 +84,16 @@ def _pemkre_client(kind: str) -> Any:
             except Exception:
                 store.close()
                 raise
-        engine = ProcessEngine(store, files)
-        # matched to the skills of ~robot (its resource model from the same tree folders HICEM runs), as the node;
-        # only when ~robot is set: a test node with its own trees and no robot runs unmatched, as before
-        from locem_bridge.pemkre.robot_model import match_robot
-        match_robot(engine, param("robot", ""), [param("trees_dir", os.path.join(package_share(), "trees"))] +
-                    split_folders(param("extra_trees_dirs", "")), files)
+        try:
+            engine = ProcessEngine(store, files)
+            # matched to the skills of ~robot (its resource model from the same tree folders HICEM runs), as the
+            # node; only when ~robot is set: a test node with its own trees and no robot runs unmatched, as before
+            from locem_bridge.pemkre.robot_model import match_robot
+            match_robot(engine, param("robot", ""), [param("trees_dir", os.path.join(package_share(), "trees"))] +
+                        split_folders(param("extra_trees_dirs", "")), files)
+        except Exception:
+            store.close()
+            raise
         return EngineClient(engine)
     raise HicemError("~pemkre must be 'ros' or 'embedded', got %r" % kind)
 
