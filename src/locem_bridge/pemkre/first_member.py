@@ -17,10 +17,10 @@ with ``proc:selectsMemberOf`` and ``proc:orderedBy`` (ontologies/process.ttl) is
   world size.
 
 The answer is the one of the equivalent query (:func:`query_text`): the lowest order, numerically, ties broken by
-the member's IRI (blank nodes are no parameter values: neither answers them). Order values must be numbers of one
+the member's IRI. Order values must be numbers of one
 kind of arithmetic: integers with decimals, or integers with floats/doubles (SPARQL compares a decimal with a
-double as doubles, Python exactly). A value that is not a number (or NaN), or decimals mixed with doubles, or a
-store that is not the only writer of its data (a SPARQL server other clients write to), and the index steps aside:
+double as doubles, Python exactly). A value that is not a number (or NaN), decimals mixed with doubles, a blank
+node member (no parameter value: the engine refuses it), or a store that is not the only writer of its data (a SPARQL server other clients write to), and the index steps aside:
 :attr:`FirstMember.why_not` says why, :meth:`FirstMember.first` raises :class:`Unanswerable` and the caller runs
 the query. Once the offending values are gone the index builds again and answers.
 """
@@ -29,7 +29,7 @@ import itertools
 import math
 import threading
 from decimal import Decimal
-from typing import List, Optional, Set, Tuple, Union
+from typing import Dict, List, Optional, Set, Tuple, Union
 
 from rdflib import RDF, Literal, URIRef
 from rdflib.term import Node
@@ -49,8 +49,8 @@ _Entry = Tuple[Number, str, int, URIRef, Literal]
 def query_text(cls: URIRef, order: URIRef) -> str:
     """The SPARQL SELECT with the answer of :meth:`FirstMember.first` wherever that can answer (the order values are joined from a
     sub-query, so a server hashes the two sets instead of one lookup per member)."""
-    return ("SELECT ?value WHERE { ?value a %s . { SELECT ?value ?order WHERE { ?value %s ?order } } "
-            "FILTER(isIRI(?value)) } ORDER BY ?order ?value LIMIT 1" % (cls.n3(), order.n3()))
+    return ("SELECT ?value WHERE { ?value a %s . { SELECT ?value ?order WHERE { ?value %s ?order } } } "
+            "ORDER BY ?order ?value LIMIT 1" % (cls.n3(), order.n3()))
 
 
 def _number(value: Node) -> Optional[Number]:
@@ -77,8 +77,8 @@ class FirstMember:
         self._seq = itertools.count()
         self._lock = threading.Lock()
         self._stale = True
-        #: (subject, value) pairs of members whose order value the index cannot compare (see the module docstring)
-        self._odd: Set[Tuple[URIRef, Literal]] = set()
+        #: (member, order value) pairs the index cannot hold, with the reason (see the module docstring)
+        self._odd: Dict[Tuple[Node, Node], str] = {}
         self._kinds: Set[type] = set()    # Decimal and/or float among the values pushed since the last build
         self._sole = store.watch(self._on_write)
 
@@ -87,8 +87,8 @@ class FirstMember:
         """Why the index cannot answer now ("" while it can)."""
         if not self._sole:
             return "the store is not the only writer of its data"
-        for subject, value in sorted(self._odd):
-            return "%s has the order value %s, which is not a number" % (subject.n3(), value.n3())
+        for key in sorted(self._odd):
+            return self._odd[key]
         if Decimal in self._kinds and float in self._kinds:
             return "the order values mix decimals and doubles"
         return ""
@@ -99,11 +99,15 @@ class FirstMember:
 
     # ---------------------------------------------------------------- feeding
     def _push(self, subject: Node, value: Node) -> None:
-        if not isinstance(subject, URIRef) or (subject, value) in self._queued:
+        if (subject, value) in self._queued:
+            return
+        if not isinstance(subject, URIRef):
+            self._odd[(subject, value)] = "a blank node is a member (%s %s)" % (subject.n3(), value.n3())
             return
         number = _number(value)
         if number is None:
-            self._odd.add((subject, value))  # type: ignore[arg-type]
+            self._odd[(subject, value)] = "%s has the order value %s, which is not a number" % (subject.n3(),
+                                                                                              value.n3())
             return
         if not isinstance(number, int):
             self._kinds.add(type(number))
@@ -121,7 +125,7 @@ class FirstMember:
             try:
                 for s, p, o, _ in changes.add:
                     if p == self.order:
-                        if isinstance(s, URIRef) and self._is_member(s):
+                        if self._is_member(s):
                             self._push(s, o)
                     elif p == RDF.type and o == self.cls:
                         for _, _, value, _ in self.store.quads(s, self.order, None, None):
@@ -131,7 +135,7 @@ class FirstMember:
                 raise
 
     def _build(self) -> None:
-        self._heap, self._queued, self._odd, self._kinds = [], set(), set(), set()
+        self._heap, self._queued, self._odd, self._kinds = [], set(), {}, set()
         members = {s for s, _, _, _ in self.store.quads(None, RDF.type, self.cls, None)}
         for s in members:
             for _, _, value, _ in self.store.quads(s, self.order, None, None):
@@ -139,7 +143,7 @@ class FirstMember:
         self._stale = False
 
     # ---------------------------------------------------------------- reading
-    def _holds(self, subject: URIRef, value: Literal) -> bool:
+    def _holds(self, subject: Node, value: Node) -> bool:
         return (any(True for _ in self.store.quads(subject, RDF.type, self.cls, None))
                 and any(True for _ in self.store.quads(subject, self.order, value, None)))
 
