@@ -36,6 +36,10 @@ robot gets from AMCL or similar, here the true pose with ``~localisation_noise``
 Gaussian noise; LOCEM takes it as its odometry pose while the base stands still (``localisation_topic``).
 Topic ``~ground_truth/base_pose`` (``geometry_msgs/Pose2D``, map frame, 20 Hz): the simulator's true base pose,
 for tests and for the HMI; nothing in the control path reads it.
+
+``~state_dir`` (default empty: nothing kept): a folder keeping the world's state across a crash of this node
+(outcome maps, base pose, arm joints, mounted tool; :mod:`locem_bridge.sim.world_state`); the node starts from what
+it holds, so the walls keep what was done to them as real walls do through a power loss.
 """
 
 import json
@@ -154,6 +158,7 @@ def main() -> None:
                                              "time_scale", "gui")}
     worksite = Worksite(load_site(param("site", default_site_path(package_share()))),
                         load_robot(param("robot", default_robot_path(package_share())), param("robot_overrides", {})),
+                        state_dir=param("state_dir", "") or None,
                         **{key: value for key, value in overrides.items() if value is not None})
     try:
         endpoints = worksite.start()

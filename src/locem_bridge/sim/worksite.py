@@ -21,6 +21,7 @@ import copy
 import json
 import logging
 import os
+import threading
 from typing import Any, Dict, List, Optional
 
 from .arm_source import KinematicArm, UrArmSource
@@ -32,6 +33,7 @@ from .errors import DeviceStandInError, SimConfigError, SimStateError
 from .modbus.modbus_server import CompressorServer
 from .modbus.tool_changer import ToolChangerModel, WorldRack, tool_changer_server
 from .world import World, resolve_arm_urdf
+from .world_state import WorldState, snapshot_loop
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +46,8 @@ class Worksite:
                  can_channel: Optional[str] = None, can_port: Optional[int] = None,
                  time_scale: Optional[float] = None, gui: Optional[bool] = None, with_ur: bool = True,
                  ur_ports: Optional[Dict[str, int]] = None, protective_stop_on_collision: bool = True,
-                 heartbeat_process: Optional[bool] = None, arm_pose: Optional[str] = None) -> None:
+                 heartbeat_process: Optional[bool] = None, arm_pose: Optional[str] = None,
+                 state_dir: Optional[str] = None, snapshot_period_s: float = 10.0) -> None:
         self.site_cfg = copy.deepcopy(site_cfg if site_cfg is not None else load_site())
         self.robot_cfg = copy.deepcopy(robot_cfg if robot_cfg is not None else load_robot())
         robot = self.robot_cfg["robot"]
@@ -76,6 +79,12 @@ class Worksite:
             raise SimConfigError("arm_pose %r is not a named pose of robot.arm.named_poses, allowed: %s"
                                  % (arm_pose, ", ".join(sorted(poses))))
         self.arm_pose = arm_pose
+        #: folder keeping the world's state across a crash (:mod:`.world_state`); None: nothing kept
+        self.state_dir = state_dir
+        self.snapshot_period_s = float(snapshot_period_s)
+        self.state: Optional[WorldState] = None
+        self.restored: Optional[Dict[str, Any]] = None   # the saved robot state found at start (None: fresh)
+        self._state_stop = threading.Event()
         self.clock: Optional[SimClock] = None
         self.compressor: Optional[CompressorModel] = None
         self.modbus: Optional[CompressorServer] = None
@@ -112,6 +121,11 @@ class Worksite:
             self.drives.start()
             arm_cfg = robot["arm"]
             q0 = arm_cfg["named_poses"].get(self.arm_pose or "home", [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
+            if self.state_dir is not None:
+                self.state = WorldState(self.state_dir)
+                saved_q = self.state.saved_robot().get("q")
+                if saved_q:
+                    q0 = [float(x) for x in saved_q]   # the arm stood there when the power went
             if self.with_ur:
                 self.ur = self._make_ur(arm_cfg, q0, sim["time_scale"])
                 self._start_ur()
@@ -129,6 +143,8 @@ class Worksite:
                 self.ur.set_contact_provider(self.world.wall_contact)
             if self.ur is not None and self.protective_stop_on_collision:
                 self.world.on_collision.append(self._protective_stop)
+            if self.state is not None:
+                self._restore_state(self.state, self.world)
             self.world.start()
         except Exception:
             self.stop()
@@ -136,6 +152,32 @@ class Worksite:
         eps = self.endpoints()
         log.info("worksite started: %s", json.dumps(eps))
         return eps
+
+    def _restore_state(self, state: WorldState, world: World) -> None:
+        """The saved maps, base pose and tool back into ``world``, then journal it and snapshot it periodically."""
+        with world._lock:
+            robot = state.restore(world.outcome)
+            if robot:
+                if robot.get("pose"):
+                    world.set_base_pose(*robot["pose"])
+                if robot.get("tool"):
+                    world.mount_tool(robot["tool"], by="the saved world state")
+            state.attach(world.outcome)
+        self.restored = robot
+        if robot is not None:
+            log.warning("world state restored from %s (%d journal records replayed): base %s, tool %s",
+                        state.folder, state.replayed, robot.get("pose"), robot.get("tool"))
+
+        def take(whole: bool) -> None:
+            with world._lock:
+                robot = {"pose": world.base_pose(), "q": list(world._q), "tool": world.mounted_tool}
+                captured = state.capture(world.outcome, robot) if whole else None
+                if not whole:
+                    state.note_robot(robot)
+            if captured is not None:
+                state.write(captured)
+        self._state_stop.clear()
+        snapshot_loop(state, take, self.snapshot_period_s, self._state_stop)
 
     def _make_ur(self, arm_cfg: Dict[str, Any], q0: List[float], time_scale: float) -> Any:
         try:
@@ -162,7 +204,12 @@ class Worksite:
             self.ur.inject_protective_stop("collision: %s with %s" % (event["part"], event["wall"]))
 
     def stop(self) -> None:
-        """Stop every part (reverse order of start; idempotent)."""
+        """Stop every part (reverse order of start; idempotent). The world state folder is left as a crash leaves
+        it (the journal holds everything since the last snapshot)."""
+        self._state_stop.set()
+        if self.state is not None:
+            self.state.close()
+            self.state = None
         if self.world is not None:
             self.world.close()
             self.world = None

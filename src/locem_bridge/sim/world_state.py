@@ -1,0 +1,272 @@
+"""The simulated worksite's state on disk, so a world killed with its process (a power loss) comes back as it was.
+
+On the real site the wall keeps its tape, compound and sanding through a power loss, the robot stays where it
+stood and the tool stays on the flange. The simulated world keeps them in a folder (``state_dir``):
+
+* ``outcome.npz`` -- a **snapshot**: every outcome map (:class:`~locem_bridge.sim.outcome.OutcomeRecorder`: tape
+  per joint, thickness, sanded and pass maps, what went into openings, the operator's manual taping, the spray
+  passes' ends), the robot's base pose, the arm's joint positions and the mounted tool, with the sequence number of
+  the last journal record it includes and the site it belongs to (wall and joint ids with their map shapes);
+* ``outcome.journal.N`` -- the **journal**, N the sequence number of its first record: one JSON line per call that
+  changed the maps since (each TCP segment the world recorded, with the sim time it was recorded at; a joint taped
+  by hand), appended and handed to the kernel at once, so a ``kill -9`` loses nothing the world recorded.
+
+Restoring loads the snapshot and replays the journal records after it: the maps come back exactly as they were
+(the recorder is deterministic; float values survive JSON unchanged). A snapshot is written every
+``snapshot_period_s`` (wall clock; copied under the world's lock, which also starts the next journal file, and
+written outside it); then the journal files it holds are deleted (a crash between the two leaves records the
+snapshot already holds, skipped by their sequence numbers; a torn last line is dropped).
+The robot's base pose, arm joints and tool are journaled too, as a record whenever they changed (looked at every
+``robot_period_s``, 0.2 s of wall clock): a tool mounted just before the power went may be missed by that much, a
+pose is up to that old, as good as a relocalisation after a restart (LOCEM's localisation is the world's own pose;
+the next action moves the arm and base anyway).
+A folder written for another site is refused naming the folder, the key that differs and both values.
+"""
+from __future__ import annotations
+
+import copy
+import io
+import json
+import os
+import threading
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from .errors import SimConfigError
+from .outcome import OutcomeRecorder
+
+SNAPSHOT = "outcome.npz"
+JOURNAL = "outcome.journal"     # + ".N": N (12 digits) the sequence number of the file's first record
+FORMAT = 1
+_MAP_ARRAYS = ("thickness", "sanded", "passes", "_last_pass", "into_openings")
+_JOINT_ARRAYS = ("tape", "tape_passes", "_tape_last")
+
+
+def _fingerprint(rec: OutcomeRecorder) -> Dict[str, Any]:
+    """What a saved state must match: the site's walls and joints with their map shapes."""
+    return {"walls": {w: [m.nt, m.ns] for w, m in sorted(rec.maps.items())},
+            "joints": {j: len(a) for j, a in sorted(rec.tape.items())}, "grid": rec.grid}
+
+
+def recorder_arrays(rec: OutcomeRecorder) -> Tuple[Dict[str, np.ndarray], Dict[str, Any]]:
+    """The recorder's state: its arrays (by name) and the rest as JSON-able values."""
+    arrays: Dict[str, np.ndarray] = {}
+    for wid, m in rec.maps.items():
+        for name in _MAP_ARRAYS:
+            arrays["wall/%s/%s" % (wid, name)] = getattr(m, name)
+    for name in _JOINT_ARRAYS:
+        for jid, a in getattr(rec, name).items():
+            arrays["joint/%s/%s" % (jid, name)] = a
+    rest = {"manual": sorted(rec.manual), "tape_off_joint": rec.tape_off_joint, "spray_time": rec.spray_time,
+            "pass": rec._pass, "active": rec._active,
+            "axis_hits": {w: [list(map(float, h)) for h in hits] for w, hits in rec._axis_hits.items()},
+            "spray_pass_ends": [[w, list(map(float, e)), list(map(float, d)), t]
+                                for w, e, d, t in rec.spray_pass_ends]}
+    return arrays, rest
+
+
+def restore_recorder(rec: OutcomeRecorder, arrays: Dict[str, np.ndarray], rest: Dict[str, Any]) -> None:
+    """Put a state of :func:`recorder_arrays` back into ``rec`` (of the same site)."""
+    for wid, m in rec.maps.items():
+        for name in _MAP_ARRAYS:
+            getattr(m, name)[...] = arrays["wall/%s/%s" % (wid, name)]
+    for name in _JOINT_ARRAYS:
+        for jid, a in getattr(rec, name).items():
+            a[...] = arrays["joint/%s/%s" % (jid, name)]
+    rec.manual = set(rest["manual"])
+    rec.tape_off_joint = float(rest["tape_off_joint"])
+    rec.spray_time = float(rest["spray_time"])
+    rec._pass = int(rest["pass"])
+    rec._active = {str(k): bool(v) for k, v in rest["active"].items()}
+    rec._axis_hits = {w: [tuple(h) for h in hits] for w, hits in rest["axis_hits"].items()}
+    rec.spray_pass_ends = [(w, tuple(e), tuple(d), t) for w, e, d, t in rest["spray_pass_ends"]]
+
+
+class WorldState:
+    """Journal and snapshots of one world's state in ``folder`` (see the module docstring).
+
+    ``restore(recorder)`` first (it returns the saved robot state, or None for a fresh folder), then
+    ``attach(recorder)`` to journal what it records, ``snapshot(recorder, robot)`` now and then, ``close()``."""
+
+    def __init__(self, folder: str) -> None:
+        self.folder = folder
+        try:
+            os.makedirs(folder, exist_ok=True)
+        except OSError as exc:
+            raise SimConfigError("cannot make the world state folder: %s" % exc, file=folder) from None
+        self.seq = 0                     # the last journal record written (or restored)
+        self._fd: Optional[int] = None
+        self._lock = threading.Lock()
+        self.replayed = 0
+        self._last_robot: Optional[Dict[str, Any]] = None
+
+    # ---------------------------------------------------------------- restoring
+    def saved_robot(self) -> Dict[str, Any]:
+        """The robot state of the snapshot (``pose``, ``q``, ``tool``), {} without one (read before the world is
+        built: the arm's controller starts where the arm stood)."""
+        snap = os.path.join(self.folder, SNAPSHOT)
+        if not os.path.exists(snap):
+            return {}
+        with np.load(snap, allow_pickle=False) as z:
+            return dict(json.loads(str(z["meta"])).get("robot") or {})
+
+    def restore(self, rec: OutcomeRecorder) -> Optional[Dict[str, Any]]:
+        """Load the snapshot and replay the journal into ``rec``; returns the saved robot state (``pose``, ``q``,
+        ``tool``), or None when the folder holds no state. Raises SimConfigError for another site's state."""
+        snap = os.path.join(self.folder, SNAPSHOT)
+        robot: Optional[Dict[str, Any]] = None
+        upto = 0
+        if os.path.exists(snap):
+            with np.load(snap, allow_pickle=False) as z:
+                meta = json.loads(str(z["meta"]))
+                self._check_site(meta.get("site", {}), _fingerprint(rec))
+                restore_recorder(rec, {k: z[k] for k in z.files if k != "meta"}, meta["recorder"])
+            upto = int(meta["seq"])
+            robot = meta.get("robot")
+        self.seq = upto
+        for record in self._journal_records():
+            if record["seq"] <= upto:
+                continue
+            if record["kind"] == "robot":
+                robot = dict(record["robot"])
+            else:
+                self._replay(rec, record)
+                if robot is None:
+                    robot = {}
+            self.seq = record["seq"]
+            self.replayed += 1
+        self._last_robot = robot
+        return robot
+
+    def _check_site(self, saved: Dict[str, Any], mine: Dict[str, Any]) -> None:
+        for key in ("grid", "walls", "joints"):
+            if saved.get(key) != mine[key]:
+                raise SimConfigError("the world state there was saved for another site: %s is %s there, %s here"
+                                     % (key, json.dumps(saved.get(key)), json.dumps(mine[key])), file=self.folder,
+                                     allowed="a world state folder of this site, or an empty one")
+
+    def journal_files(self) -> List[str]:
+        """The journal files, oldest first."""
+        names = [n for n in os.listdir(self.folder) if n.startswith(JOURNAL + ".") and n[len(JOURNAL) + 1:].isdigit()]
+        return [os.path.join(self.folder, n) for n in sorted(names)]
+
+    def _journal_records(self) -> List[Dict[str, Any]]:
+        out = []
+        for path in self.journal_files():
+            with open(path, "rb") as fh:
+                for line in fh:
+                    if not line.endswith(b"\n"):
+                        break            # a torn last line: the write the crash interrupted
+                    out.append(json.loads(line))
+        return out
+
+    @staticmethod
+    def _replay(rec: OutcomeRecorder, r: Dict[str, Any]) -> None:
+        if r["kind"] == "manual":
+            rec.mark_manual_taping(r["joint"])
+            return
+        clock = rec.clock
+        stamp = r["clock"]
+        rec.clock = None if stamp is None else (lambda: stamp)   # the spray passes' end stamps as recorded
+        try:
+            OutcomeRecorder.record(rec, r["tool"], r["on"], np.asarray(r["p0"]), np.asarray(r["p1"]),
+                                   np.asarray(r["z"]), r["dt"])
+        finally:
+            rec.clock = clock
+
+    # ---------------------------------------------------------------- journaling
+    def attach(self, rec: OutcomeRecorder) -> None:
+        """Journal every later ``record`` / ``mark_manual_taping`` of ``rec`` before it changes the maps."""
+        with self._lock:
+            self._open_journal()
+        record, manual = rec.record, rec.mark_manual_taping
+
+        def journaled_record(tool: str, active: bool, p0: Any, p1: Any, z_axis: Any, dt: float) -> None:
+            self._append({"kind": "segment", "tool": tool, "on": bool(active), "p0": [float(x) for x in p0],
+                          "p1": [float(x) for x in p1], "z": [float(x) for x in z_axis], "dt": float(dt),
+                          "clock": None if rec.clock is None else float(rec.clock())})
+            record(tool, active, p0, p1, z_axis, dt)
+
+        def journaled_manual(joint_id: str) -> None:
+            manual(joint_id)             # an unknown joint raises before anything is journaled
+            self._append({"kind": "manual", "joint": joint_id})
+        rec.record = journaled_record            # type: ignore[method-assign]
+        rec.mark_manual_taping = journaled_manual  # type: ignore[method-assign]
+
+    def _open_journal(self) -> None:
+        """Go on in a new journal file named for the next record (under ``_lock``)."""
+        if self._fd is not None:
+            os.close(self._fd)
+        path = os.path.join(self.folder, "%s.%012d" % (JOURNAL, self.seq + 1))
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+
+    def _append(self, record: Dict[str, Any]) -> None:
+        with self._lock:
+            if self._fd is None:
+                return
+            self.seq += 1
+            record["seq"] = self.seq
+            os.write(self._fd, (json.dumps(record, separators=(",", ":")) + "\n").encode())
+
+    def note_robot(self, robot: Dict[str, Any]) -> None:
+        """Journal the robot's state (``pose``, ``q``, ``tool``) when it changed since it was last noted."""
+        if robot != self._last_robot:
+            self._last_robot = copy.deepcopy(robot)
+            self._append({"kind": "robot", "robot": robot})
+
+    def capture(self, rec: OutcomeRecorder, robot: Dict[str, Any]) -> Tuple[Dict[str, np.ndarray], Dict[str, Any]]:
+        """A copy of the state for :meth:`write` (call it under the lock the recorder's writer holds, the
+        world's, so it is one moment: a few milliseconds; the writing happens outside that lock)."""
+        arrays, rest = recorder_arrays(rec)
+        with self._lock:
+            meta = {"format": FORMAT, "seq": self.seq, "site": _fingerprint(rec), "recorder": copy.deepcopy(rest),
+                    "robot": copy.deepcopy(robot)}
+            self._last_robot = copy.deepcopy(robot)
+            if self._fd is not None:
+                self._open_journal()     # what comes after this moment goes to a file the snapshot does not hold
+        return {k: v.copy() for k, v in arrays.items()}, meta
+
+    def write(self, captured: Tuple[Dict[str, np.ndarray], Dict[str, Any]]) -> None:
+        """Write a :meth:`capture` as the snapshot (atomically), then delete the journal files it holds."""
+        arrays, meta = captured
+        buf = io.BytesIO()
+        np.savez(buf, meta=np.array(json.dumps(meta)), **arrays)
+        path = os.path.join(self.folder, SNAPSHOT)
+        tmp = path + ".tmp"
+        with open(tmp, "wb") as fh:
+            fh.write(buf.getvalue())
+        os.replace(tmp, path)
+        for old in self.journal_files():
+            if int(old.rsplit(".", 1)[1]) <= meta["seq"]:
+                os.remove(old)
+
+    def snapshot(self, rec: OutcomeRecorder, robot: Dict[str, Any]) -> None:
+        """:meth:`capture` and :meth:`write` in one go (for callers that hold the recorder still)."""
+        self.write(self.capture(rec, robot))
+
+    def close(self) -> None:
+        with self._lock:
+            if self._fd is not None:
+                os.close(self._fd)
+                self._fd = None
+
+
+def snapshot_loop(state: WorldState, take: Callable[[bool], None], period_s: float,
+                  stop: threading.Event, robot_period_s: float = 0.2) -> threading.Thread:
+    """A daemon thread calling ``take(False)`` (note the robot) every ``robot_period_s`` and ``take(True)`` (a
+    whole snapshot) every ``period_s`` seconds until ``stop`` is set."""
+    every = max(1, int(round(period_s / robot_period_s)))
+
+    def run() -> None:
+        n = 0
+        while not stop.wait(min(period_s, robot_period_s)):
+            n += 1
+            try:
+                take(n % every == 0)
+            except Exception:            # a full disk must not stop the world; the journal still has it all
+                import logging
+                logging.getLogger(__name__).exception("world state snapshot failed (the journal keeps growing)")
+    t = threading.Thread(target=run, name="world-state", daemon=True)
+    t.start()
+    return t

@@ -1,0 +1,170 @@
+"""The simulated world's state survives its process (sim/world_state.py): what the tools did to the walls comes back
+exactly from the snapshot and the journal (also after a crash between the two, and with a torn last line), the robot
+stands where it stood with its tool; a state of another site is refused."""
+import copy
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from locem_bridge.sim.arm_source import KinematicArm
+from locem_bridge.sim.clock import SimClock
+from locem_bridge.sim.errors import SimConfigError
+from locem_bridge.sim.modbus.compressor import CompressorModel
+from locem_bridge.sim.world import World
+from locem_bridge.sim.world_state import WorldState, recorder_arrays
+from locem_bridge.sim.worksite import Worksite
+
+import sys  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from test_world_outcome import ManualWall, _pass, _spray_ready, _vertical  # noqa: E402
+
+
+def _world(site_cfg, robot_cfg):
+    wall = ManualWall()
+    clock = SimClock(1.0, wall=wall)
+    arm = KinematicArm(robot_cfg["robot"]["arm"]["named_poses"]["wall_ready"])
+    comp = CompressorModel(copy.deepcopy(robot_cfg["robot"]["compressor"]), clock.now)
+    return World(copy.deepcopy(site_cfg), robot_cfg, clock, arm=arm, compressor=comp, gui=False), arm, comp, wall
+
+
+def _robot(world):
+    return {"pose": world.base_pose(), "q": list(world._q), "tool": world.mounted_tool}
+
+
+def _work(world, arm, comp, wall, state, crash_before_truncate=False):
+    """Spray a lane over wall_1, snapshot, tape half of joint 1, the operator tapes joint 2 by hand."""
+    _spray_ready(world, comp, wall)
+    _pass(world, arm, wall, [[1.4, 3.2, 1.2]], [0, 1, 0])
+    comp.set_valve(True)
+    _pass(world, arm, wall, [[x, 3.2, 1.2] for x in np.arange(1.4, 2.6, 0.01)], [0, 1, 0])
+    comp.set_valve(False)
+    _pass(world, arm, wall, [[2.6, 3.1, 1.2]], [0, 1, 0])
+    journal = state.journal_files()[-1]
+    before = open(journal, "rb").read()
+    state.snapshot(world.outcome, _robot(world))
+    assert not os.path.exists(journal)
+    if crash_before_truncate:       # the crash came after the snapshot was in place, before the old journal went
+        with open(journal, "wb") as fh:
+            fh.write(before)
+    world.remove_tool()
+    world.set_base_pose(1.2, 2.5, np.pi / 2)
+    world.mount_tool("taping_tool")
+    _pass(world, arm, wall, [[1.2, 3.5, 0.9]], [0, 1, 0])
+    arm.set_digital_output(0, True)
+    _pass(world, arm, wall, _vertical(1.2, 3.6, 0.9, 1.9), [0, 1, 0])
+    arm.set_digital_output(0, False)
+    _pass(world, arm, wall, [[1.2, 3.5, 1.9]], [0, 1, 0])
+    world.outcome.mark_manual_taping("wall_1_joint_2")
+    state.note_robot(_robot(world))
+
+
+def _same(a, b):
+    arrays_a, rest_a = recorder_arrays(a.outcome)
+    arrays_b, rest_b = recorder_arrays(b.outcome)
+    assert sorted(arrays_a) == sorted(arrays_b)
+    for k in arrays_a:
+        assert np.array_equal(arrays_a[k], arrays_b[k]), k
+    assert rest_a == rest_b
+    assert a.outcome.summary() == b.outcome.summary()
+
+
+@pytest.mark.parametrize("crash_before_truncate", [False, True])
+def test_the_outcome_maps_come_back_exactly_after_a_crash(site_cfg, robot_cfg, tmp_path, crash_before_truncate):
+    a, arm, comp, wall = _world(site_cfg, robot_cfg)
+    b = None
+    try:
+        state = WorldState(str(tmp_path / "state"))
+        assert state.restore(a.outcome) is None          # a fresh folder
+        state.attach(a.outcome)
+        _work(a, arm, comp, wall, state, crash_before_truncate)
+        s = a.outcome.summary()
+        assert s["joints"]["wall_1_joint_1"]["coverage"] > 0.3 and s["joints_manual"] == 1
+        assert a.outcome.maps["wall_1"].thickness.max() > 0
+        assert state.seq > 10
+        state.close()                                    # the process dies: nothing more is written
+        b, *_ = _world(site_cfg, robot_cfg)
+        again = WorldState(str(tmp_path / "state"))
+        robot = again.restore(b.outcome)
+        assert robot["tool"] == "taping_tool" and robot["pose"] == pytest.approx([1.2, 2.5, np.pi / 2])
+        assert again.replayed > 10 and again.seq == state.seq
+        _same(a, b)
+    finally:
+        a.close()
+        if b is not None:
+            b.close()
+
+
+def test_a_torn_last_journal_line_is_dropped(site_cfg, robot_cfg, tmp_path):
+    a, arm, comp, wall = _world(site_cfg, robot_cfg)
+    b = None
+    try:
+        state = WorldState(str(tmp_path / "state"))
+        state.restore(a.outcome)
+        state.attach(a.outcome)
+        _work(a, arm, comp, wall, state)
+        state.close()
+        with open(state.journal_files()[-1], "ab") as fh:
+            fh.write(b'{"kind":"segment","tool":"spray_gun","on":tr')    # the write the power loss cut short
+        b, *_ = _world(site_cfg, robot_cfg)
+        WorldState(state.folder).restore(b.outcome)
+        _same(a, b)
+    finally:
+        a.close()
+        if b is not None:
+            b.close()
+
+
+def test_a_state_of_another_site_is_refused_naming_the_folder_and_what_differs(site_cfg, robot_cfg, tmp_path):
+    a, arm, comp, wall = _world(site_cfg, robot_cfg)
+    other = copy.deepcopy(site_cfg)
+    other["site"]["walls"][0]["height"] = 2.0
+    b = None
+    try:
+        state = WorldState(str(tmp_path / "state"))
+        state.attach(a.outcome)
+        _work(a, arm, comp, wall, state)
+        state.close()
+        b, *_ = _world(other, robot_cfg)
+        before = recorder_arrays(b.outcome)[0]["wall/wall_1/thickness"].copy()
+        with pytest.raises(SimConfigError, match=r"state: the world state there was saved for another site: walls"):
+            WorldState(state.folder).restore(b.outcome)
+        assert not before.any() and not b.outcome.maps["wall_1"].thickness.any()   # nothing half restored
+    finally:
+        a.close()
+        if b is not None:
+            b.close()
+
+
+def test_a_worksite_started_again_on_its_state_folder_has_its_tool_and_pose_back(site_cfg, robot_cfg, port, tmp_path):
+    folder = str(tmp_path / "world_state")
+
+    def site():
+        return Worksite(site_cfg, robot_cfg, modbus_port=port, can_interface="virtual",
+                        can_channel="state-%d" % os.getpid(), with_ur=False, state_dir=folder,
+                        snapshot_period_s=600)        # no snapshot: it all comes from the journal
+    w = site()
+    w.start()
+    try:
+        assert w.restored is None
+        w.mount_tool("sander")
+        w.world.set_base_pose(2.0, 1.5, 1.0)
+        w.mark_manual_taping("wall_1_joint_3")
+        import time
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and not any(b'"tool":"sander"' in open(f, "rb").read()
+                                                      for f in w.state.journal_files()):
+            time.sleep(0.05)
+        assert not os.path.exists(os.path.join(folder, "outcome.npz"))
+    finally:
+        w.stop()
+    w = site()
+    w.start()
+    try:
+        assert w.restored["tool"] == "sander" and w.world.mounted_tool == "sander"
+        assert w.world.base_pose() == pytest.approx([2.0, 1.5, 1.0], abs=1e-6)
+        assert w.outcome()["joints_manual"] == 1
+    finally:
+        w.stop()
+    shutil.rmtree(folder)
