@@ -18,6 +18,7 @@ from locem_bridge.sim.worksite import Worksite
 
 import sys  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from conftest import free_port  # noqa: E402
 from test_world_outcome import ManualWall, _pass, _spray_ready, _vertical  # noqa: E402
 
 
@@ -168,3 +169,91 @@ def test_a_worksite_started_again_on_its_state_folder_has_its_tool_and_pose_back
     finally:
         w.stop()
     shutil.rmtree(folder)
+
+
+def test_a_journal_without_a_snapshot_of_another_site_is_refused_too(site_cfg, robot_cfg, tmp_path):
+    a, arm, comp, wall = _world(site_cfg, robot_cfg)
+    other = copy.deepcopy(site_cfg)
+    other["site"]["walls"][0]["height"] = 2.0
+    b = None
+    try:
+        state = WorldState(str(tmp_path / "state"))
+        state.attach(a.outcome)
+        _spray_ready(a, comp, wall)
+        comp.set_valve(True)
+        _pass(a, arm, wall, [[x, 3.2, 1.2] for x in np.arange(1.4, 2.0, 0.01)], [0, 1, 0])
+        state.close()
+        assert not os.path.exists(os.path.join(state.folder, "outcome.npz"))
+        b, *_ = _world(other, robot_cfg)
+        with pytest.raises(SimConfigError, match="saved for another site: walls"):
+            WorldState(state.folder).restore(b.outcome)
+    finally:
+        a.close()
+        if b is not None:
+            b.close()
+
+
+def test_records_after_a_torn_line_start_their_own_line_and_a_failing_disk_stops_only_the_journal(
+        site_cfg, robot_cfg, tmp_path, monkeypatch, caplog):
+    a, arm, comp, wall = _world(site_cfg, robot_cfg)
+    b = c = None
+    try:
+        state = WorldState(str(tmp_path / "state"))
+        state.attach(a.outcome)
+        _work(a, arm, comp, wall, state)
+        state.close()
+        # the crash tore the first line of a journal file just begun (the one the next run writes on again)
+        with open(os.path.join(state.folder, "outcome.journal.%012d" % (state.seq + 1)), "wb") as fh:
+            fh.write(b'{"kind":"si')
+        b, arm_b, comp_b, wall_b = _world(site_cfg, robot_cfg)
+        again = WorldState(state.folder)
+        again.restore(b.outcome)
+        again.attach(b.outcome)                                    # the second run goes on where the first stopped
+        b.outcome.mark_manual_taping("wall_1_joint_3")
+        # then the disk fails: the world goes on (the maps still change), only the journal stops
+        import locem_bridge.sim.world_state as ws_mod
+
+        def full_disk(fd, data):
+            raise OSError(28, "No space left on device")
+        monkeypatch.setattr(ws_mod.os, "write", full_disk)
+        b.outcome.mark_manual_taping("wall_2_joint_1")
+        assert b.outcome.manual == {"wall_1_joint_2", "wall_1_joint_3", "wall_2_joint_1"}
+        monkeypatch.undo()
+        again.close()
+        c, *_ = _world(site_cfg, robot_cfg)
+        WorldState(state.folder).restore(c.outcome)
+        assert c.outcome.manual == {"wall_1_joint_2", "wall_1_joint_3"}   # what was journaled, nothing broken
+        assert "broken journal line" not in caplog.text and "cannot be written" in caplog.text
+        assert np.array_equal(c.outcome.maps["wall_1"].thickness, a.outcome.maps["wall_1"].thickness)
+    finally:
+        for w in (a, b, c):
+            if w is not None:
+                w.close()
+
+
+def test_a_tool_changer_restored_with_the_world_holds_the_tool_on_the_flange(site_cfg, port, tmp_path):
+    from locem_bridge.sim.config import load_robot
+    robot = load_robot(os.path.join(os.path.dirname(__file__), "..", "..", "config", "robots", "diffdrive_ur5e.yaml"))
+    robot["robot"]["tool_changer"]["port"] = free_port()
+    folder = str(tmp_path / "world_state")
+
+    def site():
+        return Worksite(site_cfg, robot, modbus_port=port, can_interface="virtual",
+                        can_channel="changer-%d" % os.getpid(), with_ur=False, state_dir=folder)
+    w = site()
+    w.start()
+    try:
+        w.world.mount_tool("spray_gun", by="the tool changer")
+        w.state.note_robot({"pose": w.world.base_pose(), "q": list(w.world._q), "tool": w.world.mounted_tool,
+                            "sim_time": w.clock.now()})
+        sim_time = w.clock.now()
+    finally:
+        w.stop()
+    w = site()
+    w.start()
+    try:
+        st = w.tool_changer_state()
+        assert w.world.mounted_tool == "spray_gun" and st["locked"] and st["coupled_tool"] == "spray_gun", st
+        assert w.clock.now() >= sim_time                 # sim time goes on, it does not start again at 0
+    finally:
+        w.stop()

@@ -175,7 +175,10 @@ class TripleStore(ABC):
         for ref in list(refs):
             callback = ref()
             if callback is None:
-                refs.remove(ref)
+                try:
+                    refs.remove(ref)
+                except ValueError:  # another writer's thread removed it first
+                    pass
                 continue
             try:
                 callback(changes)

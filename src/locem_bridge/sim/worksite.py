@@ -85,6 +85,7 @@ class Worksite:
         self.state: Optional[WorldState] = None
         self.restored: Optional[Dict[str, Any]] = None   # the saved robot state found at start (None: fresh)
         self._state_stop = threading.Event()
+        self._state_thread: Optional[threading.Thread] = None
         self.clock: Optional[SimClock] = None
         self.compressor: Optional[CompressorModel] = None
         self.modbus: Optional[CompressorServer] = None
@@ -105,7 +106,12 @@ class Worksite:
         robot = self.robot_cfg["robot"]
         sim = self.site_cfg["simulation"]
         try:
-            self.clock = SimClock(sim["time_scale"])
+            saved: Dict[str, Any] = {}
+            if self.state_dir is not None:
+                self.state = WorldState(self.state_dir)
+                saved = self.state.saved_robot()
+            # sim time goes on from where the saved world stood (the spray passes' stamps of both runs in order)
+            self.clock = SimClock(sim["time_scale"], start=float(saved.get("sim_time") or 0.0))
             comp = robot["compressor"]
             self.compressor = CompressorModel(comp, self.clock.now)
             self.modbus = CompressorServer(self.compressor, comp["host"], comp["port"], comp["device_id"])
@@ -121,11 +127,8 @@ class Worksite:
             self.drives.start()
             arm_cfg = robot["arm"]
             q0 = arm_cfg["named_poses"].get(self.arm_pose or "home", [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
-            if self.state_dir is not None:
-                self.state = WorldState(self.state_dir)
-                saved_q = self.state.saved_robot().get("q")
-                if saved_q:
-                    q0 = [float(x) for x in saved_q]   # the arm stood there when the power went
+            if saved.get("q"):
+                q0 = [float(x) for x in saved["q"]]      # the arm stood there when the power went
             if self.with_ur:
                 self.ur = self._make_ur(arm_cfg, q0, sim["time_scale"])
                 self._start_ur()
@@ -134,6 +137,8 @@ class Worksite:
                 self.arm = KinematicArm(q0)
             self.world = World(self.site_cfg, self.robot_cfg, self.clock, arm=self.arm, drives=self.drives,
                                compressor=self.compressor, lift=self.lift)
+            if self.state is not None:               # before the tool changer: it sees the tool on the flange
+                self._restore_state(self.state, self.world)
             tc = robot.get("tool_changer")
             if tc is not None:                   # the changer's rack slots are flange positions of the world's arm
                 self.changer = ToolChangerModel(tc, self.clock.now, WorldRack(self.world, tc))
@@ -143,8 +148,6 @@ class Worksite:
                 self.ur.set_contact_provider(self.world.wall_contact)
             if self.ur is not None and self.protective_stop_on_collision:
                 self.world.on_collision.append(self._protective_stop)
-            if self.state is not None:
-                self._restore_state(self.state, self.world)
             self.world.start()
         except Exception:
             self.stop()
@@ -170,14 +173,15 @@ class Worksite:
 
         def take(whole: bool) -> None:
             with world._lock:
-                robot = {"pose": world.base_pose(), "q": list(world._q), "tool": world.mounted_tool}
+                robot = {"pose": world.base_pose(), "q": list(world._q), "tool": world.mounted_tool,
+                         "sim_time": world.clock.now()}
                 captured = state.capture(world.outcome, robot) if whole else None
                 if not whole:
                     state.note_robot(robot)
             if captured is not None:
                 state.write(captured)
-        self._state_stop.clear()
-        snapshot_loop(state, take, self.snapshot_period_s, self._state_stop)
+        self._state_stop = threading.Event()
+        self._state_thread = snapshot_loop(state, take, self.snapshot_period_s, self._state_stop)
 
     def _make_ur(self, arm_cfg: Dict[str, Any], q0: List[float], time_scale: float) -> Any:
         try:
@@ -207,12 +211,15 @@ class Worksite:
         """Stop every part (reverse order of start; idempotent). The world state folder is left as a crash leaves
         it (the journal holds everything since the last snapshot)."""
         self._state_stop.set()
-        if self.state is not None:
-            self.state.close()
-            self.state = None
+        if self._state_thread is not None:
+            self._state_thread.join(timeout=10.0)
+            self._state_thread = None
         if self.world is not None:
             self.world.close()
             self.world = None
+        if self.state is not None:               # after the world: what it did until it stopped is journaled
+            self.state.close()
+            self.state = None
         if self.ur is not None:
             try:
                 self.ur.stop()

@@ -7,9 +7,10 @@ stood and the tool stays on the flange. The simulated world keeps them in a fold
   per joint, thickness, sanded and pass maps, what went into openings, the operator's manual taping, the spray
   passes' ends), the robot's base pose, the arm's joint positions and the mounted tool, with the sequence number of
   the last journal record it includes and the site it belongs to (wall and joint ids with their map shapes);
-* ``outcome.journal.N`` -- the **journal**, N the sequence number of its first record: one JSON line per call that
-  changed the maps since (each TCP segment the world recorded, with the sim time it was recorded at; a joint taped
-  by hand), appended and handed to the kernel at once, so a ``kill -9`` loses nothing the world recorded.
+* ``outcome.journal.N`` -- the **journal**, N the sequence number of its first record: a line naming the site, then
+  one JSON line per call that changed the maps since (each TCP segment the world recorded, with the sim time it was
+  recorded at, which is also what a spray pass ending there stamps; a joint taped by hand), appended and handed to
+  the kernel at once, so a ``kill -9`` loses nothing the world recorded.
 
 Restoring loads the snapshot and replays the journal records after it: the maps come back exactly as they were
 (the recorder is deterministic; float values survive JSON unchanged). A snapshot is written every
@@ -20,13 +21,18 @@ The robot's base pose, arm joints and tool are journaled too, as a record whenev
 ``robot_period_s``, 0.2 s of wall clock): a tool mounted just before the power went may be missed by that much, a
 pose is up to that old, as good as a relocalisation after a restart (LOCEM's localisation is the world's own pose;
 the next action moves the arm and base anyway).
-A folder written for another site is refused naming the folder, the key that differs and both values.
+The sim clock goes on from the saved sim time. A folder written for another site (snapshot or journal) is refused
+naming the folder, the key that differs and both values. What cannot be read back is left out with a warning, never
+a node that cannot start: a broken line, a record whose replay fails (as it failed live). A disk that cannot take
+the journal any more is logged once; the world goes on without keeping its state. Not kept: a lift's height (the
+lift drive starts where its model starts).
 """
 from __future__ import annotations
 
 import copy
 import io
 import json
+import logging
 import os
 import threading
 from typing import Any, Callable, Dict, List, Optional, Tuple
@@ -35,6 +41,8 @@ import numpy as np
 
 from .errors import SimConfigError
 from .outcome import OutcomeRecorder
+
+log = logging.getLogger(__name__)
 
 SNAPSHOT = "outcome.npz"
 JOURNAL = "outcome.journal"     # + ".N": N (12 digits) the sequence number of the file's first record
@@ -100,16 +108,25 @@ class WorldState:
         self._lock = threading.Lock()
         self.replayed = 0
         self._last_robot: Optional[Dict[str, Any]] = None
+        self._site: Dict[str, Any] = {}
+        self._broken = False
 
     # ---------------------------------------------------------------- restoring
     def saved_robot(self) -> Dict[str, Any]:
-        """The robot state of the snapshot (``pose``, ``q``, ``tool``), {} without one (read before the world is
-        built: the arm's controller starts where the arm stood)."""
+        """The robot state last saved (``pose``, ``q``, ``tool``, ``sim_time``: the snapshot's, then the journal's
+        later notes), {} without any (read before the world is built: the clock goes on from the saved sim time,
+        the arm's controller starts where the arm stood)."""
+        robot: Dict[str, Any] = {}
+        upto = 0
         snap = os.path.join(self.folder, SNAPSHOT)
-        if not os.path.exists(snap):
-            return {}
-        with np.load(snap, allow_pickle=False) as z:
-            return dict(json.loads(str(z["meta"])).get("robot") or {})
+        if os.path.exists(snap):
+            with np.load(snap, allow_pickle=False) as z:
+                meta = json.loads(str(z["meta"]))
+            robot, upto = dict(meta.get("robot") or {}), int(meta["seq"])
+        for record in self._journal_records(repair=False):
+            if record["seq"] > upto and record["kind"] == "robot":
+                robot = dict(record["robot"])
+        return robot
 
     def restore(self, rec: OutcomeRecorder) -> Optional[Dict[str, Any]]:
         """Load the snapshot and replay the journal into ``rec``; returns the saved robot state (``pose``, ``q``,
@@ -125,13 +142,20 @@ class WorldState:
             upto = int(meta["seq"])
             robot = meta.get("robot")
         self.seq = upto
-        for record in self._journal_records():
-            if record["seq"] <= upto:
+        records = self._journal_records()
+        for record in records:
+            if record["kind"] == "site":                 # each journal file's first line
+                self._check_site(record["site"], _fingerprint(rec))
+        for record in records:
+            if record["kind"] == "site" or record["seq"] <= upto:
                 continue
             if record["kind"] == "robot":
                 robot = dict(record["robot"])
             else:
-                self._replay(rec, record)
+                try:
+                    self._replay(rec, record)
+                except Exception as exc:                # what failed live fails again: as live, it is left out
+                    log.warning("world state %s: journal record %d not replayed: %s", self.folder, record["seq"], exc)
                 if robot is None:
                     robot = {}
             self.seq = record["seq"]
@@ -151,14 +175,22 @@ class WorldState:
         names = [n for n in os.listdir(self.folder) if n.startswith(JOURNAL + ".") and n[len(JOURNAL) + 1:].isdigit()]
         return [os.path.join(self.folder, n) for n in sorted(names)]
 
-    def _journal_records(self) -> List[Dict[str, Any]]:
+    def _journal_records(self, repair: bool = True) -> List[Dict[str, Any]]:
+        """Every complete record of the journal files, oldest first. A torn last line (the write the crash
+        interrupted) is dropped, and with ``repair`` cut off the file, so records appended later start a line."""
         out = []
         for path in self.journal_files():
             with open(path, "rb") as fh:
-                for line in fh:
-                    if not line.endswith(b"\n"):
-                        break            # a torn last line: the write the crash interrupted
+                data = fh.read()
+            end = data.rfind(b"\n") + 1
+            if end < len(data) and repair:
+                with open(path, "r+b") as fh:
+                    fh.truncate(end)
+            for line in data[:end].splitlines():
+                try:
                     out.append(json.loads(line))
+                except ValueError:
+                    log.warning("world state %s: a broken journal line in %s left out", self.folder, path)
         return out
 
     @staticmethod
@@ -179,14 +211,21 @@ class WorldState:
     def attach(self, rec: OutcomeRecorder) -> None:
         """Journal every later ``record`` / ``mark_manual_taping`` of ``rec`` before it changes the maps."""
         with self._lock:
+            self._site = _fingerprint(rec)
             self._open_journal()
         record, manual = rec.record, rec.mark_manual_taping
 
         def journaled_record(tool: str, active: bool, p0: Any, p1: Any, z_axis: Any, dt: float) -> None:
+            clock = rec.clock
+            stamp = None if clock is None else float(clock())
             self._append({"kind": "segment", "tool": tool, "on": bool(active), "p0": [float(x) for x in p0],
                           "p1": [float(x) for x in p1], "z": [float(x) for x in z_axis], "dt": float(dt),
-                          "clock": None if rec.clock is None else float(rec.clock())})
-            record(tool, active, p0, p1, z_axis, dt)
+                          "clock": stamp})
+            rec.clock = None if stamp is None else (lambda: stamp)   # what a pass ending now stamps: as replayed
+            try:
+                record(tool, active, p0, p1, z_axis, dt)
+            finally:
+                rec.clock = clock
 
         def journaled_manual(joint_id: str) -> None:
             manual(joint_id)             # an unknown joint raises before anything is journaled
@@ -195,11 +234,39 @@ class WorldState:
         rec.mark_manual_taping = journaled_manual  # type: ignore[method-assign]
 
     def _open_journal(self) -> None:
-        """Go on in a new journal file named for the next record (under ``_lock``)."""
+        """Go on in a new journal file named for the next record, headed by the site it belongs to (under
+        ``_lock``)."""
         if self._fd is not None:
             os.close(self._fd)
+            self._fd = None
+        if self._broken:
+            return
         path = os.path.join(self.folder, "%s.%012d" % (JOURNAL, self.seq + 1))
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        try:
+            self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        except OSError as exc:
+            self._fail(exc)
+            return
+        self._write_line({"kind": "site", "site": self._site, "seq": self.seq})
+
+    def _fail(self, exc: OSError) -> None:
+        """The journal cannot be written (a full disk): say so once and go on without it (the world keeps
+        working; what it does from now on is not kept)."""
+        if not self._broken:
+            log.error("world state %s: the journal cannot be written (%s); the world goes on without keeping its "
+                      "state", self.folder, exc)
+        self._broken = True
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def _write_line(self, record: Dict[str, Any]) -> None:
+        data = (json.dumps(record, separators=(",", ":")) + "\n").encode()
+        try:
+            if self._fd is not None and os.write(self._fd, data) != len(data):
+                raise OSError("short write")
+        except OSError as exc:
+            self._fail(exc)
 
     def _append(self, record: Dict[str, Any]) -> None:
         with self._lock:
@@ -207,7 +274,7 @@ class WorldState:
                 return
             self.seq += 1
             record["seq"] = self.seq
-            os.write(self._fd, (json.dumps(record, separators=(",", ":")) + "\n").encode())
+            self._write_line(record)
 
     def note_robot(self, robot: Dict[str, Any]) -> None:
         """Journal the robot's state (``pose``, ``q``, ``tool``) when it changed since it was last noted."""
@@ -265,8 +332,7 @@ def snapshot_loop(state: WorldState, take: Callable[[bool], None], period_s: flo
             try:
                 take(n % every == 0)
             except Exception:            # a full disk must not stop the world; the journal still has it all
-                import logging
-                logging.getLogger(__name__).exception("world state snapshot failed (the journal keeps growing)")
+                log.exception("world state snapshot failed (the journal keeps growing)")
     t = threading.Thread(target=run, name="world-state", daemon=True)
     t.start()
     return t
