@@ -171,15 +171,22 @@ class Worksite:
             log.warning("world state restored from %s (%d journal records replayed): base %s, tool %s",
                         state.folder, state.replayed, robot.get("pose"), robot.get("tool"))
 
-        def take(whole: bool) -> None:
+        last_q: List[List[float]] = [[]]
+
+        def take(whole: bool) -> bool:
+            """Note the robot; with ``whole``, a snapshot too, unless the arm moved since the last tick or a tool
+            works now (False: try again at the next tick)."""
             with world._lock:
                 robot = {"pose": world.base_pose(), "q": list(world._q), "tool": world.mounted_tool,
                          "sim_time": world.clock.now()}
-                captured = state.capture(world.outcome, robot) if whole else None
-                if not whole:
+                moved, last_q[0] = robot["q"] != last_q[0], robot["q"]
+                working = whole and (moved or world.tool_active() or any(world.outcome._active.values()))
+                captured = state.capture(world.outcome, robot) if whole and not working else None
+                if captured is None:
                     state.note_robot(robot)
             if captured is not None:
                 state.write(captured)
+            return not working
         self._state_stop = threading.Event()
         self._state_thread = snapshot_loop(state, take, self.snapshot_period_s, self._state_stop)
 

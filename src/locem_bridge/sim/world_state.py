@@ -14,8 +14,10 @@ stood and the tool stays on the flange. The simulated world keeps them in a fold
 
 Restoring loads the snapshot and replays the journal records after it: the maps come back exactly as they were
 (the recorder is deterministic; float values survive JSON unchanged). A snapshot is written every
-``snapshot_period_s`` (wall clock; copied under the world's lock, which also starts the next journal file, and
-written outside it); then the journal files it holds are deleted (a crash between the two leaves records the
+``snapshot_period_s`` (wall clock), at the first moment after that when the arm rests and no tool process is on
+(copying and writing 3-4 MB holds the interpreter some 20 ms, which must not stall the stand-ins while the arm works
+at the wall: at time scale 10 that is 0.2 s of a spray lane, or a valve switched that much late); it is copied under the world's lock, which also starts the next journal
+file, and written outside it; then the journal files it holds are deleted (a crash between the two leaves records the
 snapshot already holds, skipped by their sequence numbers; a torn last line is dropped).
 The robot's base pose, arm joints and tool are journaled too, as a record whenever they changed (looked at every
 ``robot_period_s``, 0.2 s of wall clock): a tool mounted just before the power went may be missed by that much, a
@@ -319,19 +321,24 @@ class WorldState:
                 self._fd = None
 
 
-def snapshot_loop(state: WorldState, take: Callable[[bool], None], period_s: float,
+def snapshot_loop(state: WorldState, take: Callable[[bool], bool], period_s: float,
                   stop: threading.Event, robot_period_s: float = 0.2) -> threading.Thread:
-    """A daemon thread calling ``take(False)`` (note the robot) every ``robot_period_s`` and ``take(True)`` (a
-    whole snapshot) every ``period_s`` seconds until ``stop`` is set."""
+    """A daemon thread calling ``take(False)`` (note the robot) every ``robot_period_s``, and ``take(True)`` (a
+    whole snapshot) once every ``period_s`` seconds, again at each tick until it returns True (the caller declines
+    while the tools work: see :class:`~locem_bridge.sim.worksite.Worksite`), until ``stop`` is set."""
     every = max(1, int(round(period_s / robot_period_s)))
 
     def run() -> None:
         n = 0
+        due = False
         while not stop.wait(min(period_s, robot_period_s)):
             n += 1
+            due = due or n % every == 0
             try:
-                take(n % every == 0)
+                if take(due):
+                    due = False
             except Exception:            # a full disk must not stop the world; the journal still has it all
+                due = False
                 log.exception("world state snapshot failed (the journal keeps growing)")
     t = threading.Thread(target=run, name="world-state", daemon=True)
     t.start()
