@@ -204,25 +204,13 @@ def _node(env, module, *args, timeout=60.0):
     return done, time.monotonic() - started
 
 
-def _store_of_another_site(tmp_path):
-    """A PEMKRE store folder that holds another site's data (claimed by ``another_bay``)."""
-    from locem_bridge.pemkre import JournaledStore
+def _store_of_another_site(tmp_path, kind="journal"):
+    """A PEMKRE store folder of ``kind`` (journal: the node's default; rocksdb: what HICEM's embedded PEMKRE
+    opens) that holds another site's data (claimed by ``another_bay``)."""
+    from locem_bridge.pemkre import JournaledStore, OxigraphStore
     from locem_bridge.pemkre.store_factory import claim_site
-    path = str(tmp_path / "claimed_pemkre_store")
-    store = JournaledStore(path)
-    try:
-        claim_site(store, "another_bay", path)
-    finally:
-        store.close()
-    return path
-
-
-def _rocksdb_store_of_another_site(tmp_path):
-    """An embedded (RocksDB) store folder, as HICEM's embedded PEMKRE opens, holding another site's data."""
-    from locem_bridge.pemkre import OxigraphStore
-    from locem_bridge.pemkre.store_factory import claim_site
-    path = str(tmp_path / "claimed_hicem_pemkre_store")
-    store = OxigraphStore(path)
+    path = str(tmp_path / ("claimed_%s_store" % kind))
+    store = {"journal": JournaledStore, "rocksdb": OxigraphStore}[kind](path)
     try:
         claim_site(store, "another_bay", path)
     finally:
@@ -238,7 +226,7 @@ def _node_cases(tmp_path):
     job = tmp_path / "job.yaml"
     job.write_text("steps:\n  - {name: taping}\n")
     claimed = _store_of_another_site(tmp_path)
-    claimed_rocksdb = _rocksdb_store_of_another_site(tmp_path)
+    claimed_rocksdb = _store_of_another_site(tmp_path, "rocksdb")
     return [
         ("locem_node", "locem", ["_robot_config:=" + bad_robot], "%s: robot.compresor: unknown key" % bad_robot),
         ("locem_node", "locem", ["_robot_config:=" + ROBOT, "_site_config:=" + bad_site, "_devices:=scanner"],

@@ -30,6 +30,20 @@ def _world(site_cfg, robot_cfg):
     return World(copy.deepcopy(site_cfg), robot_cfg, clock, arm=arm, compressor=comp, gui=False), arm, comp, wall
 
 
+@pytest.fixture
+def make_world():
+    """``make_world(site_cfg, robot_cfg)``: :func:`_world`, closed after the test."""
+    made = []
+
+    def make(site, robot):
+        w = _world(site, robot)
+        made.append(w[0])
+        return w
+    yield make
+    for w in made:
+        w.close()
+
+
 def _robot(world):
     return {"pose": world.base_pose(), "q": list(world._q), "tool": world.mounted_tool}
 
@@ -72,70 +86,54 @@ def _same(a, b):
 
 
 @pytest.mark.parametrize("crash_before_truncate", [False, True])
-def test_the_outcome_maps_come_back_exactly_after_a_crash(site_cfg, robot_cfg, tmp_path, crash_before_truncate):
-    a, arm, comp, wall = _world(site_cfg, robot_cfg)
-    b = None
-    try:
-        state = WorldState(str(tmp_path / "state"))
-        assert state.restore(a.outcome) is None          # a fresh folder
-        state.attach(a.outcome)
-        _work(a, arm, comp, wall, state, crash_before_truncate)
-        s = a.outcome.summary()
-        assert s["joints"]["wall_1_joint_1"]["coverage"] > 0.3 and s["joints_manual"] == 1
-        assert a.outcome.maps["wall_1"].thickness.max() > 0
-        assert state.seq > 10
-        state.close()                                    # the process dies: nothing more is written
-        b, *_ = _world(site_cfg, robot_cfg)
-        again = WorldState(str(tmp_path / "state"))
-        robot = again.restore(b.outcome)
-        assert robot["tool"] == "taping_tool" and robot["pose"] == pytest.approx([1.2, 2.5, np.pi / 2])
-        assert again.replayed > 10 and again.seq == state.seq
-        _same(a, b)
-    finally:
-        a.close()
-        if b is not None:
-            b.close()
+def test_the_outcome_maps_come_back_exactly_after_a_crash(site_cfg, robot_cfg, tmp_path, crash_before_truncate,
+                                                        make_world):
+    a, arm, comp, wall = make_world(site_cfg, robot_cfg)
+    state = WorldState(str(tmp_path / "state"))
+    assert state.restore(a.outcome) is None          # a fresh folder
+    state.attach(a.outcome)
+    _work(a, arm, comp, wall, state, crash_before_truncate)
+    s = a.outcome.summary()
+    assert s["joints"]["wall_1_joint_1"]["coverage"] > 0.3 and s["joints_manual"] == 1
+    assert a.outcome.maps["wall_1"].thickness.max() > 0
+    assert state.seq > 10
+    state.close()                                    # the process dies: nothing more is written
+    b, *_ = make_world(site_cfg, robot_cfg)
+    again = WorldState(str(tmp_path / "state"))
+    robot = again.restore(b.outcome)
+    assert robot["tool"] == "taping_tool" and robot["pose"] == pytest.approx([1.2, 2.5, np.pi / 2])
+    assert again.replayed > 10 and again.seq == state.seq
+    _same(a, b)
 
 
-def test_a_torn_last_journal_line_is_dropped(site_cfg, robot_cfg, tmp_path):
-    a, arm, comp, wall = _world(site_cfg, robot_cfg)
-    b = None
-    try:
-        state = WorldState(str(tmp_path / "state"))
-        state.restore(a.outcome)
-        state.attach(a.outcome)
-        _work(a, arm, comp, wall, state)
-        state.close()
-        with open(state.journal_files()[-1], "ab") as fh:
-            fh.write(b'{"kind":"segment","tool":"spray_gun","on":tr')    # the write the power loss cut short
-        b, *_ = _world(site_cfg, robot_cfg)
-        WorldState(state.folder).restore(b.outcome)
-        _same(a, b)
-    finally:
-        a.close()
-        if b is not None:
-            b.close()
+def test_a_torn_last_journal_line_is_dropped(site_cfg, robot_cfg, tmp_path, make_world):
+    a, arm, comp, wall = make_world(site_cfg, robot_cfg)
+    state = WorldState(str(tmp_path / "state"))
+    state.restore(a.outcome)
+    state.attach(a.outcome)
+    _work(a, arm, comp, wall, state)
+    state.close()
+    with open(state.journal_files()[-1], "ab") as fh:
+        fh.write(b'{"kind":"segment","tool":"spray_gun","on":tr')    # the write the power loss cut short
+    b, *_ = make_world(site_cfg, robot_cfg)
+    WorldState(state.folder).restore(b.outcome)
+    _same(a, b)
 
 
-def test_a_state_of_another_site_is_refused_naming_the_folder_and_what_differs(site_cfg, robot_cfg, tmp_path):
-    a, arm, comp, wall = _world(site_cfg, robot_cfg)
+def test_a_state_of_another_site_is_refused_naming_the_folder_and_what_differs(site_cfg, robot_cfg, tmp_path,
+                                                                             make_world):
+    a, arm, comp, wall = make_world(site_cfg, robot_cfg)
     other = copy.deepcopy(site_cfg)
     other["site"]["walls"][0]["height"] = 2.0
-    b = None
-    try:
-        state = WorldState(str(tmp_path / "state"))
-        state.attach(a.outcome)
-        _work(a, arm, comp, wall, state)
-        state.close()
-        b, *_ = _world(other, robot_cfg)
-        before = recorder_arrays(b.outcome)[0]["wall/wall_1/thickness"].copy()
-        with pytest.raises(SimConfigError, match=r"state: the world state there was saved for another site: walls"):
-            WorldState(state.folder).restore(b.outcome)
-        assert not before.any() and not b.outcome.maps["wall_1"].thickness.any()   # nothing half restored
-    finally:
-        a.close()
-        if b is not None:
-            b.close()
+    state = WorldState(str(tmp_path / "state"))
+    state.attach(a.outcome)
+    _work(a, arm, comp, wall, state)
+    state.close()
+    b, *_ = make_world(other, robot_cfg)
+    before = recorder_arrays(b.outcome)[0]["wall/wall_1/thickness"].copy()
+    with pytest.raises(SimConfigError, match=r"state: the world state there was saved for another site: walls"):
+        WorldState(state.folder).restore(b.outcome)
+    assert not before.any() and not b.outcome.maps["wall_1"].thickness.any()   # nothing half restored
 
 
 def test_a_worksite_started_again_on_its_state_folder_has_its_tool_and_pose_back(site_cfg, robot_cfg, port, tmp_path):
@@ -171,64 +169,52 @@ def test_a_worksite_started_again_on_its_state_folder_has_its_tool_and_pose_back
     shutil.rmtree(folder)
 
 
-def test_a_journal_without_a_snapshot_of_another_site_is_refused_too(site_cfg, robot_cfg, tmp_path):
-    a, arm, comp, wall = _world(site_cfg, robot_cfg)
+def test_a_journal_without_a_snapshot_of_another_site_is_refused_too(site_cfg, robot_cfg, tmp_path, make_world):
+    a, arm, comp, wall = make_world(site_cfg, robot_cfg)
     other = copy.deepcopy(site_cfg)
     other["site"]["walls"][0]["height"] = 2.0
-    b = None
-    try:
-        state = WorldState(str(tmp_path / "state"))
-        state.attach(a.outcome)
-        _spray_ready(a, comp, wall)
-        comp.set_valve(True)
-        _pass(a, arm, wall, [[x, 3.2, 1.2] for x in np.arange(1.4, 2.0, 0.01)], [0, 1, 0])
-        state.close()
-        assert not os.path.exists(os.path.join(state.folder, "outcome.npz"))
-        b, *_ = _world(other, robot_cfg)
-        with pytest.raises(SimConfigError, match="saved for another site: walls"):
-            WorldState(state.folder).restore(b.outcome)
-    finally:
-        a.close()
-        if b is not None:
-            b.close()
+    state = WorldState(str(tmp_path / "state"))
+    state.attach(a.outcome)
+    _spray_ready(a, comp, wall)
+    comp.set_valve(True)
+    _pass(a, arm, wall, [[x, 3.2, 1.2] for x in np.arange(1.4, 2.0, 0.01)], [0, 1, 0])
+    state.close()
+    assert not os.path.exists(os.path.join(state.folder, "outcome.npz"))
+    b, *_ = make_world(other, robot_cfg)
+    with pytest.raises(SimConfigError, match="saved for another site: walls"):
+        WorldState(state.folder).restore(b.outcome)
 
 
 def test_records_after_a_torn_line_start_their_own_line_and_a_failing_disk_stops_only_the_journal(
-        site_cfg, robot_cfg, tmp_path, monkeypatch, caplog):
-    a, arm, comp, wall = _world(site_cfg, robot_cfg)
-    b = c = None
-    try:
-        state = WorldState(str(tmp_path / "state"))
-        state.attach(a.outcome)
-        _work(a, arm, comp, wall, state)
-        state.close()
-        # the crash tore the first line of a journal file just begun (the one the next run writes on again)
-        with open(os.path.join(state.folder, "outcome.journal.%012d" % (state.seq + 1)), "wb") as fh:
-            fh.write(b'{"kind":"si')
-        b, arm_b, comp_b, wall_b = _world(site_cfg, robot_cfg)
-        again = WorldState(state.folder)
-        again.restore(b.outcome)
-        again.attach(b.outcome)                                    # the second run goes on where the first stopped
-        b.outcome.mark_manual_taping("wall_1_joint_3")
-        # then the disk fails: the world goes on (the maps still change), only the journal stops
-        import locem_bridge.sim.world_state as ws_mod
+        site_cfg, robot_cfg, tmp_path, monkeypatch, caplog, make_world):
+    a, arm, comp, wall = make_world(site_cfg, robot_cfg)
+    state = WorldState(str(tmp_path / "state"))
+    state.attach(a.outcome)
+    _work(a, arm, comp, wall, state)
+    state.close()
+    # the crash tore the first line of a journal file just begun (the one the next run writes on again)
+    with open(os.path.join(state.folder, "outcome.journal.%012d" % (state.seq + 1)), "wb") as fh:
+        fh.write(b'{"kind":"si')
+    b, arm_b, comp_b, wall_b = make_world(site_cfg, robot_cfg)
+    again = WorldState(state.folder)
+    again.restore(b.outcome)
+    again.attach(b.outcome)                                    # the second run goes on where the first stopped
+    b.outcome.mark_manual_taping("wall_1_joint_3")
+    # then the disk fails: the world goes on (the maps still change), only the journal stops
+    import locem_bridge.sim.world_state as ws_mod
 
-        def full_disk(fd, data):
-            raise OSError(28, "No space left on device")
-        monkeypatch.setattr(ws_mod.os, "write", full_disk)
-        b.outcome.mark_manual_taping("wall_2_joint_1")
-        assert b.outcome.manual == {"wall_1_joint_2", "wall_1_joint_3", "wall_2_joint_1"}
-        monkeypatch.undo()
-        again.close()
-        c, *_ = _world(site_cfg, robot_cfg)
-        WorldState(state.folder).restore(c.outcome)
-        assert c.outcome.manual == {"wall_1_joint_2", "wall_1_joint_3"}   # what was journaled, nothing broken
-        assert "broken journal line" not in caplog.text and "cannot be written" in caplog.text
-        assert np.array_equal(c.outcome.maps["wall_1"].thickness, a.outcome.maps["wall_1"].thickness)
-    finally:
-        for w in (a, b, c):
-            if w is not None:
-                w.close()
+    def full_disk(fd, data):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(ws_mod.os, "write", full_disk)
+    b.outcome.mark_manual_taping("wall_2_joint_1")
+    assert b.outcome.manual == {"wall_1_joint_2", "wall_1_joint_3", "wall_2_joint_1"}
+    monkeypatch.undo()
+    again.close()
+    c, *_ = make_world(site_cfg, robot_cfg)
+    WorldState(state.folder).restore(c.outcome)
+    assert c.outcome.manual == {"wall_1_joint_2", "wall_1_joint_3"}   # what was journaled, nothing broken
+    assert "broken journal line" not in caplog.text and "cannot be written" in caplog.text
+    assert np.array_equal(c.outcome.maps["wall_1"].thickness, a.outcome.maps["wall_1"].thickness)
 
 
 def test_a_tool_changer_restored_with_the_world_holds_the_tool_on_the_flange(site_cfg, port, tmp_path):

@@ -144,8 +144,7 @@ class FirstMember:
 
     # ---------------------------------------------------------------- reading
     def _holds(self, subject: Node, value: Node) -> bool:
-        return (any(True for _ in self.store.quads(subject, RDF.type, self.cls, None))
-                and any(True for _ in self.store.quads(subject, self.order, value, None)))
+        return self._is_member(subject) and any(True for _ in self.store.quads(subject, self.order, value, None))
 
     def first(self) -> Optional[URIRef]:
         """The member with the lowest order (ties: the lowest IRI), or None when the class has no ordered member.

@@ -133,3 +133,16 @@ def claim_site(store: TripleStore, site: str, where: str) -> bool:
                           "process on it" % (" and ".join(repr(n) for n in names), site), file=where, key="site",
                           allowed=allowed)
     return False
+
+
+def claim_site_or_close(store: TripleStore, site: str, where: str, site_file: str) -> bool:
+    """:func:`claim_site` for a node starting on ``store``: on any failure the store is closed first, and a
+    :class:`ConfigError` names ``site_file`` unless it names the store itself (a refused store)."""
+    try:
+        return claim_site(store, site, where)
+    except ConfigError as exc:
+        store.close()
+        raise exc.in_file(site_file)
+    except Exception:
+        store.close()
+        raise

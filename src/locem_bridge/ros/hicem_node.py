@@ -37,7 +37,6 @@ from typing import Any, Dict, Optional
 import rospkg
 import rospy
 
-from locem_bridge.common.config_errors import ConfigError
 from locem_bridge.common.folders import split_folders
 from locem_bridge.common.program_state import Method, Transition
 from locem_bridge.hicem.config import load_params
@@ -74,16 +73,14 @@ def _pemkre_client(kind: str) -> Any:
         store = open_store("rocksdb", store_path)
         site_file = param("site", "")
         if site_file:  # the store holds this site's data or none (as the PEMKRE node checks its store)
-            from locem_bridge.pemkre.store_factory import claim_site
+            from locem_bridge.pemkre.store_factory import claim_site_or_close
             from locem_bridge.sim.config import load_site
             try:
-                claim_site(store, load_site(site_file)["site"]["name"], store_path)
-            except ConfigError as exc:
-                store.close()
-                raise exc.in_file(site_file)
+                site = load_site(site_file)["site"]["name"]
             except Exception:
                 store.close()
                 raise
+            claim_site_or_close(store, site, store_path, site_file)
         try:
             engine = ProcessEngine(store, files)
             # matched to the skills of ~robot (its resource model from the same tree folders HICEM runs), as the

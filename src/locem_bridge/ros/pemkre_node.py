@@ -47,7 +47,7 @@ from locem_bridge.pemkre import ProcessEngine
 from locem_bridge.pemkre.engine import load_json
 from locem_bridge.pemkre.errors import PemkreError, StoreError
 from locem_bridge.pemkre.robot_model import match_robot
-from locem_bridge.pemkre.store_factory import claim_site, open_store, open_store_waiting
+from locem_bridge.pemkre.store_factory import claim_site_or_close, open_store, open_store_waiting
 from locem_bridge.pemkre.terms import bindings_from_strings
 from locem_bridge.ros.params import package_share, param
 from locem_bridge.srv import (PemkreMatchProcess, PemkreMatchProcessResponse, PemkreNextAction,
@@ -191,15 +191,8 @@ def main() -> None:
                                                       query_url=query_url,
                                                       update_url=param("update_url", "")),
                                    kind, log=rospy.logwarn, stop=rospy.is_shutdown)
-        try:
-            if site is not None and claim_site(store, site, where):
-                rospy.loginfo("PEMKRE: %s now holds site %r", where, site)
-        except ConfigError as exc:
-            store.close()
-            raise exc.in_file(site_file)       # a bad name is the site file's; a refused store names itself
-        except Exception:
-            store.close()
-            raise
+        if site is not None and claim_site_or_close(store, site, where, site_file):
+            rospy.loginfo("PEMKRE: %s now holds site %r", where, site)
         try:
             engine = ProcessEngine(store, files,
                                    site_namespace=param("site_namespace", "") or None,
