@@ -7,4 +7,4 @@ ENV_FILE="$(bash "$REPO/tools/setup.sh")"
 set +u; . "$ENV_FILE"; set -u
 cd "$REPO"
 export LOCEM_NO_SKIP=1   # everything is installed here: a skipped test means broken setup (test/conftest.py)
-exec python -m pytest -q -rfE "$@"
+exec python -m pytest -q -rfE --durations=25 "$@"   # the 25 slowest: where CI's time goes

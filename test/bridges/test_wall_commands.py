@@ -55,6 +55,28 @@ def test_apply_tape_along_the_joint_covers_it(wall, core):
     assert rig.nothing_running()
 
 
+def test_get_tool_point_gives_where_the_tool_stands_in_the_map_even_after_the_controller_lost_its_tcp(wall, core):
+    # after a power loss HICEM reads where the arm stopped before anything moves it (RECOVER): the tool's point in
+    # the map frame, from odometry, the arm's mount and the active tool's TCP offset
+    rig, _ = wall
+    rig.world.mount_tool("taping_tool")
+    assert run(core, "MOUNT_TOOL taping_tool").success
+    assert run(core, "APPLY_TAPE_START 1.8 3.6 1.25 3.0 3.6 1.25 %s" % NORMAL).success
+    time.sleep(0.1)
+    # a restarted controller holds the installation's TCP (the flange), not the tool's
+    assert run(core, "SET_TCP 0 0 0 0 0 0").success
+    assert rig.standin.get_tcp_offset()[2] == pytest.approx(0.0)
+    r = run(core, "GET_TOOL_POINT")
+    assert r.success, r.message
+    pos, _z = rig.world.tcp_pose()
+    assert r.result["point"] == pytest.approx([1.8, 3.55, 1.25], abs=0.002)
+    assert r.result["point"] == pytest.approx(list(pos), abs=0.002)
+    assert r.result["axis"] == pytest.approx([0.0, 1.0, 0.0], abs=0.01)          # into the wall at y = 3.6
+    assert r.result["tool"] == "taping_tool" and "taping_tool at 1.8" in r.message
+    assert rig.standin.get_tcp_offset()[2] == pytest.approx(0.22)                  # the tool's TCP is set again
+    assert run(core, "HOME").success
+
+
 def test_spray_area_covers_the_area_and_leaves_the_valve_closed(wall, core):
     rig, _ = wall
     rig.world.mount_tool("spray_gun")
@@ -176,6 +198,9 @@ def test_a_restarted_locem_restores_the_mounted_tool_and_its_tcp(wall, core):
     rig.world.mount_tool("spray_gun")
     assert run(core, "MOUNT_TOOL spray_gun").success
     assert kept == ["spray_gun"]
+    old.activate_tool(None)                   # CHANGE_TOOL put it back in the rack: nothing on the flange
+    assert kept == ["spray_gun", ""]
+    assert run(core, "MOUNT_TOOL spray_gun").success
     fresh = WallCommands(rig.robot, arm=built.get("arm"), base=built.get("base"), compressor=built.get("compressor"),
                          scanner=built.get("scanner"))
     with pytest.raises(BadRequest):

@@ -46,7 +46,7 @@ SITE = {
 # keyword arguments that take a word (LOCEM's Arg.choice), with the words allowed
 CHOICES = {"contact": ("position", "force"), "lanes": ("horizontal", "vertical")}
 # name -> number of positional numeric args (None = any count of numbers, key=value allowed)
-GRAMMAR = {"SCAN": 0, "HOME": 0, "GET_POSE": 0, "STOP": 0, "WAIT": 1, "STATUS": 0, "GOTO": 3, "LIFT": 0, "MOUNT_TOOL": "word", "CHANGE_TOOL": "word", "MOVE_HOME": "word", "WALL_READY": 0, "RESET_ARM": 0,
+GRAMMAR = {"SCAN": 0, "HOME": 0, "GET_POSE": 0, "GET_TOOL_POINT": 0, "STOP": 0, "WAIT": 1, "STATUS": 0, "GOTO": 3, "LIFT": 0, "MOUNT_TOOL": "word", "CHANGE_TOOL": "word", "MOVE_HOME": "word", "WALL_READY": 0, "RESET_ARM": 0,
            "APPLY_TAPE_START": 9, "APPLY_TAPE": 9, "SPRAY_AREA": 11, "SAND_AREA": 11}
 
 
@@ -112,6 +112,7 @@ class LocemDouble(LocemClient):
         # name -> the progress feedback text its commands report (e.g. SPRAY_AREA: 'raster 2.345 of 6.480 m')
         self.feedback: Dict[str, str] = {}
         self.pose = [1.4, 1.4, 0.7854]     # the default site's start (config/sites/default.yaml)
+        self.tool_point = [0.0, 0.0, 0.0]  # GET_TOOL_POINT's point (map frame)
         # STATUS 'health' (LOCEM's per-backend records); health_script: answers given first, one per STATUS
         self.health: Dict[str, Dict[str, Any]] = {n: {"link": "up", "device": "ok", "last_error": ""}
                                                   for n in ("arm", "base", "compressor", "wall")}
@@ -169,6 +170,8 @@ class LocemDouble(LocemClient):
                 self.pose = [float(w) for w in command.split()[1:4]]
             elif name == "GET_POSE":
                 result = {"pose": list(self.pose), "twist": [0.0, 0.0, 0.0]}
+            elif name == "GET_TOOL_POINT":
+                result = {"point": list(self.tool_point), "axis": [1.0, 0.0, 0.0], "tool": "spray_gun"}
             elif name == "STATUS":
                 health = self.health_script.pop(0) if self.health_script else self.health
                 result = {"running": [], "resources": {}, "health": json.loads(json.dumps(health)), "uptime_s": 1.0}

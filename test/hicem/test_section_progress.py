@@ -2,6 +2,7 @@
 record survives a HICEM restart (SQLite HDICT) and is gone once the area is done."""
 import copy
 
+import pytest
 from py_trees.common import Status
 
 from hicem_doubles import SITE, LocemDouble
@@ -32,17 +33,20 @@ def _store(path):
     return DataManager(MemoryStore(), SqliteStore(str(path)), persistent_collections=["features", PROGRESS])
 
 
-def _spray_tree(store, locem):
+def _spray_tree(store, locem, tree_id="SPRAY_AREA", clock=None):
+    """``tree_id`` (SPRAY_AREA of wall_1_area_1, or RECOVER) on ``store`` against ``locem``; ``clock``: the
+    context's clock (default the real one)."""
     hdh = DataHandler(store)
     hdh.ingest_scan(REACHABLE)
+    timing = {"clock": clock} if clock is not None else {}
     ctx = NodeContext(locem=locem, store=store, health=HealthMonitor([ModuleSpec("locem", crucial=True)]),
-                      operator=OperatorDesk(), data_handler=hdh)
+                      operator=OperatorDesk(**timing), data_handler=hdh, **timing)
     bb = Blackboard()
     bb.update(params().blackboard_entries())
-    bb.update({"param_area": "wall_1_area_1"})
+    bb.update({"param_area": "wall_1_area_1", "param_robot": "robot"})
     lib = TreeLibrary()
     lib.load_directory(TREES)
-    return lib.build("SPRAY_AREA", ctx, bb), ctx
+    return lib.build(tree_id, ctx, bb), ctx
 
 
 def _tick(tree, locem, fail_at=None):
@@ -234,10 +238,8 @@ def test_progress_is_recorded_as_the_feedback_arrives_only_forward_and_dropped_w
     assert store.value(PROGRESS, "spray/a") == {"done": [2]}       # the section's partial record is gone
 
 
-def _cut(feedback_texts, reply):
-    """A section's command reports ``feedback_texts`` (one per tick) and then ends with ``reply``; the recorded
-    progress of section 2."""
-    store = DataManager()
+def _section_command(store):
+    """Section 2 of area 'a' running one SPRAY_AREA inside RecordSectionProgress: (tree, the LOCEM double)."""
     lib = TreeLibrary()
     lib.load_string('<root BTCPP_format="4"><BehaviorTree ID="T">'
                     '<RecordSectionProgress area_id="a" work="spray" index="2">'
@@ -245,7 +247,14 @@ def _cut(feedback_texts, reply):
                     'code="{code}" message="{message}"/>'
                     '</RecordSectionProgress></BehaviorTree></root>')
     locem = LocemDouble(durations={"SPRAY_AREA": 60.0})
-    tree = lib.build("T", NodeContext(locem=locem, store=store), Blackboard())
+    return lib.build("T", NodeContext(locem=locem, store=store), Blackboard()), locem
+
+
+def _cut(feedback_texts, reply):
+    """A section's command reports ``feedback_texts`` (one per tick) and then ends with ``reply``; the recorded
+    progress of section 2."""
+    store = DataManager()
+    tree, locem = _section_command(store)
     for text in feedback_texts:
         locem.feedback["SPRAY_AREA"] = text
         assert tree.tick() == R
@@ -287,3 +296,146 @@ def test_the_controllers_timed_handle_passes_the_feedback_on():
     locem.feedback["SPRAY_AREA"] = "raster 0.500 of 6.000 m"
     assert _TimedHandle(locem.send("SPRAY_AREA 0 0 0 1 0 0 1 1 0 -1 0"), lambda: None).feedback() == \
         "raster 0.500 of 6.000 m"
+
+
+# ------------------------------------------------------------------------------------ a power loss mid-section --
+def _spray_args(command):
+    """origin, u, width, height, normal and the keyword values of a SPRAY_AREA command text."""
+    words = command.split()
+    nums = [float(w) for w in words[1:12]]
+    kw = {k: float(v) for k, v in (w.split("=", 1) for w in words[12:])}
+    return nums[0:3], nums[3:6], nums[6], nums[7], nums[8:11], kw
+
+
+def _tcp_at(command, raster_m):
+    """The TCP point ``raster_m`` m into the first (forward) lane of a SPRAY_AREA command's raster."""
+    origin, u, _w, _h, normal, kw = _spray_args(command)
+    along = raster_m - kw["run_in"]
+    return [origin[k] + u[k] * along + normal[k] * kw["standoff"] for k in range(3)]
+
+
+def _recover(store, locem):
+    """RECOVER on ``store`` against ``locem``, ticked on a simulated clock."""
+    clock = [1000.0]
+    tree, _ = _spray_tree(store, locem, "RECOVER", clock=lambda: clock[0])
+    for _ in range(2000):
+        st = tree.tick()
+        if st != R:
+            return st
+        clock[0] += 0.05
+    raise AssertionError("RECOVER still running")
+
+
+def _cut_by_power_loss(tmp_path, feedback):
+    """The first section's SPRAY_AREA runs with ``feedback`` when every process stops at once (no end seen: the
+    tree is dropped, the HDICT closed); returns the command sent."""
+    store = _store(tmp_path / "hdict.sqlite")
+    first = LocemDouble(durations={"SPRAY_AREA": 60.0})
+    first.feedback["SPRAY_AREA"] = feedback
+    tree, _ = _spray_tree(store, first)
+    for _ in range(50):
+        assert tree.tick() == R
+    assert len(_sprays(first)) == 1
+    store.close()
+    return _sprays(first)[0]
+
+
+def test_a_section_cut_by_a_power_loss_goes_on_where_the_tool_stood_not_where_the_last_feedback_was_recorded(
+        tmp_path):
+    # the last feedback that reached the store said 0.175 m sprayed (0.6 m should LOCEM stop now); the arm went on
+    # to 0.355 m before the power went, and stands there when everything comes back
+    command = _cut_by_power_loss(tmp_path, "raster 0.175 of 6.480 m (0.600 m if LOCEM stops now)")
+    store = _store(tmp_path / "hdict.sqlite")
+    assert store.value(PROGRESS, "spray/wall_1_area_1") == {"done": [], "partial": {"0": 0.175}, "bound": {"0": 0.6}}
+    locem = LocemDouble()
+    locem.tool_point = _tcp_at(command, 0.355)
+    # RECOVER reads where the tool stands before it moves the arm, and notes it for the cut section
+    assert _recover(store, locem) == S
+    assert locem.sent[-2:] == ["GET_TOOL_POINT", "WALL_READY"]
+    record = store.value(PROGRESS, "spray/wall_1_area_1")
+    assert record["tool_at"] == {"0": pytest.approx(locem.tool_point, abs=1e-4)}
+    # a second RECOVER (the arm now at wall_ready) keeps the note of the cut and reads nothing
+    elsewhere = LocemDouble()
+    assert _recover(store, elsewhere) == S
+    assert "GET_TOOL_POINT" not in elsewhere.sent
+    assert store.value(PROGRESS, "spray/wall_1_area_1")["tool_at"] == record["tool_at"]
+    # the retried task: the section goes on at 0.355 m, where the spray stopped
+    again = LocemDouble()
+    tree, _ = _spray_tree(store, again)
+    assert _tick(tree, again) == S
+    sprays = _sprays(again)
+    assert _skip(sprays[0]) == pytest.approx(0.355, abs=1e-3)
+    assert sprays[0].split(" skip=")[0] == command.split(" skip=")[0]            # the same section
+    assert store.get(PROGRESS, "spray/wall_1_area_1") is None
+    store.close()
+
+
+@pytest.mark.parametrize("raster_m, off, expected", [
+    (0.5, 0.0, 0.5),         # within them: there
+    (0.9, 0.0, 0.6),         # beyond the bound the last feedback allowed (the arm went on with the valve closed)
+    (0.1, 0.0, 0.175),       # behind the recorded point: never goes back before what was recorded
+    (0.355, 0.25, 0.175),    # not on the raster (25 cm off the spray plane): the recorded point
+])
+def test_a_noted_tool_point_is_used_only_on_the_raster_and_between_the_recorded_point_and_the_bound(
+        tmp_path, raster_m, off, expected):
+    command = _cut_by_power_loss(tmp_path, "raster 0.175 of 6.480 m (0.600 m if LOCEM stops now)")
+    store = _store(tmp_path / "hdict.sqlite")
+    locem = LocemDouble()
+    _o, _u, _w, _h, normal, _kw = _spray_args(command)
+    locem.tool_point = [c + n * off for c, n in zip(_tcp_at(command, raster_m), normal)]
+    assert _recover(store, locem) == S
+    again = LocemDouble()
+    tree, _ = _spray_tree(store, again)
+    assert _tick(tree, again) == S
+    assert _skip(_sprays(again)[0]) == pytest.approx(expected, abs=1e-3)
+    store.close()
+
+
+def test_a_command_that_ended_with_a_reply_keeps_its_recorded_point_and_recover_notes_nothing(tmp_path):
+    # the compressor link dropped: LOCEM answered, its last feedback is where the spray got; the arm stopped
+    # after the valve had closed, so its point would leave a strip unsprayed
+    store = _store(tmp_path / "hdict.sqlite")
+    first = LocemDouble(durations={"SPRAY_AREA": 60.0})
+    first.feedback["SPRAY_AREA"] = "raster 0.175 of 6.480 m (0.600 m if LOCEM stops now)"
+    tree, _ = _spray_tree(store, first)
+    for _ in range(20):
+        assert tree.tick() == R
+    first.handles[-1]._reply = LocemReply(False, "HARDWARE_ERROR", "compressor: link down")
+    first.handles[-1].t_done = 0.0
+    assert tree.tick() == F
+    assert store.value(PROGRESS, "spray/wall_1_area_1") == {"done": [], "partial": {"0": 0.175}}   # no bound
+    locem = LocemDouble()
+    locem.tool_point = _tcp_at(_sprays(first)[0], 0.355)
+    assert _recover(store, locem) == S
+    assert "GET_TOOL_POINT" not in locem.sent and "tool_at" not in store.value(PROGRESS, "spray/wall_1_area_1")
+    again = LocemDouble()
+    tree, _ = _spray_tree(store, again)
+    assert _tick(tree, again) == S
+    assert _skip(_sprays(again)[0]) == pytest.approx(0.175)
+    store.close()
+
+
+def test_note_tool_at_cut_refuses_a_point_that_is_not_get_tool_points_result():
+    store = DataManager()
+    store.put(PROGRESS, "spray/a", {"done": [], "partial": {"1": 0.2}, "bound": {"1": 0.5}}, source="test")
+    tree, bb = _leaf_tree('<NoteToolAtCut point="{p}"/>', store)
+    bb.set("p", {"pose": [1, 2, 3]})
+    assert tree.tick() == F
+    assert "point must be GET_TOOL_POINT's result {point: [x, y, z], ...}" in tree.ctx.last_failure()[1]
+    assert "tool_at" not in store.value(PROGRESS, "spray/a")
+
+
+def test_a_command_halted_while_it_ran_leaves_no_bound_open_and_no_tool_no_note(tmp_path):
+    # a halt (a health fault, a cancel) is an end HICEM saw: LOCEM closes the valve, the recorded point stands
+    store = DataManager()
+    tree, locem = _section_command(store)
+    locem.feedback["SPRAY_AREA"] = "raster 0.300 of 6.000 m (0.700 m if LOCEM stops now)"
+    assert tree.tick() == R
+    assert store.value(PROGRESS, "spray/a") == {"done": [], "partial": {"2": 0.3}, "bound": {"2": 0.7}}
+    tree.halt()
+    assert store.value(PROGRESS, "spray/a") == {"done": [], "partial": {"2": 0.3}}
+    # with a bound open and no tool on the arm (GET_TOOL_POINT's tool ''), nothing is noted
+    store.put(PROGRESS, "spray/a", {"done": [], "partial": {"2": 0.3}, "bound": {"2": 0.7}}, source="test")
+    tree, bb = _leaf_tree('<NoteToolAtCut point="{p}" noted="{n}"/>', store)
+    bb.set("p", {"point": [1.0, 2.0, 0.5], "axis": [0, 1, 0], "tool": ""})
+    assert tree.tick() == S and bb.get("n") == 0 and "tool_at" not in store.value(PROGRESS, "spray/a")

@@ -18,7 +18,7 @@ from locem_bridge.pemkre import PLB, PPR, ProcessEngine
 from locem_bridge.pemkre.errors import QueryError, StoreConflict, StoreError, StoreUnavailable, TaskStateError
 from locem_bridge.pemkre.sparql_http import Endpoint, RetryPolicy
 from locem_bridge.pemkre.sparql_store import SparqlStore
-from locem_bridge.pemkre.store import G_WORLD, ChangeSet
+from locem_bridge.pemkre.store import G_LOG, G_WORLD, ChangeSet
 from locem_bridge.pemkre.vocab import SITE
 
 EX = "https://ex.example/"
@@ -735,3 +735,34 @@ def test_only_pemkre_graphs_found_on_the_server_join_the_default_graph(sparql_st
     q = reader.prepare("SELECT ?x WHERE { ex:a ex:p ?x }", "p", {"ex": EX})
     assert reader.select(q) == [{"x": Literal(2)}]
     assert foreign not in reader.refresh_graphs() and ours in reader.refresh_graphs()
+
+
+def test_within_one_decision_each_subject_costs_one_round_trip_and_writes_and_other_clients_are_seen(sparql_store):
+    """``reading()`` (the engine wraps each decision in it): look-ups by subject are answered from one fetch of the
+    subject's quads; this client's own write is seen at once (the written subjects are fetched again), another
+    client's write at the next decision; outside a decision every look-up asks the server."""
+    store, other = sparql_store(), sparql_store()
+    b, q = URIRef(EX + "b"), URIRef(EX + "q")
+    store.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD), (A, q, b, G_WORLD), (b, P, Literal(5), G_WORLD)]))
+    posts = []
+    send = store.query_endpoint.post
+
+    def counted(*args, **kwargs):
+        posts.append(args[0])
+        return send(*args, **kwargs)
+    store.query_endpoint.post = counted
+    with store.reading():
+        store.prefetch([A, b])
+        assert len(posts) == 1                                   # both subjects in one request
+        assert store.value(A, P) == Literal(1) and store.value(A, q) == b and store.value(b, P) == Literal(5)
+        assert store.objects(A, P, (G_WORLD,)) == [Literal(1)] and store.value(A, P, (G_LOG,)) is None
+        assert len(posts) == 1
+        other.apply(ChangeSet(remove=[(b, P, Literal(5), G_WORLD)], add=[(b, P, Literal(6), G_WORLD)]))
+        store.apply(ChangeSet(remove=[(A, P, Literal(1), G_WORLD)], add=[(A, P, Literal(2), G_WORLD)]))
+        assert store.value(A, P) == Literal(2)                   # its own write: A fetched again
+        assert store.value(b, P) == Literal(5)                   # another client's: within this decision, not yet
+        fetched = len(posts)
+        with store.reading():                                    # nested: the same decision
+            assert store.value(A, q) == b and len(posts) == fetched
+    assert store.value(b, P) == Literal(6)                       # the next decision sees it
+    assert store.value(b, P) == Literal(6) and len(posts) == fetched + 2   # outside a decision: a request each

@@ -67,7 +67,7 @@ def run_rostest(suite, tmp_path, args=(), timeout=600):
 # Whole-job suites of a kind CI already runs, run with --long to keep CI within its time (a whole job costs 2-4
 # minutes): job_hicem_kill (a node killed mid-job: job_locem_kill and job_pemkre_kill run in CI; HICEM's kill -9
 # resume from its HDICT is also run by hicem_process and hicem_pemkre_ros, without the whole job)
-LONG_SUITES = ("job_hicem_kill",)
+LONG_SUITES = ("job_hicem_kill", "job_locem_kill")   # the kill kind stays in CI with job_pemkre_kill + test_power_loss
 
 
 def _suite_param(suite):

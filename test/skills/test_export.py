@@ -19,10 +19,10 @@ def test_export_writes_turtle_that_round_trips_the_skill_count(tmp_path, shipped
     proc = subprocess.run([sys.executable, "-m", "locem_bridge.skills", "export", "--robot", ROBOT, "--trees", TREES,
                            "--out", str(out)], capture_output=True, text=True, env=child_env(), timeout=120)
     assert proc.returncode == 0, proc.stderr
-    assert "46 skills (36 basic, 10 composite; 46 offered)" in proc.stdout
+    assert "47 skills (37 basic, 10 composite; 47 offered)" in proc.stdout
     g = Graph().parse(str(out), format="turtle")
     skills = set(g.subjects(RDF.type, SK.BasicSkill)) | set(g.subjects(RDF.type, SK.CompositeSkill))
-    assert len(skills) == len(shipped_model.skills()) == 46
+    assert len(skills) == len(shipped_model.skills()) == 47
     robot = URIRef("https://locem-bridge.example.org/robot/rbkairos_ur10e/robot")
     assert set(g.objects(robot, SK.providesSkill)) == skills
     # Protégé: the file is an ontology importing the vocabulary, and the catalog beside it maps those IRIs to files

@@ -27,7 +27,7 @@ from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Seque
 
 import numpy as np
 
-from locem_bridge.common.raster_progress import progress_text
+from locem_bridge.common.raster_progress import lane_heights, progress_text
 from locem_bridge.locem.errors import NotReady
 from locem_bridge.locem.registry import Arg, CommandSpec
 
@@ -159,6 +159,13 @@ WALL_READY = CommandSpec(
 HOME = CommandSpec(
     "HOME", "Process outputs off, arm to its home pose.", resources=frozenset({"arm", "tool"}), category=CATEGORY,
     timeout=60.0, result=(("q", "joint positions"),), pausable=True, capability="sk:cap_ArmHome")
+GET_TOOL_POINT = CommandSpec(
+    "GET_TOOL_POINT", "Read where the active tool works now, in the map frame: its TCP point and axis (base odometry, "
+    "the arm's mount and lift applied; the tool's TCP offset set on the controller first, nothing moves). After a "
+    "power loss the arm stands where the work stopped: HICEM reads it back before anything moves the arm.",
+    resources=frozenset({"arm", "tool"}), category=CATEGORY, timeout=3.0,
+    result=(("point", "[x, y, z] TCP point in map, m"), ("axis", "[x, y, z] tool axis in map (into the wall at work)"),
+            ("tool", "the active tool ('' none)")))
 
 
 
@@ -166,7 +173,7 @@ HOME = CommandSpec(
 def wall_specs(tools: Tuple[str, ...]) -> Tuple[CommandSpec, ...]:
     """The wall commands of a robot with these tools (MOUNT_TOOL's choices)."""
     return (SCAN, mount_tool_spec(tuple(tools)), APPLY_TAPE_START, APPLY_TAPE, SPRAY_AREA, SAND_AREA, WALL_READY,
-            HOME)
+            HOME, GET_TOOL_POINT)
 
 
 def specs_for(robot: Mapping[str, Any]) -> Tuple[CommandSpec, ...]:
@@ -789,7 +796,7 @@ class WallCommands:
     def handlers(self) -> Dict[str, Any]:
         out = {"SCAN": self.scan, "MOUNT_TOOL": self.mount_tool, "APPLY_TAPE_START": self.apply_tape_start,
                 "APPLY_TAPE": self.apply_tape, "SPRAY_AREA": self.spray_area, "SAND_AREA": self.sand_area,
-                "WALL_READY": self.wall_ready, "HOME": self.home}
+                "WALL_READY": self.wall_ready, "HOME": self.home, "GET_TOOL_POINT": self.get_tool_point}
         if self.changer_fitted:
             del out["MOUNT_TOOL"]
         return out
@@ -844,10 +851,14 @@ class WallCommands:
         moved[2, 3] = self.lift.height()
         return moved
 
+    def _map_arm(self) -> np.ndarray:
+        """``map <- arm base`` now: the base's odometry pose and the arm's mount (at the lift's height)."""
+        x, y, th = self._need("base").pose()
+        return planar(x, y, th).dot(self.mount)
+
     def to_arm(self, point: Sequence[float], normal: Sequence[float]) -> List[float]:
         """TCP pose (arm base frame) at a map ``point`` facing the wall with inward ``normal``."""
-        x, y, th = self._need("base").pose()
-        t_map_arm = planar(x, y, th).dot(self.mount)
+        t_map_arm = self._map_arm()
         try:
             frame = tool_frame_facing(point, normal)
         except ValueError as error:
@@ -964,9 +975,18 @@ class WallCommands:
         arm.set_tcp([float(v) for v in cfg["tcp"]])
         arm.set_payload(float(cfg["mass"]), [float(v) for v in cfg["cog"]])
         self.active_tool = tool
-        if self.tool_listener is not None and tool is not None:
-            self.tool_listener(tool)
+        if self.tool_listener is not None:
+            self.tool_listener(tool or "")           # "": nothing on the flange
         return {"tool": tool or "", "tcp": cfg["tcp"], "mass": cfg["mass"]}
+
+    def get_tool_point(self, ctx: Any) -> Dict[str, Any]:
+        self._apply_tool()              # a restarted controller holds the installation's TCP, not the tool's
+        time.sleep(0.02)                # its measured TCP pose follows the new offset within a control cycle or two
+        frame = self._map_arm().dot(pose_to_matrix(self._need("arm").tcp_pose()))
+        point = [round(float(v), 5) for v in frame[:3, 3]]
+        axis = [round(float(v), 5) for v in frame[:3, 2]]
+        return {"point": point, "axis": axis, "tool": self.active_tool or "",
+                "message": "%s at %.4f %.4f %.4f" % (self.active_tool or "flange", point[0], point[1], point[2])}
 
     def apply_tape_start(self, ctx: Any, x0: float, y0: float, z0: float, x1: float, y1: float, z1: float,
                          nx: float, ny: float, nz: float, approach: float) -> Dict[str, Any]:
@@ -1015,11 +1035,9 @@ class WallCommands:
 
     @staticmethod
     def _lane_heights(height: float, spacing: float) -> List[float]:
-        """Heights of a raster's lanes above the area's origin: bottom to top, ``spacing`` at most apart."""
-        if height <= 1e-9:
-            return [0.0]                 # no extent across the lanes: one lane (a vertical pass of width 0)
-        lanes = max(1, int(math.ceil(height / spacing - 1e-9))) + 1
-        return [height * k / (lanes - 1) for k in range(lanes)] if lanes > 1 else [height / 2.0]
+        """Heights of a raster's lanes above the area's origin
+        (:func:`~locem_bridge.common.raster_progress.lane_heights`)."""
+        return list(lane_heights(height, spacing))
 
     @staticmethod
     def _raster_lanes(heights: Sequence[float], width: float, run_in: float,

@@ -23,6 +23,11 @@ they equal ``tape_coverage``, ``spray_coverage``, ``sand_coverage`` and ``spray_
 ``outcome.manual_touched`` (``tape_m``, ``spray_m2``, ``sand_m2``) is work the worksite found deep inside the
 planned manual parts, where the robot cannot reach: it should be 0.
 
+``launches`` lists the launches of the run (one unless it was resumed with ``tools/main.sh --resume``): ``started``,
+``last_seen`` (ISO local time), ``wall_clock_s`` and ``ended`` (the job's end reason in that launch, or ``cut off``
+when it has none: a power loss or kill); the processes, outcome, interventions and KPIs cover them all, and
+``timing`` then adds ``wall_clock_total_s`` and ``down_s`` (between the launches).
+
 ``ended`` says how the job ended: ``{"reason", "early", "detail", "not_run", "unread"}`` where ``reason`` is one
 of :data:`ENDED_REASONS`, ``early`` is true when the job did not run to its end (a reason of
 :data:`EARLY_REASONS`, or steps that never ran), ``not_run`` names those steps and
@@ -83,6 +88,7 @@ class RunRecord:
     manual_areas: List[Dict[str, Any]] = field(default_factory=list)
     ended: Optional["JobEnd"] = None
     manual_joints: List[Dict[str, Any]] = field(default_factory=list)
+    launches: List[Dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -170,7 +176,17 @@ def build_report(record: RunRecord, run: str) -> Dict[str, Any]:
         "timing": {k: round(v, 3) for k, v in record.timing.items()},
         "pictures": [os.path.basename(p) for p in record.pictures],
         "ended": (record.ended or JobEnd("completed")).as_dict(),
+        "launches": [_launch(x) for x in record.launches],
     }
+
+
+def _launch(launch: Dict[str, Any]) -> Dict[str, Any]:
+    """A launch of the run as the report shows it: ISO start and last sign of life, wall seconds, how it ended."""
+    def iso(t: Any) -> Optional[str]:
+        return None if t is None else datetime.datetime.fromtimestamp(float(t)).isoformat(timespec="seconds")
+    return {"started": iso(launch.get("started")), "last_seen": iso(launch.get("last_seen")),
+            "wall_clock_s": round(float(launch.get("wall_clock_s", 0.0)), 3),
+            "ended": launch.get("ended") or "cut off (no end recorded: a power loss, kill or crash)"}
 
 
 def render_markdown(report: Dict[str, Any]) -> str:
@@ -219,6 +235,12 @@ def render_markdown(report: Dict[str, Any]) -> str:
               "| collisions | %d |" % o["collisions"]]
     if not o.get("measured", True):
         lines += ["", "The worksite's outcome could not be measured: the numbers above are not measurements."]
+    if len(report.get("launches") or []) > 1:
+        lines += ["", "## Launches", "", "The run was resumed: one report over its %d launches." % len(
+            report["launches"]), "", "| launch | started | last seen | wall clock | ended |",
+            "| --- | --- | --- | --- | --- |"]
+        lines += ["| %d | %s | %s | %.0f s | %s |" % (n, x["started"], x["last_seen"], x["wall_clock_s"], x["ended"])
+                  for n, x in enumerate(report["launches"], 1)]
     if report.get("timing"):
         lines += ["", "## Time", "", "| part | seconds |", "| --- | --- |"]
         lines += ["| %s | %.2f |" % kv for kv in report["timing"].items()]

@@ -57,15 +57,18 @@ class JobTracker:
         self.manual_joints: List[Dict[str, Any]] = []
         self.current: Optional[int] = None
         self._started = 0.0
+        self._carried = 0.0
         self._tasks: Dict[str, List[str]] = {}
         self._last_task = ""
         self._done: Optional[Dict[str, Any]] = None
 
     # -- feeding ------------------------------------------------------------------------------------------
-    def begin(self, index: int) -> None:
-        """The job node is about to start ``steps[index]``."""
+    def begin(self, index: int, carried_s: float = 0.0, resumed: bool = False) -> None:
+        """The job node is about to start ``steps[index]`` (``resumed``: to follow it as HICEM goes on with it after
+        a restart of the job, ``carried_s`` seconds already spent on it before)."""
         self.current = index
         self._started = self.clock()
+        self._carried = max(0.0, float(carried_s))
         self._tasks = {}
         self._last_task = ""
         self._joint_index = 0
@@ -75,7 +78,7 @@ class JobTracker:
         self._all_tasks: set = set()
         self._done = None
         step = self.steps[index]
-        self.say("%s starting %s" % (self._tag(), step.name))
+        self.say("%s %s %s" % (self._tag(), "resuming" if resumed else "starting", step.name))
 
     def on_state(self, state: Mapping[str, Any]) -> None:
         """A ``/hicem/state`` message (process, phase, action_type, task, skill, node, detail) as a dict."""
@@ -138,7 +141,7 @@ class JobTracker:
         final = self._done or {}
         phase = status or final.get("phase", "failed")
         record = ProcessRecord(step.name, step.iri, "succeeded" if phase == "ended" else phase,
-                               self.clock() - self._started, detail or final.get("detail", ""))
+                               self.elapsed(), detail or final.get("detail", ""))
         self.records.append(record)
         self.say("%s %s %s in %.1f s%s" % (self._tag(), step.name, record.status, record.duration_s,
                                           (": " + record.detail) if record.detail and record.status != "succeeded"
@@ -152,6 +155,10 @@ class JobTracker:
         return {"areas": [{"work": m["work"], "area": m["area"], "along": list(m["along"]),
                            "height": list(m["height"])} for m in list(self.manual_areas)],
                 "joints": [{"joint": m["joint"], "along": list(m["along"])} for m in list(self.manual_joints)]}
+
+    def elapsed(self) -> float:
+        """Seconds spent on the current process (before a restart of the job included); 0 when none runs."""
+        return 0.0 if self.current is None else self._carried + self.clock() - self._started
 
     @property
     def total_interventions(self) -> int:

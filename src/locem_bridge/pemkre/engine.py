@@ -571,11 +571,13 @@ class ProcessEngine:
 
     def next_action(self, process: Optional[str] = None) -> NextAction:
         """The next high-level action of ``process`` (default: the running one); see the module docstring."""
-        with self._lock:
+        with self._lock, self.store.reading():   # one fetch per subject (a server's round trip) per decision
             sp = check_iri(process, "process IRI") if process else self._active
             if sp is None:
                 raise TaskStateError("no process has been started; call start_process first")
             state = self._state(sp)
+            if state.task is not None:
+                self.store.prefetch([state.task])
             if state.status == "ended":
                 return NextAction("ended", str(sp), message=self._outcome(state))
             if state.status == "failed":
@@ -822,7 +824,7 @@ class ProcessEngine:
 
         A ``request_id`` already applied to this task answers ``repeated=True`` and changes nothing.
         """
-        with self._lock:
+        with self._lock, self.store.reading():
             if status not in TASK_STATUSES:
                 raise InvalidStatusError("task status %r is not allowed; use one of %s" % (status, ", ".join(TASK_STATUSES)))
             rid = _check_request_id(request_id)
@@ -845,6 +847,7 @@ class ProcessEngine:
             sp = self._v(t, _P_partOfProcess)
             if sp is None:
                 raise UnknownTaskError("no task <%s> is known; task IRIs come from next_action" % t)
+            self.store.prefetch([sp])
             state = self._state(sp)  # type: ignore[arg-type]
             current_iri = self._v(t, _P_status)
             current = self.model.status_name.get(current_iri, "")

@@ -354,6 +354,8 @@ class IncrementalReasoner:
             return changes
         if any(t[1] in self._transitive_family for t in removed | added):
             return self._with_full_recompute(store, changes, budget)
+        # the look-ups below are about these nodes: one fetch on a store whose reads are round trips
+        store.prefetch({x for t in removed | added for x in (t[0], t[2]) if not isinstance(x, Literal)})
         r = self.rules
         inf_g = (G_ABOX_INFERRED,)
         dead: Set[Triple] = set(removed)

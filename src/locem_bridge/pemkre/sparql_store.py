@@ -86,6 +86,7 @@ import socket
 import time
 import threading
 import uuid
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Set, Tuple
 
@@ -96,7 +97,7 @@ from rdflib.term import Node
 from .errors import InvalidParameterError, QueryError, StoreError, StoreUnavailable
 from .oxigraph_store import check_query
 from .sparql_http import Answer, Endpoint, HttpStatusError, RetryPolicy
-from .sparql_text import iri_text, json_rows, term_text, unskolem, values_block, values_position
+from .sparql_text import SKOLEM_PREFIX, iri_text, json_rows, term_text, unskolem, values_block, values_position
 from .store import (ASSERTED_GRAPHS, G_META, INFERRED_GRAPHS, ChangeSet, PreparedQuery, Quad, QueryResult, Triple,
                     TripleStore, conflict_error)
 from .vocab import GRAPHS, META
@@ -185,6 +186,12 @@ class SparqlStore(TripleStore):
         self._unknown: Dict[str, _Unknown] = {}
         self._lock = threading.RLock()
         self._closed = False
+        #: within reading() (per thread: the engine's decisions): every quad of each subject fetched (PEMKRE's
+        #: graphs), by subject; a write or a change of the graphs bumps the generation (a fetch under way when it
+        #: happened is not kept)
+        self._reading = threading.local()
+        self._by_subject: Dict[Node, List[Quad]] = {}
+        self._generation = 0
         self._refresh_dataset()
         if check:
             self.check()
@@ -216,6 +223,7 @@ class SparqlStore(TripleStore):
         return sorted(found)  # type: ignore[arg-type]
 
     def _refresh_dataset(self) -> None:
+        self._forget_all()                  # fetched over the graphs known until now
         if self.union_default_graph:
             self._dataset = []
             return
@@ -281,8 +289,71 @@ class SparqlStore(TripleStore):
         return QueryResult(kind="SELECT", variables=names, rows=rows)
 
     # ---------------------------------------------------------------- reads
+    @contextmanager
+    def reading(self) -> Iterator[None]:
+        depth = getattr(self._reading, "depth", 0)
+        self._reading.depth = depth + 1
+        try:
+            yield
+        finally:
+            self._reading.depth = depth
+            if not depth:
+                self._forget_all()
+
+    #: subjects per prefetch request
+    PREFETCH_CHUNK = 200
+
+    def prefetch(self, subjects: Iterable[Node]) -> None:
+        if not getattr(self._reading, "depth", 0):
+            return
+        with self._lock:
+            graphs = self._known_graphs()
+            generation = self._generation
+            missing = sorted({x for x in subjects if isinstance(x, URIRef) and not x.startswith(SKOLEM_PREFIX)
+                              and x not in self._by_subject})
+        if not graphs:
+            return
+        for i in range(0, len(missing), self.PREFETCH_CHUNK):
+            chunk = missing[i:i + self.PREFETCH_CHUNK]
+            text = "SELECT ?s ?p ?o ?g WHERE { VALUES ?g { %s } VALUES ?s { %s } GRAPH ?g { ?s ?p ?o } }" % (
+                " ".join(term_text(g) for g in graphs), " ".join(term_text(x) for x in chunk))
+            doc = self._select_doc(text, "the quads of %d subjects" % len(chunk), dataset=False)
+            _, rows = json_rows(doc, self.query_endpoint.name)
+            found: Dict[Node, List[Quad]] = {x: [] for x in chunk}
+            for r in rows:
+                held = found.get(r["s"])  # type: ignore[arg-type]
+                if held is not None:
+                    held.append((r["s"], r["p"], r["o"], r["g"]))  # type: ignore[arg-type]
+            with self._lock:
+                if self._generation != generation:    # written meanwhile: what was fetched may be older
+                    return
+                self._by_subject.update(found)
+
+    def _forget(self, quads: Iterable[Quad]) -> None:
+        """A write touches these quads: their subjects are fetched again when next looked up."""
+        with self._lock:
+            self._generation += 1
+            for q in quads:
+                self._by_subject.pop(q[0], None)
+
+    def _forget_all(self) -> None:
+        with self._lock:
+            self._generation += 1
+            self._by_subject.clear()
+
     def quads(self, s: Optional[Node] = None, p: Optional[Node] = None, o: Optional[Node] = None,
               graphs: Optional[Sequence[URIRef]] = None) -> Iterator[Quad]:
+        if getattr(self._reading, "depth", 0) and isinstance(s, URIRef):
+            self.prefetch([s])
+            with self._lock:
+                held = self._by_subject.get(s)
+                known = None if held is None else set(self._known_graphs())
+            if held is not None and known is not None and (graphs is None or all(g in known for g in graphs)):
+                wanted = known if graphs is None else set(graphs)
+                if isinstance(o, Literal) and o.datatype == XSD.string and not o.language:
+                    o = Literal(str(o))           # as the server's answers give it (sparql_text.json_term)
+                return iter([q for q in held if q[3] in wanted and (p is None or q[1] == p)
+                             and (o is None or q[2] == o)])
         pattern: List[str] = []
         for name, term in (("s", s), ("p", p), ("o", o)):
             if term is None:
@@ -331,6 +402,9 @@ class SparqlStore(TripleStore):
         except InvalidParameterError as exc:
             raise StoreError("cannot write this change (nothing was written): %s" % exc) from None
         with self._lock:
+            if self._unknown:               # a write whose fate is found out now may show up in any subject
+                self._forget_all()
+            self._forget(list(changes.remove) + list(changes.add) + list(changes.expect))
             self._settle_unknown_writes()
             if changes.expect:
                 self._apply_conditional(changes, removes, adds, expects)
@@ -518,6 +592,7 @@ class SparqlStore(TripleStore):
             raise StoreError("cannot replace graph %s: %s" % (graph, exc)) from None
         self._know_graphs([graph])
         with self._lock:
+            self._forget_all()
             self._settle_unknown_writes()   # a late write must not land in the graph after it was replaced
             first = "DROP SILENT GRAPH %s" % g
             if chunks:
@@ -533,6 +608,7 @@ class SparqlStore(TripleStore):
         graphs = sorted(g for g in set(self.refresh_graphs()) | self._graphs | {G_CLAIMS}
                         if str(g).startswith(str(GRAPHS)))
         with self._lock:
+            self._forget_all()
             self._settle_unknown_writes()   # a late write must not bring data back into the fresh store
             self._done_tokens = []
             self._update(" ;\n".join("DROP SILENT GRAPH %s" % term_text(g) for g in graphs),

@@ -29,6 +29,7 @@ Backends: :class:`~locem_bridge.pemkre.journal_store.JournaledStore` and
 import logging
 import weakref
 from abc import ABC, abstractmethod
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
 
@@ -255,6 +256,18 @@ class TripleStore(ABC):
 
     def flush(self) -> None:
         """Push buffered writes to disk (no-op for stores that never buffer)."""
+
+    @contextmanager
+    def reading(self) -> Iterator[None]:
+        """A stretch of work (one decision) whose look-ups by subject may be answered from one fetch of each
+        subject's quads: a store whose every read is a round trip (a server) keeps what it fetched until the
+        outermost ``reading()`` ends, and forgets a subject when it writes one of its quads. Another client's write
+        meanwhile is seen at the next stretch (conditional changes are still checked by the store). The embedded
+        stores read directly: a no-op."""
+        yield
+
+    def prefetch(self, subjects: Iterable[Node]) -> None:
+        """Within :meth:`reading`: fetch every quad of these subjects at once (a hint; no-op by default)."""
 
     def maintain(self) -> None:
         """Housekeeping when due (cheap to call often; the engine calls it after each change): drop what removed

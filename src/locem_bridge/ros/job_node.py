@@ -6,7 +6,11 @@ Parameters (private): ``job`` (YAML with ``steps: [{name, process, options}]``, 
 ``settings`` (JSON copied into the report; ``devices`` is added: the device addresses LOCEM was given, i.e. the
 robot file's with ``locem/robot_overrides`` merged), ``run`` (run folder name; default the start time),
 ``peer_wait`` (s to wait for HICEM or PEMKRE when they are away, default 120; see :class:`ProcessSequencer`: the
-job goes on with the next process only when a process failed by itself). Services used: ``hicem/start_process``,
+job goes on with the next process only when a process failed by itself), ``journal`` (the run's journal file,
+:mod:`locem_bridge.job.journal`; empty: none), ``resume`` (true: go on with the run of that journal -- the processes
+it or PEMKRE's log (``pemkre/query kpi_by_process``) shows ended are not run again, the one HICEM resumes from its
+HDICT is followed, not started, and the report covers every launch; false: a fresh run, refused when the journal
+exists). Services used: ``hicem/start_process``,
 ``sim/outcome``, ``sim/scan``, ``sim/save_outcome``, and ``pemkre/query`` for the KPI table when present. Exits when the job is
 done (0 when every process ended, 1 otherwise), so a launch file can mark it ``required``.
 
@@ -32,6 +36,8 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import rospy
 
+from locem_bridge.common.config_errors import ConfigError
+from locem_bridge.job.journal import NOT_STARTED, SAVE_PERIOD_S, JobJournal, JournalError, resume_point
 from locem_bridge.job.report import JobEnd, RunRecord, write_report
 from locem_bridge.job.steps import load_steps
 from locem_bridge.job.tracker import TERMINAL_PHASES, JobStep, JobTracker, with_manual_plan
@@ -55,6 +61,7 @@ def kpi_rows(reply: Any) -> List[Dict[str, Any]]:
 #: HICEM's words for a process that failed because PEMKRE was away (hicem/controller.py, ros/hicem_pemkre.py),
 #: not because one of its tasks failed
 _PEER_AWAY = re.compile(r"PEMKRE .*failed: \S+ did not answer within")
+RESUME_LOOK_S = 5.0         # a resumed job waits this long for HICEM to name the process it goes on with
 
 
 class ProcessSequencer:
@@ -69,24 +76,40 @@ class ProcessSequencer:
 
     def __init__(self, tracker: JobTracker, timeout: float, peer_wait: float, reruns: int = 2,
                  while_waiting: Callable[[], None] = lambda: None,
-                 shutdown_reason: Callable[[], str] = lambda: "ROS shutdown") -> None:
+                 shutdown_reason: Callable[[], str] = lambda: "ROS shutdown",
+                 checkpoint: Callable[[], None] = lambda: None) -> None:
         self.tracker = tracker
         self.timeout = timeout
         self.peer_wait = peer_wait
         self.reruns = reruns
-        self.last_state: Dict[str, str] = {}
+        self.last_state: Dict[str, Any] = {}
         self.while_waiting = while_waiting          # called about every 0.1 s while a process runs
         self.shutdown_reason = shutdown_reason
+        self.checkpoint = checkpoint                # called when a process begins and when it ends (the journal)
         self.ended: Optional[JobEnd] = None         # why the job must end here, when run() says so
 
     def _shut_down(self, step: JobStep) -> bool:
         self.tracker.end(status="interrupted", detail="launch shut down")
+        self.checkpoint()
         self.ended = JobEnd("shutdown", "the launch shut down (%s) while %s was running" % (
             self.shutdown_reason(), step.name))
         return False
 
-    def on_state(self, msg: Any) -> None:
-        self.last_state = {"process": msg.process, "phase": msg.phase}
+    def on_state(self, state: Dict[str, Any]) -> None:
+        """A ``/hicem/state`` message as the tracker takes it (process, phase, action_type, task, ...)."""
+        self.last_state = dict(state)
+
+    def _hicem_goes_on(self, step: JobStep, look_s: float = RESUME_LOOK_S) -> bool:
+        """After a restart of the job: True when HICEM resumed ``step``'s process by itself (its HDICT held it):
+        its state names the process within ``look_s`` s, running or already ended (then handed to the tracker)."""
+        deadline = time.monotonic() + look_s
+        while not rospy.is_shutdown() and time.monotonic() < deadline:
+            state = dict(self.last_state)
+            if state.get("process") == step.iri and state.get("phase") not in ("", "idle"):
+                self.tracker.on_state(state)          # an end HICEM reached before the job looked is kept
+                return True
+            time.sleep(0.1)
+        return False
 
     def _start(self, step: JobStep) -> Any:
         """(success, message) of HICEM's start_process, waiting for HICEM while it is away."""
@@ -111,15 +134,22 @@ class ProcessSequencer:
                 time.sleep(0.5)
         return False, "the launch is shutting down"
 
-    def run(self, index: int, step: JobStep) -> bool:
-        """Run ``step`` to its end; False when the job must end here (not started, timeout, STOP)."""
+    def run(self, index: int, step: JobStep, resuming: bool = False, carried_s: float = 0.0) -> bool:
+        """Run ``step`` to its end; False when the job must end here (not started, timeout, STOP). ``resuming``:
+        the job was restarted while ``step`` ran (``carried_s`` s spent on it then): when HICEM goes on with it by
+        itself the job follows it instead of starting it."""
         for attempt in range(self.reruns + 1):
-            self.tracker.begin(index)
-            ok, message = self._start(step)
+            again = resuming and attempt == 0
+            self.tracker.begin(index, carried_s=carried_s, resumed=again)
+            self.checkpoint()
+            if again and self._hicem_goes_on(step):
+                ok, message = True, "resumed by HICEM"
+            else:
+                ok, message = self._start(step)
             if not ok:
                 if rospy.is_shutdown():
                     return self._shut_down(step)
-                self.tracker.end(status="failed", detail="not started: %s" % message)
+                self.tracker.end(status="failed", detail="%s: %s" % (NOT_STARTED, message))
                 self.ended = JobEnd("hicem_unreachable" if message.startswith("HICEM's start_process") else
                                     "process_failed", "%s not started: %s" % (step.name, message))
                 return False
@@ -134,6 +164,15 @@ class ProcessSequencer:
                 self.ended = JobEnd("process_timeout", "%s did not end within %.0f s" % (step.name, self.timeout))
                 return False
             final = self.tracker.finished
+            if again and final.get("phase") == "failed" and str(final.get("detail", "")).startswith(
+                    "resume failed") and attempt < self.reruns:
+                # HICEM could not go on with it from its HDICT: the process is started again (PEMKRE's world state
+                # makes it go on where it stopped), not counted as its own failure
+                print("[job] HICEM could not resume %s (%s); starting it again" % (step.name, final.get("detail")),
+                      flush=True)
+                self.tracker.end()
+                carried_s = self.tracker.records.pop().duration_s
+                continue
             if final.get("phase") == "failed" and _PEER_AWAY.search(final.get("detail", "")) and \
                     attempt < self.reruns:
                 # not the process's failure: wait for PEMKRE, then the same process again (its record replaced)
@@ -148,6 +187,7 @@ class ProcessSequencer:
                 continue
             # the operator pressed STOP: the job ends here; a failed process (a task of its own failed): go on
             record = self.tracker.end()
+            self.checkpoint()
             if record.status == "stopped":
                 self.ended = JobEnd("operator_stop", "%s stopped%s" % (step.name, (": " + record.detail)
                                                                        if record.detail else ""))
@@ -184,6 +224,17 @@ OUTCOME_PERIOD_S = 10.0     # the worksite's outcome is read this often while a 
 END_CALL_TIMEOUT_S = 2.0    # each call made to write the report (the launch may be shutting down)
 
 
+def _every(period_s: float, action: Callable[[], None]) -> Callable[[], None]:
+    """A callable that runs ``action`` when ``period_s`` passed since it last did."""
+    due = {"at": time.monotonic() + period_s}
+
+    def tick() -> None:
+        if time.monotonic() >= due["at"]:
+            due["at"] = time.monotonic() + period_s
+            action()
+    return tick
+
+
 class OutcomeCache:
     """The latest worksite outcome the job could read, and when (read in the background, never blocking)."""
 
@@ -197,13 +248,7 @@ class OutcomeCache:
 
     def refresh_every(self, period_s: float) -> Callable[[], None]:
         """A callable that refreshes the outcome when ``period_s`` passed since its last refresh."""
-        due = {"at": time.monotonic() + period_s}
-
-        def tick() -> None:
-            if time.monotonic() >= due["at"]:
-                due["at"] = time.monotonic() + period_s
-                self.refresh()
-        return tick
+        return _every(period_s, self.refresh)
 
     def refresh(self, wait: bool = False) -> None:
         if not self._busy.acquire(blocking=False):
@@ -235,6 +280,65 @@ def device_addresses(robot_path: str) -> Dict[str, Any]:
         return {"error": str(exc).splitlines()[0] if str(exc) else type(exc).__name__}
 
 
+def open_journal(path: str, steps: List[JobStep], resume: bool) -> Tuple[Optional[JobJournal], Optional[float]]:
+    """The run's journal at ``path`` (none without a path) and, when ``resume``, since when PEMKRE's processes
+    belong to this run (None: a fresh run). A journal that cannot be used for these steps is a configuration
+    error; a resume without a journal goes by PEMKRE's log alone (every process it holds counts)."""
+    if not path:
+        if resume:
+            raise ConfigError("resume needs the run's journal (the job node's ~journal parameter is empty)",
+                              key="journal")
+        return None, None
+    if not resume:
+        if os.path.exists(path):
+            raise ConfigError("%s exists: this run_id's run has begun before; give resume:=true to go on with it, "
+                              "or another run_id for a fresh run" % path, key="resume")
+        journal = JobJournal.fresh(path, steps)
+        since: Optional[float] = None
+    elif os.path.exists(path):
+        try:
+            journal = JobJournal.load(path, steps)
+        except JournalError as exc:
+            raise ConfigError(str(exc), key="resume")
+        since = journal.launches[0].started if journal.launches else 0.0
+    else:
+        print("[job] resume: no job journal at %s; going by PEMKRE's log alone" % path, flush=True)
+        journal, since = JobJournal.fresh(path, steps), 0.0
+    try:
+        journal.begin_launch()
+    except OSError as exc:
+        raise ConfigError("cannot write the job's journal: %s" % exc, key="journal")
+    return journal, since
+
+
+def save_journal(journal: JobJournal, tracker: JobTracker) -> None:
+    try:
+        journal.capture(tracker)
+    except OSError as exc:         # the job goes on; a resume would repeat what was not saved
+        rospy.logwarn_throttle(60.0, "job: the journal %s could not be written: %s" % (journal.path, exc))
+
+
+def resume_job(steps: List[JobStep], journal: JobJournal, tracker: JobTracker, since: float) -> Tuple[int, float]:
+    """Where the resumed job goes on (the index of the step, the time already spent on it): from the journal and
+    PEMKRE's execution log (``kpi_by_process``; the journal alone when PEMKRE does not answer)."""
+    rows: List[Dict[str, Any]] = []
+    try:
+        timed(lambda: rospy.wait_for_service("pemkre/query", timeout=30.0), 31.0, "pemkre/query")
+        rows = kpi_rows(timed(lambda: rospy.ServiceProxy("pemkre/query", PemkreQuery)("kpi_by_process", [], []),
+                              10.0, "pemkre/query kpi_by_process"))
+    except CallFailed as exc:
+        print("[job] resume: PEMKRE's log could not be read (%s); going by the job's journal alone" % exc, flush=True)
+    point = resume_point(steps, journal, rows, since)
+    journal.restore(tracker, point.records)
+    for note in point.notes:
+        print("[job] resume: %s" % note, flush=True)
+    done = ", ".join("%s %s" % (r.name, r.status) for r in point.records) or "none"
+    print("[job] resuming the run (launch %d): done before: %s; %s" % (
+        len(journal.launches), done, ("going on with %s" % steps[point.index].name) if point.index < len(steps)
+        else "nothing left to run"), flush=True)
+    return point.index, point.carried_s
+
+
 @config_guard("job")
 def main() -> None:
     rospy.init_node("job")
@@ -247,6 +351,7 @@ def main() -> None:
     settings = json.loads(param("settings", "{}"))
     if settings.get("robot"):       # read now, while the master is surely there
         settings.setdefault("devices", device_addresses(str(settings["robot"])))
+    journal, since = open_journal(param("journal", ""), steps, param("resume", False))
     outcomes = OutcomeCache()
     scan: Dict[str, Any] = {}
     not_started: Optional[JobEnd] = None       # the job could not begin: still a report saying why
@@ -266,24 +371,38 @@ def main() -> None:
     totals = {"joints": len(outcomes.outcome.get("joints", {})), "areas": len(scan.get("areas", []))}
     tracker = JobTracker(steps, totals, say=lambda line: print(line, flush=True))
     outcomes.manual = tracker.manual_plan
+    checkpoint = (lambda: save_journal(journal, tracker)) if journal is not None else (lambda: None)
+    refresh = outcomes.refresh_every(OUTCOME_PERIOD_S)
+    keep = _every(SAVE_PERIOD_S, checkpoint)
     sequencer = ProcessSequencer(tracker, timeout, param("peer_wait", 120.0),
-                                 while_waiting=outcomes.refresh_every(OUTCOME_PERIOD_S),
-                                 shutdown_reason=lambda: shutdown.get("reason", "ROS shutdown"))
-    rospy.Subscriber("hicem/state", HicemState, sequencer.on_state)
-    rospy.Subscriber("hicem/state", HicemState, lambda m: tracker.on_state(
-        {"process": m.process, "phase": m.phase, "action_type": m.action_type, "task": m.task,
-         "skill": getattr(m, "skill", ""), "detail": m.detail}))
+                                 while_waiting=lambda: (refresh(), keep()),
+                                 shutdown_reason=lambda: shutdown.get("reason", "ROS shutdown"),
+                                 checkpoint=checkpoint)
+
+    def on_state(m: Any) -> None:
+        state = {"process": m.process, "phase": m.phase, "action_type": m.action_type, "task": m.task,
+                 "skill": getattr(m, "skill", ""), "detail": m.detail}
+        sequencer.on_state(state)
+        tracker.on_state(state)
+    rospy.Subscriber("hicem/state", HicemState, on_state)
     rospy.Subscriber("hicem/prompts", HicemPrompt, lambda m: tracker.on_prompt(
         {"event": m.event, "kind": m.kind, "text": m.text, "answer": m.answer}))
     started = time.time()
     time.sleep(0.5)  # let the latched state arrive before the first start
     sequencer.ended = not_started
+    first, carried = 0, 0.0
+    if journal is not None and since is not None and not_started is None:
+        first, carried = resume_job(steps, journal, tracker, since)
+        checkpoint()
     for index, step in enumerate(steps if not_started is None else []):
+        if index < first:
+            continue
         if rospy.is_shutdown():
             sequencer.ended = JobEnd("shutdown", "the launch shut down (%s) before %s started" % (
                 shutdown.get("reason", "ROS shutdown"), step.name))
             break
-        if not sequencer.run(index, step):
+        if not sequencer.run(index, step, resuming=index == first and since is not None,
+                             carried_s=carried if index == first else 0.0):
             break
         outcomes.refresh()
     ended = sequencer.ended
@@ -292,7 +411,9 @@ def main() -> None:
         ended = JobEnd("process_failed", "; ".join("%s %s%s" % (r.name, r.status, (": " + r.detail) if r.detail
                                                                  else "") for r in failed)) if failed else \
             JobEnd("completed")
-    ended.not_run = [s.name for s in steps[len(tracker.records):]]
+    # steps never run, and steps HICEM never started (a resume runs them): the job did not run to its end
+    ended.not_run = [r.name for r in tracker.records if r.detail.startswith(NOT_STARTED)] + \
+        [s.name for s in steps[len(tracker.records):]]
     if ended.reason == "process_failed":
         try:   # a process that failed because PEMKRE was gone is not the process's own failure
             timed(lambda: rospy.wait_for_service("pemkre/query", timeout=END_CALL_TIMEOUT_S), END_CALL_TIMEOUT_S + 0.5,
@@ -321,9 +442,19 @@ def main() -> None:
     except CallFailed as exc:
         ended.unread.append("KPI table (%s)" % exc)
     settings.setdefault("interventions_by_kind", tracker.interventions)
+    timing = {"wall_clock_s": time.time() - started}
+    launches: List[Dict[str, Any]] = []
+    if journal is not None:
+        try:
+            journal.capture(tracker)
+            journal.end_launch(ended.reason)
+        except OSError as exc:
+            print("[job] the job's journal %s could not be written: %s" % (journal.path, exc), flush=True)
+        launches = journal.report_launches()
+        timing.update(journal.report_timing())       # one report over every launch of the run
     record = RunRecord(processes=tracker.records, outcome=outcome, operator_interventions=tracker.total_interventions,
-                       collisions=int(outcome.get("collisions", 0)), settings=settings, kpis=kpis,
-                       timing={"wall_clock_s": time.time() - started},
+                       collisions=int(outcome.get("collisions", 0)), settings=settings, kpis=kpis, launches=launches,
+                       timing=timing,
                        pictures=[os.path.join(pictures_dir, p) for p in outcome.get("pictures", [])],
                        manual_areas=tracker.manual_areas, manual_joints=tracker.manual_joints, ended=ended)
     folder = write_report(record, results_dir, run=param("run", "") or None)

@@ -38,6 +38,8 @@ import actionlib
 import rospy
 from actionlib_msgs.msg import GoalStatus
 
+from locem_bridge.bridges.errors import BadRequest
+from locem_bridge.bridges.tool_memory import read_tool_file, write_tool_file
 from locem_bridge.common.locem_codes import Code
 from locem_bridge.locem.core import LocemCore
 from locem_bridge.locem.dispatcher import DEFAULT_MAX_RUNNING
@@ -253,12 +255,28 @@ def _action_result(response: Optional[Response]) -> CommandResult:
 
 def _keep_tool(wall: Any) -> None:
     """The mounted tool outlives a LOCEM restart: kept in the private parameter ``~active_tool`` (the master
-    outlives a respawned node) and restored from it at start."""
-    last = param("active_tool", "")
+    outlives a respawned node) and, given ``~tool_file``, in that file too (it outlives the master: a power loss),
+    and restored from the parameter, else the file, at start."""
+    last, source = param("active_tool", ""), "~active_tool"
+    path = param("tool_file", "")
+    if not last and path:
+        last, source = read_tool_file(path), path
     if last:
-        wall.restore_tool(last)
-        rospy.logwarn("LOCEM restarted with the %s mounted (from ~active_tool)", last)
-    wall.tool_listener = lambda tool: rospy.set_param("~active_tool", tool)
+        try:
+            wall.restore_tool(last)
+            rospy.logwarn("LOCEM restarted with the %s mounted (from %s)", last, source)
+        except BadRequest as exc:       # a robot file changed since: start with no tool, MOUNT_TOOL tells it again
+            rospy.logwarn("LOCEM restarted without a tool: %s names %s, not a tool of this robot (%s)", source, last,
+                          exc)
+
+    def keep(tool: str) -> None:
+        rospy.set_param("~active_tool", tool)
+        if path:
+            try:
+                write_tool_file(path, tool)
+            except OSError as exc:
+                rospy.logwarn("LOCEM could not keep the mounted tool in %s: %s", path, exc)
+    wall.tool_listener = keep
 
 
 @config_guard("locem")

@@ -14,19 +14,34 @@ Each run takes its own device addresses (loopback address, Modbus port, CAN chan
 :mod:`locem_bridge.job.runs`), so two runs on one machine never reach each other's devices; when none are left it
 refuses at once with one line naming what is taken and by which run (exit status 2).
 
+Every run keeps its state in ``<results-dir>/<run>.state/`` (PEMKRE's store, HICEM's HDICT, the simulated
+world's state, the job's journal and ``run.json``: the run's options), so a run cut short -- a power loss,
+``kill -9``, Ctrl-C -- goes on where it stopped with ``--resume [RUN]`` (default: the latest run): the same options
+(only ``--port``, ``--hmi-port``, ``--timeout``, ``--verbose``, ``--max-runs`` and ``--keep-state`` may be given
+again), the processes it
+finished are not run again, HICEM goes on with the interrupted one from its HDICT, the world from its saved maps,
+and the run's report covers every launch. A run whose report says it ran to its end is not started again, nor one
+whose launch still holds its lock (``<state>/run.lock``; its nodes may outlive a killed main.sh). The state folder of a
+run that ran to its end is removed (its report holds the results) unless ``--keep-state``.
+
 Node output other than the job's goes to the ROS log folder (``--verbose`` shows it).
 """
 
 import argparse
+import contextlib
+import fcntl
 import json
 import os
 import re
+import shutil
+import signal
 import subprocess
 import sys
 import threading
 import time
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
+from locem_bridge.common.files import write_whole
 from locem_bridge.job.report import run_name
 from locem_bridge.job.runs import RunEntry, RunRegistry, RunsError, addresses_of
 
@@ -35,6 +50,27 @@ from .processes import free_port
 from .startup import LINE as NODE_CONFIG_ERROR
 
 PROGRESS = re.compile(r"^\[(\d+/\d+ [^\]]+|job)\]")
+
+
+STATE_SUFFIX = ".state"      # <results-dir>/<run>.state: the run's state folder
+RUN_FILE = "run.json"         # in it: the run's options, for --resume
+#: options a resumed run may be given again (the others are the run's, from its run.json)
+RESUME_OPTIONS = ("results_dir", "resume", "port", "hmi_port", "timeout", "verbose", "max_runs", "keep_state")
+
+
+def state_folder(args: argparse.Namespace, run: str) -> str:
+    return os.path.join(os.path.abspath(args.results_dir), run + STATE_SUFFIX)
+
+
+def launch_args(args: argparse.Namespace) -> Dict[str, str]:
+    """The ``--launch-arg name:=value`` given, by name (the last of a name wins, as with roslaunch)."""
+    return dict(a.split(":=", 1) for a in args.launch_arg if ":=" in a)
+
+
+def run_state_dir(args: argparse.Namespace, run: str) -> str:
+    """Where the nodes keep ``run``'s state: its state folder, or the folder a ``state_dir:=`` launch argument
+    names (run.json stays in the state folder)."""
+    return launch_args(args).get("state_dir") or state_folder(args, run)
 
 
 def launch_command(args: argparse.Namespace, port: int, entry: Optional[RunEntry] = None) -> List[str]:
@@ -53,8 +89,10 @@ def launch_command(args: argparse.Namespace, port: int, entry: Optional[RunEntry
         cmd.append("extra_ontology_dirs:=%s" % ":".join(os.path.abspath(d) for d in args.ontologies))
     if args.trees:
         cmd.append("extra_trees_dirs:=%s" % ":".join(os.path.abspath(d) for d in args.trees))
-    if entry is not None:       # this run's own device addresses and run folder name
-        cmd += ["robot_overrides:=%s" % json.dumps(entry.addresses.overrides(), sort_keys=True), "run:=%s" % entry.run]
+    if entry is not None:       # this run's own device addresses, run folder name and state
+        cmd += ["robot_overrides:=%s" % json.dumps(entry.addresses.overrides(), sort_keys=True), "run:=%s" % entry.run,
+                "state_dir:=%s" % state_folder(args, entry.run), "run_id:=%s" % entry.run,
+                "resume:=%s" % ("true" if args.resume else "false")]
     return cmd + list(args.launch_arg)
 
 
@@ -88,9 +126,9 @@ def robot_file(launch_args: List[str], robot: str = "") -> str:
     return os.path.join(robots_dir(), "rbkairos_ur10e.yaml")    # the launch's default
 
 
-def claim_addresses(args: argparse.Namespace, ports: List[int]) -> RunEntry:
+def claim_addresses(args: argparse.Namespace, ports: List[int], run: str = "") -> RunEntry:
     """This run's slot in the machine's run registry: its own device addresses (raises NoFreeAddresses or
-    RunsError with a one-line reason)."""
+    RunsError with a one-line reason). ``run``: the name of a run to resume (else a new name, the start time)."""
     from locem_bridge.common.config_errors import ConfigError
     from locem_bridge.robot_file import load_robot
     try:
@@ -99,8 +137,12 @@ def claim_addresses(args: argparse.Namespace, ports: List[int]) -> RunEntry:
     except ConfigError as exc:
         raise RunsError("cannot read the device addresses: %s" % exc)
     results = os.path.abspath(args.results_dir)
-    return RunRegistry().claim(run_name(), addresses_of(robot), max_slots=args.max_runs, ports=ports,
-                               taken_names=lambda name: os.path.lexists(os.path.join(results, name)))
+    registry = RunRegistry()
+    if run:             # main() holds the run's lock: a live run of this name is another resume (claim adds -2)
+        return registry.claim(run, addresses_of(robot), max_slots=args.max_runs, ports=ports)
+    return registry.claim(run_name(), addresses_of(robot), max_slots=args.max_runs, ports=ports,
+                          taken_names=lambda name: os.path.lexists(os.path.join(results, name)) or
+                          os.path.lexists(os.path.join(results, name + STATE_SUFFIX)))
 
 
 def preflight(args: argparse.Namespace, robot_overrides: Optional[Dict[str, Any]] = None) -> Optional[str]:
@@ -111,7 +153,7 @@ def preflight(args: argparse.Namespace, robot_overrides: Optional[Dict[str, Any]
     from locem_bridge.common.folders import split_folders
 
     share = package_share()
-    launch = dict(a.split(":=", 1) for a in args.launch_arg if ":=" in a)
+    launch = launch_args(args)
 
     def path(name: str, default: str) -> str:
         return os.path.abspath(launch.get(name) or default)
@@ -182,6 +224,10 @@ def _follow(proc: "subprocess.Popen[str]", verbose: bool, found: Dict[str, str],
 
 def arguments(argv: Optional[List[str]] = None) -> argparse.Namespace:
     """The command line of :func:`main` (``tools/main.sh``'s arguments)."""
+    return _parser().parse_args(argv)
+
+
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--results-dir", default="results", help="folder receiving one subfolder per run")
     parser.add_argument("--time-scale", type=float, default=10.0, help="sim seconds per wall second (default 10: the "
@@ -204,13 +250,190 @@ def arguments(argv: Optional[List[str]] = None) -> argparse.Namespace:
     parser.add_argument("--verbose", action="store_true", help="show every node's output")
     parser.add_argument("--max-runs", type=int, default=8, help="runs at once on this machine, each on its own "
                         "device addresses (default 8)")
-    return parser.parse_args(argv)
+    parser.add_argument("--keep-state", action="store_true", help="keep the run's state folder (<results-dir>/"
+                        "<run>.state: PEMKRE's store with the execution log, HDICT, world state) when the job "
+                        "completed; by default it is removed then (the report holds the results) and kept otherwise, "
+                        "for --resume")
+    parser.add_argument("--resume", nargs="?", const="latest", default=None, metavar="RUN", help="go on with a run "
+                        "cut short (power loss, kill, Ctrl-C) where it stopped, with the options it began with: RUN "
+                        "names its folder under --results-dir (default: the latest run there)")
+    return parser
+
+
+class ResumeError(Exception):
+    """A run cannot be resumed (one line: which run, what is wrong, what there is)."""
+
+
+class ResumeDone(Exception):
+    """The run to resume ran to its end: nothing to do (``run``, its ``report``)."""
+
+    def __init__(self, run: str, report: str) -> None:
+        super().__init__(run)
+        self.run, self.report = run, report
+
+
+def _absolute(args: argparse.Namespace) -> Dict[str, Any]:
+    """``args`` as saved in run.json: file and folder options as absolute paths (a resume may run elsewhere)."""
+    saved = dict(vars(args))
+    for key in ("site", "job"):
+        saved[key] = os.path.abspath(saved[key]) if saved[key] else ""
+    if saved["robot"]:
+        saved["robot"] = resolve_robot(saved["robot"])
+    for key in ("ontologies", "trees"):
+        saved[key] = [os.path.abspath(d) for d in saved[key]]
+    saved["results_dir"] = os.path.abspath(saved["results_dir"])
+    saved["resume"] = None
+    return saved
+
+
+def write_run_file(args: argparse.Namespace, run: str) -> str:
+    """Create the run's state folder with its run.json (the run's options); returns the folder."""
+    folder = state_folder(args, run)
+    write_whole(os.path.join(folder, RUN_FILE),
+                json.dumps({"run": run, "started": time.time(), "args": _absolute(args)}, indent=1, sort_keys=True))
+    return folder
+
+
+def resumable_runs(results_dir: str) -> List[str]:
+    """The runs under ``results_dir`` that keep their state (a run.json), oldest first (names are start times)."""
+    try:
+        names = os.listdir(results_dir)
+    except OSError:
+        return []
+    return sorted(name[:-len(STATE_SUFFIX)] for name in names
+                  if name.endswith(STATE_SUFFIX) and os.path.isfile(os.path.join(results_dir, name, RUN_FILE)))
+
+
+def latest_run(results_dir: str) -> str:
+    """The newest run under ``results_dir``: a state folder or a run folder with its report ('' when none)."""
+    try:
+        names = os.listdir(results_dir)
+    except OSError:
+        names = []
+    runs = resumable_runs(results_dir) + [n for n in names if not os.path.islink(os.path.join(results_dir, n)) and
+                                          os.path.isfile(os.path.join(results_dir, n, "report.json"))]
+    return max(runs) if runs else ""
+
+
+def given_options(argv: List[str]) -> List[str]:
+    """The options (their ``dest`` names) written on the command line ``argv``, whatever their values."""
+    names = {flag: action.dest for action in _parser()._actions for flag in action.option_strings}
+    found: List[str] = []
+    for token in argv:
+        dest = names.get(token.split("=", 1)[0])
+        if dest is not None and dest not in found:
+            found.append(dest)
+    return found
+
+
+def resumed_arguments(given: argparse.Namespace, argv: Optional[List[str]] = None) -> Tuple[argparse.Namespace, str]:
+    """The options of the run ``given.resume`` names ("latest": the newest under ``given.results_dir``) with the
+    ones a resume may change taken from ``given``, and the run's name; ResumeError says why not (also for an
+    option of the command line ``argv`` a resume may not change, even given its default value)."""
+    results = os.path.abspath(given.results_dir)
+    runs = resumable_runs(results)
+    run = latest_run(results) if given.resume == "latest" else given.resume
+    if run not in runs:
+        report = finished_report(given, run) if run and given.resume == "latest" else ""
+        if report:
+            raise ResumeDone(run, report)
+        if given.resume == "latest":
+            raise ResumeError("no run to resume in %s%s (a run keeps its state in <results-dir>/<run>%s/%s)" % (
+                results, ": the latest, %s, keeps no state" % run if run else "", STATE_SUFFIX, RUN_FILE))
+        raise ResumeError("no run %r to resume in %s; runs there: %s" % (run, results, ", ".join(runs) or "none"))
+    defaults = arguments([])
+    changed = sorted(set(k for k, v in vars(given).items() if k not in RESUME_OPTIONS and v != getattr(defaults, k))
+                     | set(k for k in given_options(argv or []) if k not in RESUME_OPTIONS))
+    if changed:
+        raise ResumeError("%s cannot be given with --resume: run %s goes on with the options it began with (may be "
+                          "given: %s)" % (", ".join("--" + k.replace("_", "-") for k in changed), run,
+                                          ", ".join("--" + k.replace("_", "-") for k in RESUME_OPTIONS)))
+    path = os.path.join(results, run + STATE_SUFFIX, RUN_FILE)
+    try:
+        with open(path, encoding="utf-8") as handle:
+            saved = json.load(handle)["args"]
+        merged = vars(defaults)
+        merged.update({k: v for k, v in saved.items() if k in merged})
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise ResumeError("%s cannot be read: %s" % (path, exc))
+    keep = bool(merged.get("keep_state"))
+    merged.update({k: getattr(given, k) for k in RESUME_OPTIONS})
+    merged["results_dir"] = results
+    merged["keep_state"] = keep or given.keep_state
+    return argparse.Namespace(**merged), run
+
+
+def finished_report(args: argparse.Namespace, run: str) -> str:
+    """The report.md of ``run`` when its report says the job ran to its end (every process ran: completed, or a
+    process failed by itself), else '' (cut short, or no report)."""
+    folder = os.path.join(os.path.abspath(args.results_dir), run)
+    try:
+        with open(os.path.join(folder, "report.json"), encoding="utf-8") as handle:
+            ended = json.load(handle).get("ended") or {}
+    except (OSError, ValueError, AttributeError):
+        return ""
+    return os.path.join(folder, "report.md") if ended and not ended.get("early", True) else ""
+
+
+def lock_run(args: argparse.Namespace, run: str) -> int:
+    """Hold the run's lock (``<state>/run.lock``) for as long as this process or its launch lives (the descriptor
+    is handed to roslaunch); RunsError when another launch of the run holds it (its nodes may outlive a killed
+    main.sh)."""
+    folder = state_folder(args, run)
+    os.makedirs(folder, exist_ok=True)
+    fd = os.open(os.path.join(folder, "run.lock"), os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise RunsError("run %s is still running (a launch of it holds %s): stop it before resuming it"
+                        % (run, os.path.join(folder, "run.lock")))
+    return fd
+
+
+def check_journal(args: argparse.Namespace, run: str) -> Optional[str]:
+    """One line when the run's job journal cannot be resumed with the run's job file, else None."""
+    from locem_bridge.common.config_errors import ConfigError
+    from locem_bridge.job.journal import JobJournal, JournalError
+    from locem_bridge.job.steps import load_steps
+    launch = launch_args(args)
+    path = os.path.join(run_state_dir(args, run), run + "_job.json")
+    if not os.path.exists(path):
+        return None                 # the job node goes by PEMKRE's log alone (and says so)
+    job = launch.get("job") or args.job or os.path.join(package_share(), "config", "jobs", "plasterboard.yaml")
+    validate = launch.get("validate_lines") or ("true" if args.validate_lines else "false")
+    try:       # the steps as the job node reads them (the launch's validate_lines overrides the file's option)
+        JobJournal.load(path, load_steps(os.path.abspath(job), validate))
+    except (ConfigError, JournalError) as exc:
+        return str(exc) if isinstance(exc, JournalError) else exc.one_line()
+    return None
 
 
 def main(argv: Optional[List[str]] = None) -> int:
     args = arguments(argv)
     started = time.monotonic()
-    problem = preflight(args)
+    if threading.current_thread() is threading.main_thread():
+        # Ctrl-C / SIGINT stops the run (the job writes its report) also when this was started from a script in
+        # the background, which hands its children SIGINT ignored
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    resuming = ""
+    # a state folder given as a launch argument, as an absolute path (the nodes run in ROS_HOME)
+    args.launch_arg = ["state_dir:=%s" % os.path.abspath(a[len("state_dir:="):]) if a.startswith("state_dir:=") else a
+                       for a in args.launch_arg]
+    if args.resume is not None:
+        try:
+            args, resuming = resumed_arguments(args, sys.argv[1:] if argv is None else argv)
+            done = finished_report(args, resuming)
+            if done:
+                raise ResumeDone(resuming, done)
+        except ResumeError as exc:
+            print("[main] cannot resume: %s" % exc, flush=True)
+            return 2
+        except ResumeDone as exc:
+            print("[main] run %s ran to its end already: nothing to resume; report: %s" % (exc.run, exc.report),
+                  flush=True)
+            return 0
+    problem = preflight(args) or (check_journal(args, resuming) if resuming else None)
     if problem:
         print("[main] configuration error: %s" % problem, flush=True)
         return 2
@@ -218,19 +441,36 @@ def main(argv: Optional[List[str]] = None) -> int:
     used = set(registry.used_ports())
     args.hmi_port = args.hmi_port or free_port(avoid=used)
     port = args.port or free_port(avoid=used | {args.hmi_port})
+    lock = -1
     try:
-        entry = claim_addresses(args, [port, args.hmi_port])
-    except RunsError as exc:            # NoFreeAddresses included
+        if resuming:
+            lock = lock_run(args, resuming)
+        entry = claim_addresses(args, [port, args.hmi_port], run=resuming)
+        if resuming and entry.run != resuming:      # another resume of it claimed the name first
+            registry.release(entry.run)
+            raise RunsError("run %s is still running: stop it before resuming it" % resuming)
+        if not resuming:
+            lock = lock_run(args, entry.run)
+    except (RunsError, OSError) as exc:            # NoFreeAddresses included; a state folder it cannot write
+        if lock >= 0:
+            os.close(lock)
         print("[main] cannot start: %s" % exc, flush=True)
         return 2
     try:
-        return run(args, port, entry, started)
+        if resuming:
+            print("[main] resuming run %s (state %s)" % (resuming, state_folder(args, resuming)), flush=True)
+        else:
+            write_run_file(args, entry.run)
+        return run(args, port, entry, started, lock)
     finally:
         registry.release(entry.run)
+        if lock >= 0:
+            os.close(lock)
 
 
-def run(args: argparse.Namespace, port: int, entry: RunEntry, started: float) -> int:
-    """Run the launch on this run's addresses to its report; the exit status of :func:`main`."""
+def run(args: argparse.Namespace, port: int, entry: RunEntry, started: float, lock: int = -1) -> int:
+    """Run the launch on this run's addresses to its report; the exit status of :func:`main`. ``lock``: the
+    run's lock, held by roslaunch too (:func:`lock_run`)."""
     env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:%d" % port, ROS_IP="127.0.0.1")
     env.pop("ROS_HOSTNAME", None)
     cmd = launch_command(args, port, entry)
@@ -238,7 +478,7 @@ def run(args: argparse.Namespace, port: int, entry: RunEntry, started: float) ->
     print("[main] run %s: devices %s" % (entry.run, entry.addresses.describe()), flush=True)
     print("[main] operator page: http://127.0.0.1:%d/" % args.hmi_port, flush=True)
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1,
-                            start_new_session=True)
+                            start_new_session=True, pass_fds=(lock,) if lock >= 0 else ())
     found: Dict[str, str] = {}
     stop = threading.Event()
     reader = threading.Thread(target=_follow, args=(proc, args.verbose, found, stop), name="main-output",
@@ -271,6 +511,7 @@ def run(args: argparse.Namespace, port: int, entry: RunEntry, started: float) ->
         return 2
     if not report:
         print("[main] the job wrote no report (%.0f s); see the ROS logs (~/.ros/log/latest)" % elapsed, flush=True)
+        print_resume_hint(args, entry.run)
         return 1
     for line in summarise(report):
         print(line)
@@ -287,7 +528,32 @@ def run(args: argparse.Namespace, port: int, entry: RunEntry, started: float) ->
             print("[main] could not be read: %s" % item, flush=True)
     print("[main] %s in %.0f s wall clock; report: %s" % ("job done" if ok else "job NOT completed", elapsed, report),
           flush=True)
+    if ended and not ended.get("early", True):
+        if not args.keep_state:
+            drop_state(args, entry.run)
+    else:
+        print_resume_hint(args, entry.run)
     return 0 if ok else 1
+
+
+def print_resume_hint(args: argparse.Namespace, run: str) -> None:
+    print("[main] the run's state is kept: bash tools/main.sh --results-dir %s --resume %s goes on with it" % (
+        os.path.abspath(args.results_dir), run), flush=True)
+
+
+def drop_state(args: argparse.Namespace, run: str) -> None:
+    """Remove the state folder of ``run`` (completed: nothing to resume), the parts a launch argument put elsewhere
+    (``state_dir:=``) included."""
+    base = run_state_dir(args, run)
+    for name in os.listdir(base) if os.path.isdir(base) else []:
+        if name.startswith(run + "_"):           # the nodes' state (in the state folder or the one given)
+            path = os.path.join(base, name)
+            if os.path.isdir(path):
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                with contextlib.suppress(OSError):
+                    os.remove(path)
+    shutil.rmtree(state_folder(args, run), ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -165,11 +165,17 @@ class Worksite:
                     world.set_base_pose(*robot["pose"])
                 if robot.get("tool"):
                     world.mount_tool(robot["tool"], by="the saved world state")
+            if world.mounted_tool is not None:
+                world.resume_samples(state.pending, state.pen)
+            else:
+                state.drop_pending()
             state.attach(world.outcome)
+            world.sample_journal = state
         self.restored = robot
         if robot is not None:
-            log.warning("world state restored from %s (%d journal records replayed): base %s, tool %s",
-                        state.folder, state.replayed, robot.get("pose"), robot.get("tool"))
+            log.warning("world state restored from %s (%d journal records replayed, %d arm samples not yet recorded "
+                        "go on): base %s, tool %s", state.folder, state.replayed, len(state.pending),
+                        robot.get("pose"), robot.get("tool"))
 
         last_q: List[List[float]] = [[]]
 
@@ -177,7 +183,9 @@ class Worksite:
             """Note the robot; with ``whole``, a snapshot too, unless the arm moved since the last tick or a tool
             works now (False: try again at the next tick)."""
             with world._lock:
-                robot = {"pose": world.base_pose(), "q": list(world._q), "tool": world.mounted_tool,
+                # the arm where the controller has it (its samples may be ahead of what the world recorded)
+                q = world._last_sample if world._last_sample is not None else world._q
+                robot = {"pose": world.base_pose(), "q": list(q), "tool": world.mounted_tool,
                          "sim_time": world.clock.now()}
                 moved, last_q[0] = robot["q"] != last_q[0], robot["q"]
                 working = whole and (moved or world.tool_active() or any(world.outcome._active.values()))

@@ -115,7 +115,11 @@ class World:
         self.mounted_tool: Optional[str] = None
         self.steps = 0
         # arm samples (joint positions, tool process on at that moment) from the controller's step listener
-        self._samples: Deque[Tuple[List[float], bool, float]] = deque(maxlen=2000)
+        # and their numbers in the state journal (None: not journaled)
+        self._samples: Deque[Tuple[List[float], bool, float, Optional[int]]] = deque(maxlen=2000)
+        #: journals the samples while a tool is mounted and what the world recorded of them (a
+        #: :class:`~locem_bridge.sim.world_state.WorldState`; set by the worksite), None: not kept
+        self.sample_journal: Any = None
         self._last_sample: Optional[List[float]] = None
         self._motion_anchor: Optional[float] = None      # world time - controller motion time (_sample_time)
         self._arm_clock: Optional[float] = None          # the latest sample's time on that line (every tick)
@@ -541,7 +545,26 @@ class World:
             on = self.tool_active()
         except Exception:                                # a stand-in shutting down: judged at the step instead
             on = False
-        self._samples.append((q, on, t))
+        journal, n = self.sample_journal, None
+        if journal is not None and self.mounted_tool is not None:
+            n = journal.note_sample(q, on, t)
+        self._samples.append((q, on, t, n))
+
+    def resume_samples(self, samples: Sequence[Tuple[List[float], bool, float, int]],
+                       pen: Optional[Tuple[Sequence[float], float]]) -> None:
+        """A restored world goes on with the arm samples its maps did not hold yet (the saved state's ``pending``),
+        the tool at ``pen`` (TCP, sim time; None: the first sample only places it) before them: the next step
+        records them as it would have. Without a tool mounted there is nothing to record: they are dropped."""
+        with self._lock:
+            if not samples or self.mounted_tool is None:
+                return
+            if pen is not None:
+                self._tcp_prev, self._tcp_prev_t = np.asarray(pen[0], dtype=float), float(pen[1])
+            newer = list(self._samples)                  # the new controller's, at most where the arm stood
+            self._samples.clear()
+            self._samples.extend([(list(q), bool(on), float(t), n) for q, on, t, n in samples] + newer)
+            if not newer:
+                self._last_sample = list(samples[-1][0])
 
     def _sample_time(self, motion_time: Optional[float]) -> float:
         """Sim time of a controller sample: the world clock, or, given the controller's ``motion_time``, that
@@ -596,43 +619,60 @@ class World:
             # gives one): mixed with the world clock, a segment after it would get no time (read before the queue
             # is drained: a sample queued meanwhile is later than it)
             t_now = now if self._arm_clock is None else self._arm_clock
-            qs: List[Tuple[List[float], bool, float]] = []
+            qs: List[Tuple[List[float], bool, float, Optional[int]]] = []
             while self._samples:
                 qs.append(self._samples.popleft())
-            if self.arm_source is not None:
-                q_now = [float(x) for x in self.arm_source.joint_positions()]
-                if not qs or max(abs(a - b) for a, b in zip(qs[-1][0], q_now)) > 1e-9:
-                    qs.append((q_now, active, max(t_now, qs[-1][2]) if qs else t_now))
-            if qs and max(abs(a - b) for a, b in zip(qs[-1][0], self._q)) <= 1e-9 and len(qs) == 1:
-                qs = []
-            if not (moved or qs or self._dirty or active):
-                self._tcp_prev_t = t_now                 # idle: nothing changed, nothing to measure
-                return
-            self._dirty = False
-            if moved:
-                self._place_robot()
-            if not qs:
-                qs = [(self._q, active, t_now)]
-            elif self.mounted_tool is None:
-                qs = [qs[-1]]                            # nothing to measure along the way
-            # thin out dense controller steps: keep every sample that moved the TCP >= 2 mm; a segment lasts from
-            # the previous kept sample's time to its own (thinned-out samples' time goes to the next segment)
-            n = len(qs)
-            for i, (q, on, t) in enumerate(qs):
-                self._q = q
-                for j, qv in zip(self.arm_joints, q):
-                    pb.resetJointState(self.arm_body, j, qv, physicsClientId=self._cid)
-                if self.mounted_tool is not None:
-                    pos, z = self._tcp()
-                    if i < n - 1 and self._tcp_prev is not None and np.linalg.norm(pos - self._tcp_prev) < 0.002:
-                        continue
-                    if self._tcp_prev is not None:
-                        self.outcome.record(self.mounted_tool, on, self._tcp_prev, pos, z,
-                                            max(0.0, t - self._tcp_prev_t))
-                    self._tcp_prev, self._tcp_prev_t = pos, t
+            numbers = [n for _q, _on, _t, n in qs if n is not None]
+            try:
+                self._record_samples(qs, moved, active, t_now)
+            finally:
+                if self.sample_journal is not None:      # where the next sample's segment starts
+                    self.sample_journal.note_drained(max(numbers) if numbers else None, None if self._tcp_prev is
+                                                     None else [float(x) for x in self._tcp_prev], self._tcp_prev_t)
+
+    def _record_samples(self, qs: List[Tuple[List[float], bool, float, Optional[int]]], moved: bool, active: bool,
+                        t_now: float) -> None:
+        """The arm's part of :meth:`step` (under the lock): the samples ``qs`` (and the arm's joints now) into the
+        outcome maps, then the collision check."""
+        if self.arm_source is not None:
+            q_now = [float(x) for x in self.arm_source.joint_positions()]
+            if not qs or max(abs(a - b) for a, b in zip(qs[-1][0], q_now)) > 1e-9:
+                qs.append((q_now, active, max(t_now, qs[-1][2]) if qs else t_now, None))
+        if qs and max(abs(a - b) for a, b in zip(qs[-1][0], self._q)) <= 1e-9 and len(qs) == 1:
+            qs = []
+        if not (moved or qs or self._dirty or active):
+            self._tcp_prev_t = t_now                 # idle: nothing changed, nothing to measure
+            return
+        self._dirty = False
+        if moved:
+            self._place_robot()
+        if not qs:
+            qs = [(self._q, active, t_now, None)]
+        elif self.mounted_tool is None:
+            qs = [qs[-1]]                            # nothing to measure along the way
+        # thin out dense controller steps: keep every sample that moved the TCP >= 2 mm; a segment lasts from
+        # the previous kept sample's time to its own (thinned-out samples' time goes to the next segment)
+        n = len(qs)
+        journal, upto = self.sample_journal, None
+        for i, (q, on, t, number) in enumerate(qs):
+            if number is not None:
+                upto = number if upto is None else max(upto, number)
+            self._q = q
+            for j, qv in zip(self.arm_joints, q):
+                pb.resetJointState(self.arm_body, j, qv, physicsClientId=self._cid)
             if self.mounted_tool is not None:
-                self._place_tool()
-            self._check_collisions()
+                pos, z = self._tcp()
+                if i < n - 1 and self._tcp_prev is not None and np.linalg.norm(pos - self._tcp_prev) < 0.002:
+                    continue
+                if self._tcp_prev is not None:
+                    if journal is not None:      # the segment's record says which samples it holds
+                        journal.segment_ends(upto, t)
+                    self.outcome.record(self.mounted_tool, on, self._tcp_prev, pos, z,
+                                        max(0.0, t - self._tcp_prev_t))
+                self._tcp_prev, self._tcp_prev_t = pos, t
+        if self.mounted_tool is not None:
+            self._place_tool()
+        self._check_collisions()
 
     def _check_collisions(self) -> None:
         c = self._cid

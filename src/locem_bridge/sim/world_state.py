@@ -19,6 +19,13 @@ Restoring loads the snapshot and replays the journal records after it: the maps 
 at the wall: at time scale 10 that is 0.2 s of a spray lane, or a valve switched that much late); it is copied under the world's lock, which also starts the next journal
 file, and written outside it; then the journal files it holds are deleted (a crash between the two leaves records the
 snapshot already holds, skipped by their sequence numbers; a torn last line is dropped).
+The arm's controller samples (joint positions, the tool's process on or off, sim time) are journaled too while a
+tool is mounted, as the controller makes them (:meth:`WorldState.note_sample`), and the world notes after each of its
+steps the last sample it turned into map records and where its tool then was (:meth:`WorldState.note_drained`): the
+arm's measured TCP (what LOCEM reports as the work done) runs up to a world step ahead of the maps, more on a busy
+machine, and what the arm did in that time must not be lost with the process. Restoring hands the samples the maps do
+not hold yet back to the world (:attr:`WorldState.pending`), which records them at its first step as it would
+have; the arm then starts where the last sample left it.
 The robot's base pose, arm joints and tool are journaled too, as a record whenever they changed (looked at every
 ``robot_period_s``, 0.2 s of wall clock): a tool mounted just before the power went may be missed by that much, a
 pose is up to that old, as good as a relocalisation after a restart (LOCEM's localisation is the world's own pose;
@@ -37,7 +44,7 @@ import json
 import logging
 import os
 import threading
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -49,8 +56,15 @@ log = logging.getLogger(__name__)
 SNAPSHOT = "outcome.npz"
 JOURNAL = "outcome.journal"     # + ".N": N (12 digits) the sequence number of the file's first record
 FORMAT = 1
+#: a sample the world has not recorded yet: (joint positions, tool on, sim time, number)
+Sample = Tuple[List[float], bool, float, int]
 _MAP_ARRAYS = ("thickness", "sanded", "passes", "_last_pass", "into_openings")
 _JOINT_ARRAYS = ("tape", "tape_passes", "_tape_last")
+
+
+def _pen(value: Any) -> Optional[Tuple[List[float], float]]:
+    """A journaled tool position (TCP, sim time), None for none."""
+    return None if value is None else ([float(x) for x in value[0]], float(value[1]))
 
 
 def _fingerprint(rec: OutcomeRecorder) -> Dict[str, Any]:
@@ -112,6 +126,11 @@ class WorldState:
         self._last_robot: Optional[Dict[str, Any]] = None
         self._site: Dict[str, Any] = {}
         self._broken = False
+        self.samples = 0                 # the number of the last arm sample journaled
+        self.drained = 0                 # ... and of the last one the world recorded (note_drained)
+        self._pen: Optional[Tuple[List[float], float]] = None     # where the tool then was (TCP, sim time)
+        self._unrecorded: Dict[int, Dict[str, Any]] = {}         # sample records after `drained`, by number
+        self._segment_end: Optional[Tuple[Optional[int], float]] = None
 
     # ---------------------------------------------------------------- restoring
     def saved_robot(self) -> Dict[str, Any]:
@@ -125,9 +144,15 @@ class WorldState:
             with np.load(snap, allow_pickle=False) as z:
                 meta = json.loads(str(z["meta"]))
             robot, upto = dict(meta.get("robot") or {}), int(meta["seq"])
+        sample: Optional[Dict[str, Any]] = None
         for record in self._journal_records(repair=False):
             if record["seq"] > upto and record["kind"] == "robot":
-                robot = dict(record["robot"])
+                robot, sample = dict(record["robot"]), None
+            elif record["seq"] > upto and record["kind"] == "sample":
+                sample = record
+        if sample is not None:                # the arm moved on after the robot was last noted
+            robot["q"] = list(sample["q"])
+            robot["sim_time"] = max(float(robot.get("sim_time") or 0.0), float(sample["t"]))
         return robot
 
     def restore(self, rec: OutcomeRecorder) -> Optional[Dict[str, Any]]:
@@ -144,6 +169,10 @@ class WorldState:
             upto = int(meta["seq"])
             robot = meta.get("robot")
         self.seq = upto
+        samples: Dict[int, Dict[str, Any]] = {}
+        if os.path.exists(snap):
+            self.samples = self.drained = int(meta.get("samples", 0))
+            self._pen = _pen(meta.get("pen"))
         records = self._journal_records()
         for record in records:
             if record["kind"] == "site":                 # each journal file's first line
@@ -153,7 +182,15 @@ class WorldState:
                 continue
             if record["kind"] == "robot":
                 robot = dict(record["robot"])
+            elif record["kind"] == "sample":
+                samples[int(record["n"])] = record
+                self.samples = max(self.samples, int(record["n"]))
+            elif record["kind"] == "drained":
+                self.drained, self._pen = max(self.drained, int(record["n"])), _pen(record["pen"])
             else:
+                if record["kind"] == "segment" and record.get("n") is not None:
+                    self.drained = max(self.drained, int(record["n"]))
+                    self._pen = (list(map(float, record["p1"])), float(record["t"]))
                 try:
                     self._replay(rec, record)
                 except Exception as exc:                # what failed live fails again: as live, it is left out
@@ -163,7 +200,20 @@ class WorldState:
             self.seq = record["seq"]
             self.replayed += 1
         self._last_robot = robot
+        self._unrecorded = {n: r for n, r in sorted(samples.items()) if n > self.drained}
         return robot
+
+    @property
+    def pending(self) -> List[Sample]:
+        """The arm samples the world has not recorded yet, oldest first (after :meth:`restore`: those the saved
+        world had not)."""
+        with self._lock:
+            return [(list(map(float, r["q"])), bool(r["on"]), float(r["t"]), n) for n, r in self._unrecorded.items()]
+
+    @property
+    def pen(self) -> Optional[Tuple[List[float], float]]:
+        """Where the world's tool was after the samples it recorded (TCP, sim time; None: no tool)."""
+        return self._pen
 
     def _check_site(self, saved: Dict[str, Any], mine: Dict[str, Any]) -> None:
         for key in ("grid", "walls", "joints"):
@@ -220,9 +270,13 @@ class WorldState:
         def journaled_record(tool: str, active: bool, p0: Any, p1: Any, z_axis: Any, dt: float) -> None:
             clock = rec.clock
             stamp = None if clock is None else float(clock())
-            self._append({"kind": "segment", "tool": tool, "on": bool(active), "p0": [float(x) for x in p0],
-                          "p1": [float(x) for x in p1], "z": [float(x) for x in z_axis], "dt": float(dt),
-                          "clock": stamp})
+            entry = {"kind": "segment", "tool": tool, "on": bool(active), "p0": [float(x) for x in p0],
+                     "p1": [float(x) for x in p1], "z": [float(x) for x in z_axis], "dt": float(dt),
+                     "clock": stamp}
+            ends, self._segment_end = self._segment_end, None
+            if ends is not None and ends[0] is not None:    # the arm samples up to n are in it, ending at time t
+                entry["n"], entry["t"] = ends
+            self._append(entry)
             rec.clock = None if stamp is None else (lambda: stamp)   # what a pass ending now stamps: as replayed
             try:
                 record(tool, active, p0, p1, z_axis, dt)
@@ -272,11 +326,54 @@ class WorldState:
 
     def _append(self, record: Dict[str, Any]) -> None:
         with self._lock:
-            if self._fd is None:
-                return
-            self.seq += 1
-            record["seq"] = self.seq
-            self._write_line(record)
+            self._append_locked(record)
+
+    def _append_locked(self, record: Dict[str, Any]) -> None:
+        if self._fd is None:
+            return
+        self.seq += 1
+        record["seq"] = self.seq
+        self._write_line(record)
+
+    def note_sample(self, q: Sequence[float], on: bool, t: float) -> int:
+        """Journal an arm controller sample (joint positions, the tool's process on, sim time) as it is made (the
+        controller's thread); returns its number for :meth:`note_drained`."""
+        with self._lock:
+            self.samples += 1
+            record = {"kind": "sample", "n": self.samples, "q": [float(x) for x in q], "on": bool(on), "t": float(t)}
+            self._unrecorded[self.samples] = record
+            self._append_locked(record)
+            return self.samples
+
+    def segment_ends(self, n: Optional[int], t: float) -> None:
+        """The world's next recorded segment holds the arm samples up to number ``n`` (None: none journaled) and
+        ends at sim time ``t`` (its journal record says so: a process killed in the middle of a step has replayed
+        segments and pending samples that do not overlap)."""
+        self._segment_end = (n, float(t))
+
+    def drop_pending(self) -> None:
+        """The restored samples cannot be recorded (no tool): forget them."""
+        with self._lock:
+            if self._unrecorded:
+                self.note_drained_locked(max(self._unrecorded), None, 0.0)
+
+    def note_drained(self, n: Optional[int], tcp: Optional[Sequence[float]], t: float) -> None:
+        """After a world step: it recorded the samples up to number ``n`` (None: no new ones) into its maps; its
+        tool is at ``tcp`` (None: no tool) at sim time ``t``, where the next sample's segment starts. Journaled when
+        either changed."""
+        with self._lock:
+            self.note_drained_locked(n, tcp, t)
+
+    def note_drained_locked(self, n: Optional[int], tcp: Optional[Sequence[float]], t: float) -> None:
+        pen = None if tcp is None else ([float(x) for x in tcp], float(t))
+        if (n is None or n <= self.drained) and pen == self._pen:
+            return
+        if n is not None and n > self.drained:
+            self.drained = n
+            for k in [k for k in self._unrecorded if k <= n]:
+                del self._unrecorded[k]
+        self._pen = pen
+        self._append_locked({"kind": "drained", "n": self.drained, "pen": pen})
 
     def note_robot(self, robot: Dict[str, Any]) -> None:
         """Journal the robot's state (``pose``, ``q``, ``tool``) when it changed since it was last noted."""
@@ -290,10 +387,12 @@ class WorldState:
         arrays, rest = recorder_arrays(rec)
         with self._lock:
             meta = {"format": FORMAT, "seq": self.seq, "site": _fingerprint(rec), "recorder": copy.deepcopy(rest),
-                    "robot": copy.deepcopy(robot)}
+                    "robot": copy.deepcopy(robot), "samples": self.drained, "pen": self._pen}
             self._last_robot = copy.deepcopy(robot)
             if self._fd is not None:
                 self._open_journal()     # what comes after this moment goes to a file the snapshot does not hold
+                for record in list(self._unrecorded.values()):   # ... with the samples the maps do not hold yet
+                    self._append_locked(dict(record))
         return {k: v.copy() for k, v in arrays.items()}, meta
 
     def write(self, captured: Tuple[Dict[str, np.ndarray], Dict[str, Any]]) -> None:

@@ -19,6 +19,14 @@ compressor's watchdog closed the valve, which the feedback gives too); ``Section
 section's ``skip`` (SPRAY_AREA ``skip=``) from it, so
 the work goes on at the point reached; ``RecordSectionDone`` drops the section's partial record.
 
+A power loss stops every process at once: the last feedback recorded lags the spray by its way to the store
+(tens of milliseconds of lane, more on a busy machine), while the arm stops where the spray stopped (the valve
+closes with the compressor). So ``RecordSectionProgress`` also keeps the furthest point the last feedback allows
+(``"bound"``: where the spray gets should LOCEM stop now), ``NoteToolAtCut`` (RECOVER, before anything moves the
+arm) notes the tool's point in the map frame for each cut section (``"tool_at"``), and ``SectionResume`` goes on
+where that point stands on the section's raster (:func:`locem_bridge.common.raster_progress.raster_point`), never
+behind the recorded point nor beyond the bound.
+
 Manual work: a section LOCEM refuses because the arm cannot reach it from its base pose (``LeaveSectionManual``
 after the section's command failed: the answer's code and a phrase of its message, ``area_work.unreachable_*``
 in the HICEM parameters) is recorded in the same entry, ``{"done": [...], "manual": [{index, along, height,
@@ -27,16 +35,16 @@ reason}]}``, counted as handled, and the area goes on; ``AreaDetail`` then write
 the run report lists (:func:`parse_manual_work`). Unreachable parts are manual work, not a failed process.
 """
 import re
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 from py_trees.common import Status
 
-from locem_bridge.common.raster_progress import parse_progress_text
+from locem_bridge.common.raster_progress import parse_progress_text, raster_point
 from locem_bridge.hicem.controls import _Decorator
 from locem_bridge.hicem.interfaces import locem_lost
 
 from ..errors import PortError
-from ..node_base import Leaf
+from ..node_base import ConditionLeaf, Leaf
 from ..ports import FLOAT, INT, JSON, STRING, STRING_LIST, input_port, output_port
 from .plasterboard import AREA_ID
 
@@ -59,6 +67,21 @@ def _record(store: Any, work: str, area_id: str) -> Dict[str, Any]:
     value = dict(entry.value) if entry is not None else {}
     value.setdefault("done", [])
     return value
+
+
+#: a cut section's entries in its area's record, each ``{"<index>": value}``: the raster length recorded done, the
+#: furthest point the last feedback allows, the tool's point where the cut left the arm
+SECTION_ENTRIES = ("partial", "bound", "tool_at")
+
+
+def _drop_section(record: Dict[str, Any], index: int, entries: Any = SECTION_ENTRIES) -> None:
+    for name in entries:
+        kept = dict(record.get(name, {}))
+        if kept.pop(str(index), None) is not None:
+            if kept:
+                record[name] = kept
+            else:
+                del record[name]
 
 
 def _put_manual(store: Any, work: str, area_id: str, keep: Any, new: List[Dict[str, Any]]) -> None:
@@ -176,17 +199,9 @@ class RecordSectionDone(Leaf):
             record = _record(store, work, area)
             if self.get("index") not in record["done"]:
                 record["done"] = sorted(record["done"] + [self.get("index")])
-            partial = dict(record.get("partial", {}))
-            if partial.pop(str(self.get("index")), None) is not None:
-                record["partial"] = partial
-                if not partial:
-                    del record["partial"]
+            _drop_section(record, int(self.get("index")))
             store.put(PROGRESS, progress_key(work, area), record, source="tree")
         return Status.SUCCESS
-
-
-def _partial(store: Any, work: str, area_id: str, index: int) -> float:
-    return float(_record(store, work, area_id).get("partial", {}).get(str(index), 0.0))
 
 
 class RecordSectionProgress(_Decorator):
@@ -196,8 +211,11 @@ class RecordSectionProgress(_Decorator):
                    "the data store collection 'progress' when it went further than recorded, so a section cut "
                    "while it runs is resumed at that point (SectionResume). When the command failed because LOCEM "
                    "went away (it died: the spray valve closes only by the compressor's watchdog), the point the "
-                   "last feedback gave for that case ('(<m> m if LOCEM stops now)') is recorded instead. Other "
-                   "feedback texts are ignored; the result is the child's.")
+                   "last feedback gave for that case ('(<m> m if LOCEM stops now)') is recorded instead. While the "
+                   "command runs that point is also kept as the section's bound (how far the spray may have got "
+                   "should everything stop now, e.g. a power loss, with no last feedback recorded); once the "
+                   "command has ended, with any reply, the bound is the recorded point. Other feedback texts are "
+                   "ignored; the result is the child's.")
     PORTS = (
         AREA_ID, WORK,
         input_port("index", INT, None, "", "the running section's index"),
@@ -209,18 +227,25 @@ class RecordSectionProgress(_Decorator):
 
     def tick(self):  # type: ignore[override]
         if self.status != Status.RUNNING:
-            self._recorded: Optional[float] = None
+            self._recorded: Optional[Tuple[float, float]] = None
             self._if_stopped = 0.0
             self.initialise()
         for node in self.decorated.tick():
             yield node
         s = self.decorated.status
-        self._record(lost=s == Status.FAILURE and self._lost())
+        self._record(lost=s == Status.FAILURE and self._lost(), ended=s != Status.RUNNING)
         if s == Status.RUNNING:
             self.status = Status.RUNNING
         else:
             self.stop(s)
         yield self
+
+    def terminate(self, new_status: Status) -> None:
+        if new_status == Status.INVALID and self.status == Status.RUNNING:
+            # halted while the command ran (a health fault, a cancel, a shutdown): HICEM saw it end, LOCEM closes
+            # the valve and stops the arm, so the point recorded stands and no bound stays open
+            self._record(lost=False, ended=True)
+        super().terminate(new_status)
 
     def _port(self, name: str) -> Optional[str]:
         try:
@@ -231,25 +256,33 @@ class RecordSectionProgress(_Decorator):
     def _lost(self) -> bool:
         return locem_lost(self._port("code") or "", self._port("message") or "")
 
-    def _record(self, lost: bool) -> None:
+    def _record(self, lost: bool, ended: bool) -> None:
         parsed = parse_progress_text(self._port("feedback") or "")
         if parsed is not None:
             self._if_stopped = max(self._if_stopped, parsed[2])
         done_m = parsed[0] if parsed is not None else 0.0
         if lost:                          # the valve stayed open until the compressor's watchdog closed it
             done_m = max(done_m, self._if_stopped)
-        if done_m <= 0.0 or (self._recorded is not None and done_m <= self._recorded + 1e-6):
+        bound = done_m if ended else max(done_m, self._if_stopped)
+        if self._recorded is not None and done_m <= self._recorded[0] + 1e-6 and abs(bound - self._recorded[1]) <= 1e-6:
+            return
+        if self._recorded is None and bound <= 0.0:
             return
         store = self.ctx.require("store", self.name)
         work, area, index = _check_work(self), self.ports.get("area_id"), int(self.ports.get("index"))
+        key = str(index)
         with store.transaction():
             record = _record(store, work, area)
-            partial = dict(record.get("partial", {}))
-            if done_m > float(partial.get(str(index), 0.0)) + 1e-6:
-                partial[str(index)] = round(done_m, 4)
-                record["partial"] = partial
+            before = float(record.get("partial", {}).get(key, 0.0)), record.get("bound", {}).get(key)
+            done_m = max(done_m, before[0])
+            after = round(done_m, 4), (round(bound, 4) if bound > done_m + 1e-6 else None)
+            if (done_m > 0.0 or after[1] is not None) and after != (round(before[0], 4), before[1]):
+                _drop_section(record, index, ("bound", "tool_at"))   # a note of an earlier cut is old now
+                record["partial"] = dict(record.get("partial", {}), **{key: after[0]})
+                if after[1] is not None:            # open: how far the spray may have got should all stop now
+                    record["bound"] = dict(record.get("bound", {}), **{key: after[1]})
                 store.put(PROGRESS, progress_key(work, area), record, source="tree")
-        self._recorded = done_m
+        self._recorded = (done_m, bound)
         if lost:
             self.ctx.log.info("%s of %s, section %d cut by LOCEM going away: sprayed to %.3f m of its raster",
                               work, area, index + 1, done_m)
@@ -258,17 +291,91 @@ class RecordSectionProgress(_Decorator):
         return self.ports.get(port)
 
 
+def _open_cuts(record: Dict[str, Any]) -> List[str]:
+    """The sections of an area's record cut with no end seen (a bound beyond the recorded point) and no note yet."""
+    partial, bounds, notes = record.get("partial", {}), record.get("bound", {}), record.get("tool_at", {})
+    return [k for k in partial if float(bounds.get(k, 0.0)) > float(partial[k]) + 1e-6 and k not in notes]
+
+
+class CheckCutOpen(ConditionLeaf):
+    DESCRIPTION = ("SUCCESS when an area section was cut while its command ran with no end seen (e.g. a power loss: "
+                   "its 'progress' record has a bound beyond the recorded point) and where the tool stood is not "
+                   "noted yet (NoteToolAtCut); FAILURE otherwise. RECOVER reads the tool's point only then.")
+    PORTS = ()
+
+    def on_tick(self) -> Status:
+        store = self.ctx.require("store", self.name)
+        cut = ["%s section %d" % (e.key, int(k) + 1) for e in store.entries(PROGRESS) for k in _open_cuts(e.value)]
+        if not cut:
+            return self.fail("no section cut with no end seen")
+        self.feedback_message = "cut with no end seen: " + ", ".join(cut)
+        return Status.SUCCESS
+
+
+class NoteToolAtCut(Leaf):
+    DESCRIPTION = ("Notes where the tool stands now (`point`, the map frame: LOCEM GET_TOOL_POINT's result) for the "
+                   "area section whose command was cut with no end seen (its 'progress' record still has a bound "
+                   "beyond the recorded point: the process stopped while the command ran, e.g. a power loss; of "
+                   "several, the record written last) and that has no note yet; nothing when no tool is mounted. "
+                   "Run it before anything moves the arm (RECOVER): the arm stopped where the work stopped, "
+                   "which the last feedback recorded lags; SectionResume goes on from there. SUCCESS (also with "
+                   "nothing to note).")
+    PORTS = (
+        input_port("point", JSON, None, "", "GET_TOOL_POINT's result: {point: [x, y, z], axis, tool}"),
+        output_port("noted", INT, None, "", "how many cut sections got the note"),
+    )
+
+    def on_tick(self) -> Status:
+        result = self.get("point")
+        point = result.get("point") if isinstance(result, dict) else None
+        if not isinstance(point, list) or len(point) != 3:
+            raise PortError("%s: point must be GET_TOOL_POINT's result {point: [x, y, z], ...}, got %r"
+                            % (self.name, result))
+        store = self.ctx.require("store", self.name)
+        noted = 0
+        if not result.get("tool"):
+            self.ctx.log.info("%s: no tool on the arm: nothing noted", self.name)
+            self.set("noted", 0)
+            return Status.SUCCESS
+        with store.transaction():
+            cut = [e for e in store.entries(PROGRESS) if _open_cuts(e.value)]
+            if cut:
+                entry = max(cut, key=lambda e: e.stamp)        # the one running last: one command at a time
+                record = dict(entry.value)
+                notes = dict(record.get("tool_at", {}))
+                for k in _open_cuts(record):
+                    notes[k] = [round(float(v), 5) for v in point]
+                    self.ctx.log.info("%s, section %d cut while it ran (recorded %.3f m, at most %.3f m): the tool "
+                                      "stands at %s", entry.key, int(k) + 1, float(record["partial"][k]),
+                                      float(record["bound"][k]), " ".join("%.3f" % float(v) for v in point))
+                    noted += 1
+                record["tool_at"] = notes
+                store.put(PROGRESS, entry.key, record, source="tree")
+        self.set("noted", noted)
+        self.feedback_message = "%d cut section(s) noted" % noted
+        return Status.SUCCESS
+
+
 class SectionResume(Leaf):
     DESCRIPTION = ("Where a section's work goes on: `skip` = the raster length recorded done for section `index` of "
                    "(work, area_id) by RecordSectionProgress (0 when none), less `back_off`, for the command's "
                    "skip= argument (SPRAY_AREA). The recorded point lags the spray (the arm's measured TCP while "
                    "the valve was open; after LOCEM died, the least the spray reached before the compressor's "
                    "watchdog closed the valve), so no back-off is needed to avoid a gap (default 0); a positive "
-                   "one buys a longer overlap.")
+                   "one buys a longer overlap. When the section was cut with no end seen and NoteToolAtCut noted "
+                   "where the tool stood, and that point is on the section's raster (`section` with `run_in` and "
+                   "`standoff`, the command's), the work goes on there instead (less `back_off`: on a real robot "
+                   "the arm may brake a few centimetres past the point where the spray stopped): never behind the "
+                   "recorded point, never beyond the bound the last feedback allowed.")
     PORTS = (
         AREA_ID, WORK,
         input_port("index", INT, None, "", "the section's index"),
-        input_port("back_off", FLOAT, "0", "m", "raster length worked again before the recorded point"),
+        input_port("back_off", FLOAT, "0", "m", "raster length worked again before the recorded point (or the noted "
+                   "tool point)"),
+        input_port("section", JSON, "null", "", "the section (GetAreaRaster: origin, u, width, height, normal, "
+                   "spacing) for a noted tool point; null: the recorded point only"),
+        input_port("run_in", FLOAT, "0", "m", "the command's run_in= (lane length worked beyond each end)"),
+        input_port("standoff", FLOAT, "0", "m", "the command's standoff= (TCP distance from the wall)"),
         output_port("skip", FLOAT, None, "m", "raster length to leave out: 0 for a section not begun"),
     )
 
@@ -277,14 +384,41 @@ class SectionResume(Leaf):
         back_off = self.get("back_off")
         if back_off < 0:
             raise PortError("%s: back_off must be >= 0 m, got %g" % (self.name, back_off))
-        done_m = _partial(store, _check_work(self), self.get("area_id"), int(self.get("index")))
+        work, area, index = _check_work(self), self.get("area_id"), int(self.get("index"))
+        record = _record(store, work, area)
+        done_m = float(record.get("partial", {}).get(str(index), 0.0))
         skip = max(0.0, done_m - back_off) if done_m > 0 else 0.0
+        at = self._tool_point(record, index, done_m)
+        at = max(0.0, at - back_off) if at is not None else None
+        if at is not None and at > skip:
+            self.ctx.log.info("%s of %s, section %d: the tool stood at %.3f m of its raster when it was cut "
+                              "(%.3f m recorded)", work, area, index + 1, at, done_m)
+            skip = at
         self.set("skip", round(skip, 4))
         if skip > 0:
-            self.feedback_message = "section %d goes on after %.3f m" % (int(self.get("index")) + 1, skip)
+            self.feedback_message = "section %d goes on after %.3f m" % (index + 1, skip)
             self.ctx.log.info("%s of %s, section %d: goes on after %.3f m of its raster (cut there before)",
-                              _check_work(self), self.get("area_id"), int(self.get("index")) + 1, skip)
+                              work, area, index + 1, skip)
         return Status.SUCCESS
+
+    def _tool_point(self, record: Dict[str, Any], index: int, done_m: float) -> Optional[float]:
+        """The raster length at the noted tool point, within [recorded, bound]; None without a usable note."""
+        point = record.get("tool_at", {}).get(str(index))
+        bound = float(record.get("bound", {}).get(str(index), done_m))
+        section = self.get("section")
+        if point is None or bound <= done_m + 1e-6 or not section:
+            return None
+        if not isinstance(section, dict) or not all(k in section for k in ("origin", "u", "width", "height",
+                                                                             "normal", "spacing")):
+            raise PortError("%s: section must be GetAreaRaster's section (origin, u, width, height, normal, "
+                            "spacing), got %r" % (self.name, section))
+        at = raster_point(point, section["origin"], section["u"], float(section["width"]), float(section["height"]),
+                          section["normal"], float(section["spacing"]), self.get("run_in"), self.get("standoff"))
+        if at is None:
+            self.ctx.log.info("%s: the tool noted at the cut (%s) is not on section %d's raster: going on after "
+                              "the recorded point", self.name, point, index + 1)
+            return None
+        return min(max(at, done_m), bound)
 
 
 class LeaveSectionManual(Leaf):
@@ -389,4 +523,4 @@ class ForgetSectionsDone(Leaf):
 
 
 LIBRARY = (PendingSections, RecordSectionDone, ForgetSectionsDone, LeaveSectionManual, LeavePlannedManual, AreaDetail,
-           RecordSectionProgress, SectionResume)
+           RecordSectionProgress, SectionResume, CheckCutOpen, NoteToolAtCut)
