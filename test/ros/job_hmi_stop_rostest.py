@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """rostest: STOP from the operator web page mid-action.
 
-The job runs on the default site with operator:=both. As soon as the robot moves in the taping process (the
-first GOTO or arm move), the test presses STOP the way the page does (POST /api/stop, same origin, JSON) and
-then checks, on the devices themselves (UR stand-in over RTDE, base ground truth, compressor over Modbus):
-arm and base still within 200 ms of sim time and still from then on, the spray valve and the tool outputs off;
+The job runs on the default site with operator:=both. As soon as the base drives in the taping process (a wheel
+at DRIVING_RAD_S or faster), the test presses STOP the way the page does (POST /api/stop, same origin, JSON) and
+then checks, on the devices themselves (UR stand-in over RTDE, the wheel drives' velocity TPDOs on the base's
+CAN bus, compressor over Modbus): arm and base still within 200 ms of sim time and still from then on, the spray
+valve and the tool outputs off;
 HICEM ends the taping process "stopped" with the operator's reason, the page shows it; report.json records the
 taping process as stopped and nothing after it as succeeded.
 
@@ -27,6 +28,8 @@ from job_support import (TAPING, HicemTimeline, HmiClient, MotionProbe, SimCalls
 PKG = "locem_bridge"
 LIMIT_SIM_S = 0.200           # issue 7: all devices stopped within 200 ms of sim time
 OBSERVE_WALL_S = 1.5          # how long the base is watched after STOP at most
+DRIVING_RAD_S = 1.0           # STOP is pressed once a wheel turns this fast (0.13 m/s at the rim): the base drives,
+                              # it does not creep into or out of a pose
 
 
 class JobHmiStopTest(unittest.TestCase):
@@ -39,7 +42,7 @@ class JobHmiStopTest(unittest.TestCase):
         cls.scale = cls.sim.time_scale()
         cls.hmi = HmiClient(int(setting("hmi_port")))
         cls.hmi.wait_up(timeout=60.0)
-        cls.probe = MotionProbe(setting("host"), int(setting("modbus_port")))
+        cls.probe = MotionProbe(setting("host"), int(setting("modbus_port")), can=True)   # base: its drives
         try:
             cls._stop_mid_action()
         finally:
@@ -53,11 +56,12 @@ class JobHmiStopTest(unittest.TestCase):
             if s.get("process") != TAPING or s.get("phase") != "running":
                 return None
             m = cls.probe.moving(window=0.12)
-            return (s, m) if m["base"] else None
+            return (s, m) if m["base"] and cls.probe.wheel_speed(0.05) >= DRIVING_RAD_S else None
         found = wait_until(base_moving_in_taping, timeout=90.0, period=0.005)
         assert found, "the base never moved during taping (last HICEM state %s, motion %s)" % (
             cls.timeline.latest(), cls.probe.moving())
         cls.stopped_state, cls.moving_before = found
+        cls.wheels_before = cls.probe.wheel_speed(0.05)
         cls.t_stop = time.monotonic()
         cls.stop_answer = cls.hmi.stop()
         cls.t_answer = time.monotonic()
@@ -80,9 +84,10 @@ class JobHmiStopTest(unittest.TestCase):
         cls.windows = {"arm": (cls.t_stop, cls.t_next), "base": (cls.t_stop, cls.t_observed)}
         cls.still = {d: cls.probe.still_since(d, *w) for d, w in cls.windows.items()}
         cls.samples = {d: cls.probe.samples_between(d, *w) for d, w in cls.windows.items()}
-        cls.measured = ("STOP pressed during %s (moving: %s); page answered in %.3f s wall; devices still after "
-                        "%s s wall (time_scale %.1f); watched %.3f s wall%s" % (
-                            cls.stopped_state["action_type"], cls.moving_before, cls.t_answer - cls.t_stop,
+        cls.measured = ("STOP pressed during %s (moving: %s, fastest wheel %.2f rad/s); page answered in %.3f s "
+                        "wall; devices still after %s s wall (time_scale %.1f); watched %.3f s wall%s" % (
+                            cls.stopped_state["action_type"], cls.moving_before, cls.wheels_before,
+                            cls.t_answer - cls.t_stop,
                             {k: (None if v is None else round(v - cls.t_stop, 3)) for k, v in cls.still.items()},
                             cls.scale, cls.t_observed - cls.t_stop,
                             " (until the next process's %s)" % cls.driving_action if cls.driving_action else ""))

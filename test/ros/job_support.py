@@ -281,17 +281,25 @@ class MotionProbe:
 
     - arm: ``actual_qd`` (rad/s of sim time) and ``actual_digital_output_bits`` from the UR controller stand-in
       through ur_rtde's ``RTDEReceiveInterface`` (a second RTDE client next to LOCEM's), polled at ~250 Hz;
-    - base: ``/sim/ground_truth/base_pose`` (20 Hz wall), speed from consecutive poses;
+    - base: the wheel drives' actual velocity (0x606C) from their cyclic TPDOs on the base's CAN bus (the real
+      canopen client as a listener beside LOCEM's master: it sends nothing; every ``tpdo_period_ms``, 20 ms),
+      when ``can=True`` and the .test gives the sim's ``~can_channel``/``~can_port``; otherwise
+      ``/sim/ground_truth/base_pose`` (20 Hz wall), speed from consecutive poses. The drives' own velocity is
+      the sharper of the two: a pose 50 ms apart that moved less than 2 mm says "still" up to a period late, plus
+      the sim node's and the topic's delays on a busy machine;
     - compressor: the spray valve (discrete input 1) over Modbus TCP with pymodbus, read on demand.
 
     ``host``/``modbus_port`` are the stand-ins' addresses (the .test file gives them). Every sample is
-    ``(monotonic wall time, value)``; call :meth:`close` at the end (it ends the RTDE client and the thread).
+    ``(monotonic wall time, value)``; call :meth:`close` at the end (it ends the RTDE client, the CAN listener
+    and the thread).
     """
 
     ARM_STILL = 1e-3     # rad/s: a joint faster than this is moving
     BASE_STILL = 2e-3    # m between two ground-truth poses (50 ms wall apart): the base is moving
+    WHEEL_STILL = 0.02   # rad/s at a wheel shaft (2.5 mm/s at the rim of a 0.127 m wheel): that wheel is moving
 
-    def __init__(self, host: str, modbus_port: int, sim_ns: str = "/sim", period: float = 0.004) -> None:
+    def __init__(self, host: str, modbus_port: int, sim_ns: str = "/sim", period: float = 0.004,
+                 can: bool = False) -> None:
         import rtde_receive
         self.host = host
         self.modbus_port = int(modbus_port)
@@ -300,16 +308,58 @@ class MotionProbe:
         self.arm: List[Tuple[float, float]] = []          # (t, max |qd|)
         self.outputs: List[Tuple[float, int]] = []        # (t, digital output bits)
         self.base: List[Tuple[float, Tuple[float, float, float]]] = []
+        #: (t, node id, |actual velocity| rad/s) of every wheel TPDO received (``can=True``)
+        self.wheels: List[Tuple[float, int, float]] = []
         self._period = period
         self._stop = threading.Event()
         self._sub = rospy.Subscriber(sim_ns.rstrip("/") + "/ground_truth/base_pose", Pose2D, self._on_pose,
                                      queue_size=50)
+        self._network: Any = None
+        self._wheel_ids: List[int] = []
+        if can:
+            self._listen_to_wheels(sim_ns)
         self._thread = threading.Thread(target=self._poll, name="motion-probe", daemon=True)
         self._thread.start()
 
     def _on_pose(self, m: Any) -> None:
         with self._lock:
             self.base.append((time.monotonic(), (m.x, m.y, m.theta)))
+
+    def _listen_to_wheels(self, sim_ns: str) -> None:
+        """Join the base's CAN bus (the sim's ``~can_channel``/``~can_port``, the robot file LOCEM runs with) as a
+        listener of every wheel drive's TPDOs: their mapping is the drives' object dictionary (the robot's EDS),
+        read from the file, not over SDO, so nothing is sent on the bus."""
+        import canopen
+        import yaml
+        channel = rospy.get_param(sim_ns.rstrip("/") + "/can_channel", None)
+        port = rospy.get_param(sim_ns.rstrip("/") + "/can_port", None)
+        robot_file = rospy.get_param("/locem/robot_config", None)
+        if channel is None or port is None or not robot_file:
+            raise SuiteSetupError("MotionProbe(can=True) needs %s/can_channel, %s/can_port and /locem/robot_config "
+                                  "(the .test sets them)" % (sim_ns, sim_ns))
+        with open(robot_file, encoding="utf-8") as handle:
+            base = yaml.safe_load(handle)["robot"]["base"]
+        drives = base["drives"]
+        eds = os.path.join(os.path.dirname(robot_file), base["eds"])
+        scale = float(drives["velocity_units_per_rad_s"])
+        self._network = canopen.Network()
+        self._network.connect(interface=drives["can"]["interface"], channel=channel, port=int(port),
+                              receive_own_messages=False)
+        for wheel in drives["wheels"]:
+            node = canopen.RemoteNode(int(wheel["node_id"]), eds)
+            self._network.add_node(node)
+            node.tpdo.read(from_od=True)
+            for pdo in node.tpdo.map.values():
+                if any(v.index == 0x606C for v in pdo.map):
+                    pdo.add_callback(self._wheel_callback(node.id, scale))
+            self._wheel_ids.append(node.id)
+
+    def _wheel_callback(self, node_id: int, scale: float) -> Callable[[Any], None]:
+        def on_tpdo(pdo: Any) -> None:
+            velocity = next(v.raw for v in pdo.map if v.index == 0x606C)
+            with self._lock:
+                self.wheels.append((time.monotonic(), node_id, abs(velocity) / scale))
+        return on_tpdo
 
     def _poll(self) -> None:
         while not self._stop.is_set():
@@ -329,6 +379,8 @@ class MotionProbe:
         self._stop.set()
         self._thread.join(2.0)
         self._sub.unregister()
+        if self._network is not None:
+            self._network.disconnect()
         try:
             self._rtde.disconnect()
         except RuntimeError:
@@ -345,13 +397,35 @@ class MotionProbe:
                 (p1[2] - p0[2] + math.pi) % (2 * math.pi) - math.pi)))
         return out
 
+    def _base_samples(self) -> List[Tuple[float, bool]]:
+        """(t, moving) of the base: with the wheel listener, at every wheel TPDO whether any wheel's latest
+        velocity is above WHEEL_STILL (from the first time every wheel was heard); otherwise at every ground-truth
+        pose whether it moved more than BASE_STILL since the one before."""
+        if self._network is None:
+            return [(t, d > self.BASE_STILL) for t, d in self._base_speeds()]
+        with self._lock:
+            frames = list(self.wheels)
+        latest: Dict[int, float] = {}
+        out = []
+        for t, node_id, speed in frames:
+            latest[node_id] = speed
+            if len(latest) == len(self._wheel_ids):
+                out.append((t, any(v > self.WHEEL_STILL for v in latest.values())))
+        return out
+
     def moving(self, window: float = 0.15) -> Dict[str, bool]:
         """Which of arm / base moved in the last ``window`` wall seconds."""
         now = time.monotonic()
         with self._lock:
             arm = [v for t, v in self.arm if now - t <= window]
-        base = [d for t, d in self._base_speeds() if now - t <= max(window, 0.12)]
-        return {"arm": any(v > self.ARM_STILL for v in arm), "base": any(d > self.BASE_STILL for d in base)}
+        base = [m for t, m in self._base_samples() if now - t <= max(window, 0.12)]
+        return {"arm": any(v > self.ARM_STILL for v in arm), "base": any(base)}
+
+    def wheel_speed(self, window: float = 0.1) -> float:
+        """The fastest wheel's velocity (rad/s) heard in the last ``window`` wall seconds (``can=True``)."""
+        now = time.monotonic()
+        with self._lock:
+            return max((v for t, _n, v in self.wheels if now - t <= window), default=0.0)
 
     def still_since(self, device: str, after: float, until: Optional[float] = None) -> Optional[float]:
         """Wall time of the first sample of ``device`` (``arm`` or ``base``) in [after, until] from which on
@@ -362,7 +436,7 @@ class MotionProbe:
             with self._lock:
                 samples = [(t, v > self.ARM_STILL) for t, v in self.arm if after <= t <= until]
         else:
-            samples = [(t, d > self.BASE_STILL) for t, d in self._base_speeds() if after <= t <= until]
+            samples = [(t, moving) for t, moving in self._base_samples() if after <= t <= until]
         if not samples or samples[-1][1]:
             return None
         first_still: Optional[float] = None
@@ -374,9 +448,10 @@ class MotionProbe:
         return first_still
 
     def samples_between(self, device: str, after: float, until: float) -> int:
+        if device == "base":
+            return sum(1 for t, _ in self._base_samples() if after <= t <= until)
         with self._lock:
-            series = self.arm if device == "arm" else self.base
-            return sum(1 for t, _ in series if after <= t <= until)
+            return sum(1 for t, _ in self.arm if after <= t <= until)
 
     def tool_outputs(self) -> int:
         with self._lock:

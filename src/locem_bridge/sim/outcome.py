@@ -18,7 +18,8 @@ sands nothing and tape is not laid. Frames (around an opening, in the wall plane
 touching one is a fault: ``sprayed_on_frames_m2`` (at least ``TRACE`` of the target) and ``sanded_on_frames_m2``.
 Seams (where a tool process was interrupted inside the work, e.g. by a suspension, and went on later): the pass
 maps count how often the spray axis and the tape crossed each point (one count per switching on of the tool); per
-joint the longest stretch taped twice (``double_m``) and the longest untaped stretch between taped ones (``gap_m``);
+joint the longest stretch taped twice (``double_m``) and the longest untaped stretch between taped ones (``gap_m``;
+``gaps_at_m``: where the untaped stretches between taped ones lie along the joint, m from its start, the 5 longest);
 per spray pass that ended inside a work area (``spray_seams``) the longest stretch never crossed (``gap_m``) and
 crossed twice (``double_m``) along the pass's direction that reaches the point where it ended (followed up to
 ``SEAM_SPAN`` either side), and when it ended (``sim_time``, from the world's clock: match it with the valve's
@@ -439,6 +440,7 @@ class OutcomeRecorder:
             joints[jid] = {"coverage": cov, "taped": cov >= TAPED_FRACTION, "manual": jid in self.manual,
                            "double_m": round(_longest_run(self.tape_passes[jid] >= 2) * TAPE_BIN, 4),
                            "gap_m": round(_longest_run(~inner) * TAPE_BIN, 4),
+                           "gaps_at_m": _runs_at(~inner, (taped[0] if taped.size else 0) * TAPE_BIN),
                            "manual_m": round(_union_length([(a, b) for j, a, b in plan.joints if j == jid],
                                                            0.0, length), 4),
                            "coverage_reachable": _weighted(bins[counted], weight[counted]) if counted.any()
@@ -858,6 +860,20 @@ def _weighted(bins: np.ndarray, weight: np.ndarray) -> float:
     """The share of the length ``weight`` the set ``bins`` hold."""
     total = float(weight.sum())
     return float(weight[bins].sum()) / total if total > 0 else float(bins.mean()) if bins.size else 0.0
+
+
+def _runs_at(flags: Any, origin: float, most: int = 5) -> List[List[float]]:
+    """Where the runs of true values in ``flags`` (TAPE_BINs from ``origin`` m) lie: ``[from, to]`` in m, the
+    ``most`` longest, in order along the line."""
+    runs, start = [], None
+    for i, f in enumerate(list(flags) + [False]):
+        if f and start is None:
+            start = i
+        elif not f and start is not None:
+            runs.append((start, i))
+            start = None
+    runs = sorted(sorted(runs, key=lambda r: r[0] - r[1])[:most])
+    return [[round(origin + a * TAPE_BIN, 3), round(origin + b * TAPE_BIN, 3)] for a, b in runs]
 
 
 def _longest_run(flags: Any) -> int:

@@ -54,6 +54,7 @@ from .site import Site, Wall
 log = logging.getLogger(__name__)
 
 BASE_SUBSTEP = 0.01    # sim s: the base pose is integrated through wheel angles at most this far apart
+SAMPLE_QUEUE = 30000   # arm controller samples waiting for the world's step, at most (60 s wall at 500 Hz)
 
 
 
@@ -116,7 +117,10 @@ class World:
         self.steps = 0
         # arm samples (joint positions, tool process on at that moment) from the controller's step listener
         # and their numbers in the state journal (None: not journaled)
-        self._samples: Deque[Tuple[List[float], bool, float, Optional[int]]] = deque(maxlen=2000)
+        # (at most SAMPLE_QUEUE: a minute of a 500 Hz controller; should the world's thread fall that far behind,
+        # the oldest are dropped and the drop is logged with how many)
+        self._samples: Deque[Tuple[List[float], bool, float, Optional[int]]] = deque(maxlen=SAMPLE_QUEUE)
+        self.samples_dropped = 0
         #: journals the samples while a tool is mounted and what the world recorded of them (a
         #: :class:`~locem_bridge.sim.world_state.WorldState`; set by the worksite), None: not kept
         self.sample_journal: Any = None
@@ -548,6 +552,11 @@ class World:
         journal, n = self.sample_journal, None
         if journal is not None and self.mounted_tool is not None:
             n = journal.note_sample(q, on, t)
+        if len(self._samples) == SAMPLE_QUEUE:
+            self.samples_dropped += 1
+            if self.samples_dropped in (1, 10, 100, 1000) or self.samples_dropped % 10000 == 0:
+                log.warning("world: %d arm samples dropped (the world's step fell %d samples behind): the outcome "
+                            "maps miss that stretch of the arm's path", self.samples_dropped, SAMPLE_QUEUE)
         self._samples.append((q, on, t, n))
 
     def resume_samples(self, samples: Sequence[Tuple[List[float], bool, float, int]],
