@@ -1,6 +1,7 @@
 """The composed plasterboard commands through LOCEM with every bridge (RTDE arm, Modbus compressor, CAN base)
 against the stand-ins, with the PyBullet world measuring tape and spray on the wall."""
 import math
+import threading
 import time
 
 import numpy as np
@@ -277,3 +278,57 @@ def test_at_time_scale_10_every_lane_is_sprayed_to_within_3_cm_of_its_ends(robot
     finally:
         built.close()
         rig.close()
+
+
+def test_a_wall_command_takes_its_targets_from_the_pose_the_first_fix_after_a_stop_settles(wall, core):
+    """The first localisation fix after the base stopped replaces its odometry pose (by the drift of the drive):
+    a wall command waits for it before it computes a target, so its targets agree. Odometry drifted 3 cm here
+    and the fix comes 0.4 s into APPLY_TAPE_START: the command's TCP target is the one from the fixed pose."""
+    rig, built = wall
+    base = built.get("base")
+    rig.world.mount_tool("taping_tool")
+    assert run(core, "MOUNT_TOOL taping_tool").success
+    x, y, th = rig.world.base_pose()
+    base.set_velocity(0.05, 0.0, 0.0, hold=0.3)            # a fix while the base moves: localisation runs, the
+    assert wait_until(lambda: abs(base.twist()[0]) > 0.02, timeout=3.0)
+    assert not base.correct_pose(x, y, th)                 # fix is not taken (late by its latency)
+    assert wait_until(lambda: abs(base.twist()[0]) < 1e-3, timeout=3.0)
+    x, y, th = rig.world.base_pose()
+    base.set_pose(x, y + 0.03, th)                         # odometry 3 cm off towards the wall (y), no fix yet
+    settled = base.pose()
+    settled[1] -= 0.03
+    fixed_at = []
+
+    def fix_later() -> None:
+        time.sleep(0.4)
+        fixed_at.append(time.monotonic())
+        assert base.correct_pose(x, y, th)
+    feeder = threading.Thread(target=fix_later, daemon=True)
+    t0 = time.monotonic()
+    feeder.start()
+    r = run(core, "APPLY_TAPE_START 1.8 3.6 1.25 3.0 3.6 1.25 %s" % NORMAL)
+    feeder.join(2.0)
+    assert r.success, r.message
+    assert fixed_at and fixed_at[0] - t0 >= 0.35, fixed_at
+    time.sleep(0.1)
+    pos, _ = rig.world.tcp_pose()                          # the TCP stands where the wall command aimed: 5 cm in
+    assert abs(pos[0] - 1.8) < 0.003 and abs(pos[1] - (3.6 - 0.05)) < 0.003, pos    # front of the line's start
+
+
+def test_without_localisation_a_wall_command_does_not_wait(wall, core):
+    rig, built = wall
+    base = built.get("base")
+    assert base.wait_localised(_Waiter(), 5.0) is None     # no fix ever came: odometry it is, at once
+    x, y, th = rig.world.base_pose()
+    base.set_velocity(0.05, 0.0, 0.0, hold=0.3)
+    assert wait_until(lambda: abs(base.twist()[0]) > 0.02, timeout=3.0)
+    assert not base.correct_pose(x, y, th)
+    assert wait_until(lambda: abs(base.twist()[0]) < 1e-3, timeout=3.0)
+    t0 = time.monotonic()
+    late = base.wait_localised(_Waiter(), 0.3)             # fixes came, none taken since the stop: waits, then
+    assert late is not None and "no localisation fix taken within 0.3 s" in late, late    # says so
+    assert 0.25 <= time.monotonic() - t0 < 1.0
+    x, y, th = rig.world.base_pose()
+    assert base.correct_pose(x, y, th)
+    t0 = time.monotonic()
+    assert base.wait_localised(_Waiter(), 5.0) is None and time.monotonic() - t0 < 0.05    # settled: at once

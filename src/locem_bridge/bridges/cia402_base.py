@@ -83,6 +83,7 @@ ALIGN_TOLERANCE = 0.02      # rad: a differential base aims at the goal this clo
 REAIM_TURNS = 1.5 * math.pi
 REAIM_CREEP_S = 1.0
 STEER_DISTANCE = 0.05       # m: it steers onto the bearing while farther than this from the goal
+LOCALISATION_SILENT_S = 2.0  # s without a localisation fix: none is running (wait_localised does not wait)
 
 
 class Cia402Base(Base):
@@ -149,6 +150,7 @@ class Cia402Base(Base):
         self._goal: Optional[Dict[str, Any]] = None
         self._last_pos: Optional[List[float]] = None
         self._fixes: List[Tuple[float, float, float]] = []   # localisation fixes taken since the base stopped
+        self._fix_offered_at: Optional[float] = None         # when the last fix came (taken or not), monotonic
         self._last_hb = [0.0] * len(self.wheels)
         self._enabled = False
         self._fault: Optional[str] = None
@@ -497,6 +499,7 @@ class Cia402Base(Base):
         other, then agree). Ignored while the base moves (the fix would be late by its latency); moving clears
         the fixes. Returns whether it was taken."""
         with self._lock:
+            self._fix_offered_at = time.monotonic()
             vx, vy, wz = self._twist
             if self._goal is not None or math.hypot(vx, vy) > still_speed or abs(wz) > still_rate:
                 self._fixes = []
@@ -508,6 +511,26 @@ class Cia402Base(Base):
             self._pose = [sum(f[0] for f in self._fixes) / n, sum(f[1] for f in self._fixes) / n,
                           wrap_angle(mean_yaw)]
             return True
+
+    def wait_localised(self, waiter: Waiter, timeout: float) -> Optional[str]:
+        """The first fix after the base stopped replaces the odometry pose, by the odometry's drift over the drive
+        (a centimetre after a long drive on a busy machine): a wall command whose targets were computed partly
+        before that fix and partly after it would run its tool off the line by as much (a taping piece that
+        started 1 cm off the wall left 10 cm of its joint bare). Waits for that fix while fixes come (one within
+        LOCALISATION_SILENT_S); later fixes move the pose by their averaged noise only."""
+        end = time.monotonic() + timeout
+        while True:
+            with self._lock:
+                if self._fixes:
+                    return None
+                offered = self._fix_offered_at
+            now = time.monotonic()
+            if offered is None or now - offered > LOCALISATION_SILENT_S:
+                return None                                  # no localisation running: odometry it is
+            if now >= end:
+                return ("base: no localisation fix taken within %.1f s of standing still (the last came %.2f s "
+                        "ago); working on odometry" % (timeout, now - offered))
+            waiter.sleep(0.01)
 
     def twist(self) -> List[float]:
         with self._lock:

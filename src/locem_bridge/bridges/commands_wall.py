@@ -19,6 +19,7 @@ to its safe state: valve closed, motor off). SPRAY_AREA therefore switches the m
 then the area again) needs no COMPRESSOR_ON first.
 """
 
+import logging
 import math
 import threading
 import time
@@ -38,6 +39,8 @@ from .geometry import arm_base_in_footprint, planar, tool_frame_facing
 from .interfaces import Arm, Base, Compressor, Lift, Scanner, Waiter
 from .suspension import Resumable, Steps, arm_settle
 
+log = logging.getLogger(__name__)
+
 CATEGORY = "wall"
 EXT = 100.0
 APPROACH_SPEED = 0.25          # m/s, free moves near the wall
@@ -49,6 +52,7 @@ PATH_BLEND = 0.03              # m, blend radius of the turns between raster lan
 LEAD_IN = 0.3                  # m, a raster path's lead-in beside its first lane (see WallCommands._raster_path)
 SKIP_RESOLUTION = 0.001        # m, a lane with less than this left after SPRAY_AREA skip= is not worked again
 LIFT_OFF = 0.03                # m, how far a suspended sander lifts off the wall
+LOCALISED_WAIT_S = 1.0         # s, the longest a wall command waits for the base's first fix after its stop
 
 
 def _point(prefix: str, doc: str, suffix: str = "") -> tuple:
@@ -856,6 +860,14 @@ class WallCommands:
         x, y, th = self._need("base").pose()
         return planar(x, y, th).dot(self.mount)
 
+    def _localised(self, ctx: Any) -> None:
+        """Before a wall command computes its first target: the base's pose holds the localisation fix that
+        follows its stop (:meth:`~locem_bridge.bridges.interfaces.Base.wait_localised`, at most
+        LOCALISED_WAIT_S), so all its targets come from one settled pose."""
+        late = self._need("base").wait_localised(ctx, LOCALISED_WAIT_S)
+        if late:
+            log.warning("%s", late)
+
     def to_arm(self, point: Sequence[float], normal: Sequence[float]) -> List[float]:
         """TCP pose (arm base frame) at a map ``point`` facing the wall with inward ``normal``."""
         t_map_arm = self._map_arm()
@@ -993,6 +1005,7 @@ class WallCommands:
         self._need_tool("taping_tool")
         n = self._unit([nx, ny, nz], "normal")
         p0 = np.array([x0, y0, z0])
+        self._localised(ctx)
         pose = self.to_arm(p0 + n * approach, n)
         self._resumable(ctx, None).run(lambda: self._approach(ctx, pose))
         return {"tcp_pose": pose}
@@ -1007,6 +1020,7 @@ class WallCommands:
         if length < 1e-3:
             raise BadRequest("APPLY_TAPE: the line is shorter than 1 mm", argument="x1")
         start = time.monotonic()
+        self._localised(ctx)
 
         def tape() -> None:          # resumed: on again where the roller stopped, on along the rest of the line
             self._switch("taping_tool", True)
@@ -1074,6 +1088,7 @@ class WallCommands:
         how long the tool stays on should LOCEM die (see there). ``live``: the running lane's switch and progress
         are kept there for a suspension (:meth:`_resumable`)."""
         arm = self._need("arm")
+        self._localised(ctx)
         live = live if live is not None else {}
         n = self._unit(normal, "normal")
         uu = self._unit(u, "u")
@@ -1289,6 +1304,7 @@ class WallCommands:
         # then), approached again at the standoff with force mode, as a lane's start
         live: Dict[str, Any] = {"k": 0, "f": 0.0, "lane": None, "at": None}
         resumable = self._resumable(ctx, "sander", live, lift_off=True)
+        self._localised(ctx)
 
         def work_lanes() -> None:
             nonlocal total, end_pose

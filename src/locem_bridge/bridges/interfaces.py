@@ -405,6 +405,12 @@ class Base(Backend):
         may ignore fixes while it moves)."""
         self._unsupported(self.LOCALISATION)
 
+    def wait_localised(self, waiter: Waiter, timeout: float) -> Optional[str]:
+        """Optional group ``localisation``: wait, at most ``timeout`` s, until the pose holds a fix taken since
+        the base last stopped, while fixes come at all. None once it does (or without localisation: at once);
+        otherwise why not, for a warning. A base without the group has nothing to wait for."""
+        return None
+
 
 class Lift(Backend):
     """A vertical axis carrying the arm (``robot.lift``): heights ``z`` (m) of the arm mount above base_footprint,
