@@ -56,12 +56,12 @@ class JobHmiStopTest(unittest.TestCase):
             if s.get("process") != TAPING or s.get("phase") != "running":
                 return None
             m = cls.probe.moving(window=0.12)
-            return (s, m) if m["base"] and cls.probe.wheel_speed(0.05) >= DRIVING_RAD_S else None
+            wheel = cls.probe.wheel_speed(0.05)
+            return (s, m, wheel) if m["base"] and wheel >= DRIVING_RAD_S else None
         found = wait_until(base_moving_in_taping, timeout=90.0, period=0.005)
         assert found, "the base never moved during taping (last HICEM state %s, motion %s)" % (
             cls.timeline.latest(), cls.probe.moving())
-        cls.stopped_state, cls.moving_before = found
-        cls.wheels_before = cls.probe.wheel_speed(0.05)
+        cls.stopped_state, cls.moving_before, cls.wheels_before = found
         cls.t_stop = time.monotonic()
         cls.stop_answer = cls.hmi.stop()
         cls.t_answer = time.monotonic()

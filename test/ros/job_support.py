@@ -316,10 +316,17 @@ class MotionProbe:
                                      queue_size=50)
         self._network: Any = None
         self._wheel_ids: List[int] = []
-        if can:
-            self._listen_to_wheels(sim_ns)
+        self._wheel_latest: Dict[int, float] = {}
+        #: (t, any wheel faster than WHEEL_STILL) at every wheel TPDO once every wheel was heard (``can=True``)
+        self.base_moving: List[Tuple[float, bool]] = []
         self._thread = threading.Thread(target=self._poll, name="motion-probe", daemon=True)
-        self._thread.start()
+        try:
+            if can:
+                self._listen_to_wheels(sim_ns)
+            self._thread.start()
+        except BaseException:
+            self.close()
+            raise
 
     def _on_pose(self, m: Any) -> None:
         with self._lock:
@@ -345,20 +352,29 @@ class MotionProbe:
         self._network = canopen.Network()
         self._network.connect(interface=drives["can"]["interface"], channel=channel, port=int(port),
                               receive_own_messages=False)
-        for wheel in drives["wheels"]:
-            node = canopen.RemoteNode(int(wheel["node_id"]), eds)
+        self._wheel_ids = [int(wheel["node_id"]) for wheel in drives["wheels"]]
+        for node_id in self._wheel_ids:
+            node = canopen.RemoteNode(node_id, eds)
             self._network.add_node(node)
             node.tpdo.read(from_od=True)
             for pdo in node.tpdo.map.values():
                 if any(v.index == 0x606C for v in pdo.map):
-                    pdo.add_callback(self._wheel_callback(node.id, scale))
-            self._wheel_ids.append(node.id)
+                    pdo.add_callback(self._wheel_callback(node_id, scale))
+        if not wait_until(lambda: len(self._wheel_latest) == len(self._wheel_ids), timeout=3.0, period=0.02):
+            raise SuiteSetupError("MotionProbe: heard no velocity TPDO of wheel drive(s) %s on %s %s:%s within 3 s "
+                                  "(heard: %s)" % (sorted(set(self._wheel_ids) - set(self._wheel_latest)),
+                                                   drives["can"]["interface"], channel, port,
+                                                   sorted(self._wheel_latest) or "none"))
 
     def _wheel_callback(self, node_id: int, scale: float) -> Callable[[Any], None]:
         def on_tpdo(pdo: Any) -> None:
-            velocity = next(v.raw for v in pdo.map if v.index == 0x606C)
+            velocity = abs(next(v.raw for v in pdo.map if v.index == 0x606C)) / scale
+            now = time.monotonic()
             with self._lock:
-                self.wheels.append((time.monotonic(), node_id, abs(velocity) / scale))
+                self.wheels.append((now, node_id, velocity))
+                self._wheel_latest[node_id] = velocity
+                if len(self._wheel_latest) == len(self._wheel_ids):
+                    self.base_moving.append((now, any(v > self.WHEEL_STILL for v in self._wheel_latest.values())))
         return on_tpdo
 
     def _poll(self) -> None:
@@ -377,14 +393,19 @@ class MotionProbe:
 
     def close(self) -> None:
         self._stop.set()
-        self._thread.join(2.0)
+        if self._thread.ident is not None:                 # started
+            self._thread.join(2.0)
         self._sub.unregister()
-        if self._network is not None:
-            self._network.disconnect()
         try:
             self._rtde.disconnect()
         except RuntimeError:
             pass
+        if self._network is not None:
+            try:
+                self._network.disconnect()
+            except Exception as exc:  # noqa: BLE001 - a listener error re-raised at disconnect: closing anyway
+                rospy.logwarn("MotionProbe: CAN listener: %s", exc)
+            self._network = None
 
     # -- reading -------------------------------------------------------------------------------------------
     def _base_speeds(self) -> List[Tuple[float, float]]:
@@ -404,14 +425,7 @@ class MotionProbe:
         if self._network is None:
             return [(t, d > self.BASE_STILL) for t, d in self._base_speeds()]
         with self._lock:
-            frames = list(self.wheels)
-        latest: Dict[int, float] = {}
-        out = []
-        for t, node_id, speed in frames:
-            latest[node_id] = speed
-            if len(latest) == len(self._wheel_ids):
-                out.append((t, any(v > self.WHEEL_STILL for v in latest.values())))
-        return out
+            return list(self.base_moving)
 
     def moving(self, window: float = 0.15) -> Dict[str, bool]:
         """Which of arm / base moved in the last ``window`` wall seconds."""
@@ -425,7 +439,12 @@ class MotionProbe:
         """The fastest wheel's velocity (rad/s) heard in the last ``window`` wall seconds (``can=True``)."""
         now = time.monotonic()
         with self._lock:
-            return max((v for t, _n, v in self.wheels if now - t <= window), default=0.0)
+            recent = []
+            for t, _n, v in reversed(self.wheels):       # newest first: stop at the window's start
+                if now - t > window:
+                    break
+                recent.append(v)
+        return max(recent, default=0.0)
 
     def still_since(self, device: str, after: float, until: Optional[float] = None) -> Optional[float]:
         """Wall time of the first sample of ``device`` (``arm`` or ``base``) in [after, until] from which on

@@ -84,6 +84,7 @@ REAIM_TURNS = 1.5 * math.pi
 REAIM_CREEP_S = 1.0
 STEER_DISTANCE = 0.05       # m: it steers onto the bearing while farther than this from the goal
 LOCALISATION_SILENT_S = 2.0  # s without a localisation fix: none is running (wait_localised does not wait)
+FIX_INTERVALS = 2.5          # wait_localised waits at most this many of the fixes' mean interval
 
 
 class Cia402Base(Base):
@@ -151,6 +152,10 @@ class Cia402Base(Base):
         self._last_pos: Optional[List[float]] = None
         self._fixes: List[Tuple[float, float, float]] = []   # localisation fixes taken since the base stopped
         self._fix_offered_at: Optional[float] = None         # when the last fix came (taken or not), monotonic
+        self._fix_interval: Optional[float] = None           # the fixes' mean interval (s, while they come)
+        #: a localisation source is configured (LOCEM's localisation_topic): before its first fix, wait_localised
+        #: waits for one too (a restarted LOCEM's pose is the configured start until then)
+        self.localisation_expected = False
         self._last_hb = [0.0] * len(self.wheels)
         self._enabled = False
         self._fault: Optional[str] = None
@@ -499,7 +504,11 @@ class Cia402Base(Base):
         other, then agree). Ignored while the base moves (the fix would be late by its latency); moving clears
         the fixes. Returns whether it was taken."""
         with self._lock:
-            self._fix_offered_at = time.monotonic()
+            now = time.monotonic()
+            if self._fix_offered_at is not None and now - self._fix_offered_at <= LOCALISATION_SILENT_S:
+                gap = now - self._fix_offered_at
+                self._fix_interval = gap if self._fix_interval is None else 0.8 * self._fix_interval + 0.2 * gap
+            self._fix_offered_at = now
             vx, vy, wz = self._twist
             if self._goal is not None or math.hypot(vx, vy) > still_speed or abs(wz) > still_rate:
                 self._fixes = []
@@ -517,19 +526,30 @@ class Cia402Base(Base):
         (a centimetre after a long drive on a busy machine): a wall command whose targets were computed partly
         before that fix and partly after it would run its tool off the line by as much (a taping piece that
         started 1 cm off the wall left 10 cm of its joint bare). Waits for that fix while fixes come (one within
-        LOCALISATION_SILENT_S); later fixes move the pose by their averaged noise only."""
-        end = time.monotonic() + timeout
+        LOCALISATION_SILENT_S), at most ``timeout`` and FIX_INTERVALS of their mean interval (a source that
+        publishes only while the base moves, as AMCL does, costs that long); before the first fix of a
+        :attr:`localisation_expected` source, at most ``timeout``. Later fixes move the pose by their averaged
+        noise only."""
+        start = time.monotonic()
         while True:
             with self._lock:
                 if self._fixes:
                     return None
-                offered = self._fix_offered_at
+                offered, interval = self._fix_offered_at, self._fix_interval
             now = time.monotonic()
-            if offered is None or now - offered > LOCALISATION_SILENT_S:
-                return None                                  # no localisation running: odometry it is
-            if now >= end:
-                return ("base: no localisation fix taken within %.1f s of standing still (the last came %.2f s "
-                        "ago); working on odometry" % (timeout, now - offered))
+            if offered is None:
+                if not self.localisation_expected:
+                    return None                              # no localisation: odometry it is
+                limit = timeout
+            elif now - offered > LOCALISATION_SILENT_S:
+                return None                                  # fixes stopped coming: odometry it is
+            else:
+                limit = timeout if interval is None else min(timeout, max(FIX_INTERVALS * interval, 0.05))
+            if now - start >= limit:
+                return ("base: no localisation fix taken within %.2f s of a wall command's start, the base standing "
+                        "still (%s); its targets come from odometry" % (
+                            now - start, "no fix yet" if offered is None else "the last came %.2f s ago"
+                            % (now - offered)))
             waiter.sleep(0.01)
 
     def twist(self) -> List[float]:

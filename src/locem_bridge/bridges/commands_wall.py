@@ -866,7 +866,7 @@ class WallCommands:
         LOCALISED_WAIT_S), so all its targets come from one settled pose."""
         late = self._need("base").wait_localised(ctx, LOCALISED_WAIT_S)
         if late:
-            log.warning("%s", late)
+            log.info("%s", late)
 
     def to_arm(self, point: Sequence[float], normal: Sequence[float]) -> List[float]:
         """TCP pose (arm base frame) at a map ``point`` facing the wall with inward ``normal``."""
@@ -1088,7 +1088,6 @@ class WallCommands:
         how long the tool stays on should LOCEM die (see there). ``live``: the running lane's switch and progress
         are kept there for a suspension (:meth:`_resumable`)."""
         arm = self._need("arm")
-        self._localised(ctx)
         live = live if live is not None else {}
         n = self._unit(normal, "normal")
         uu = self._unit(u, "u")
@@ -1102,6 +1101,7 @@ class WallCommands:
             ctx.report(1.0, progress_text(total_m, total_m))
             return {"length_m": 0.0, "lanes": 0, "skipped_m": round(min(skip, total_m), 4),
                     "duration_s": round(time.monotonic() - start, 3)}
+        self._localised(ctx)
         runup = speed * speed / (2.0 * LANE_ACCEL) + RUNUP_MARGIN
         # one blended path when the arm has them: always for a tool switched along the path (a resume into the
         # last lane gets its lead-in too), else for two lanes or more

@@ -362,6 +362,9 @@ class Base(Backend):
     LOCALISATION = "localisation"
     OPTIONAL: ClassVar[Mapping[str, Tuple[str, ...]]] = {LOCALISATION: ("correct_pose",)}
 
+    #: a localisation source is configured (optional group ``localisation``; see :meth:`wait_localised`)
+    localisation_expected: bool = False
+
     #: named poses ``[x, y, theta]`` of ``robot.base.named_poses`` (plus the node's ``~named_poses``)
     named_poses: Mapping[str, List[float]] = {}
 
@@ -407,8 +410,9 @@ class Base(Backend):
 
     def wait_localised(self, waiter: Waiter, timeout: float) -> Optional[str]:
         """Optional group ``localisation``: wait, at most ``timeout`` s, until the pose holds a fix taken since
-        the base last stopped, while fixes come at all. None once it does (or without localisation: at once);
-        otherwise why not, for a warning. A base without the group has nothing to wait for."""
+        the base last stopped, while fixes come at all (or before the first one, when
+        :attr:`localisation_expected`). None once it does (or without localisation: at once); otherwise why
+        not, for the log. A base without the group has nothing to wait for."""
         return None
 
 

@@ -73,6 +73,7 @@ class LocemDevices:
             self._cmd_sub = rospy.Subscriber("cmd_vel", Twist, self._on_cmd_vel, queue_size=10)
             if self.localisation_topic and base.supports(Base.LOCALISATION):
                 from geometry_msgs.msg import PoseWithCovarianceStamped
+                base.localisation_expected = True
                 self._loc_sub = rospy.Subscriber(self.localisation_topic, PoseWithCovarianceStamped,
                                                  self._on_localisation, queue_size=1)
         self._timers.append(rospy.Timer(rospy.Duration(1.0 / self.rate), self._publish_state))
