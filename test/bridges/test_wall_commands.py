@@ -242,6 +242,7 @@ def test_at_time_scale_10_every_lane_is_sprayed_to_within_3_cm_of_its_ends(robot
     END_M = 0.03
     from locem_bridge.bridges.commands_wall import WallCommands
     from locem_bridge.bridges.robot import build_robot
+    from locem_bridge.common.raster_progress import lane_heights
     from locem_bridge.sim.outcome import PASS_GRID
     rig = WorksiteRig(robot, time_scale=10.0, arm_in_process=True)
     built = build_robot(rig.robot, site=rig.site_path, initial_pose=tuple(rig.world.base_pose()))
@@ -255,7 +256,7 @@ def test_at_time_scale_10_every_lane_is_sprayed_to_within_3_cm_of_its_ends(robot
         time.sleep(0.2)
         m = rig.world.outcome.maps["wall_1"]
         s0, t0, _d = m.wall.to_wall_coords([2.0, 3.6, z])
-        for k, h, w0, w1, _start in WallCommands._raster_lanes(WallCommands._lane_heights(height, 0.1), 0.6, 0.0,
+        for k, h, w0, w1, _start in WallCommands._raster_lanes(lane_heights(height, 0.1), 0.6, 0.0,
                                                                skip):
             a, b = sorted(m.wall.to_wall_coords([2.0 + w, 3.6, z])[0] for w in (w0, w1))
             cols = np.arange(int(math.ceil((a + END_M) / PASS_GRID)), int((b - END_M) / PASS_GRID))

@@ -24,8 +24,8 @@ def _at(point, **kw):
 def test_the_start_of_every_lane_locem_works_after_a_skip_maps_back_to_that_skip():
     # LOCEM's own lanes after skip= (WallCommands._raster_lanes): the TCP where each remaining lane's worked stretch
     # begins stands at exactly that many metres of the raster
-    heights = WallCommands._lane_heights(HEIGHT, SPACING)
-    assert heights == list(lane_heights(HEIGHT, SPACING)) and len(heights) == 6
+    heights = lane_heights(HEIGHT, SPACING)
+    assert len(heights) == 6
     for skip in (0.0, 0.3, LANE - 0.2, LANE + 0.01, 2.5 * LANE, 5 * LANE + 0.7):
         lanes = WallCommands._raster_lanes(heights, WIDTH, RUN_IN, skip)
         k, t, w0, _w1, start_m = lanes[0]

@@ -438,7 +438,7 @@ def test_get_area_raster_gives_every_section_the_same_coat_per_m2_whatever_its_h
     +29 % of coat). Each
     section gets the whole number of intervals nearest 0.15 m, rounded up to what the command carries, and a
     speed scaled by the ratio (at most max_speed): spacing x speed, the coat's inverse, is the same everywhere."""
-    from locem_bridge.bridges.commands_wall import WallCommands
+    from locem_bridge.common.raster_progress import lane_heights
     scan = {"walls": [dict(SITE["walls"][0], openings=[{"id": "w", "kind": "window", "s": [1.5, 2.4],
                                                        "t": [0.85, 1.45], "frame": 0.05}])],
             "areas": [{"id": "wall_1_area_1", "wall": "wall_1", "origin": [0.0, 3.0, 0.1], "u": [1.0, 0.0, 0.0],
@@ -453,7 +453,7 @@ def test_get_area_raster_gives_every_section_the_same_coat_per_m2_whatever_its_h
     assert heights == [0.35, 0.5, 0.55, 0.7]
     for s in secs:
         n = round(s["height"] / 0.15) or 1
-        lanes = WallCommands._lane_heights(s["height"], s["spacing"])
+        lanes = lane_heights(s["height"], s["spacing"])
         assert len(lanes) == n + 1 and s["spacing"] == pytest.approx(s["height"] / n, abs=1e-5), s
         assert s["speed"] * s["spacing"] == pytest.approx(0.5 * 0.15, rel=1e-3), s
     # without lane_spacing: the spacing given (band_gap) and the speed port as they are

@@ -1048,12 +1048,6 @@ class WallCommands:
             pass
 
     @staticmethod
-    def _lane_heights(height: float, spacing: float) -> List[float]:
-        """Heights of a raster's lanes above the area's origin
-        (:func:`~locem_bridge.common.raster_progress.lane_heights`)."""
-        return list(lane_heights(height, spacing))
-
-    @staticmethod
     def _raster_lanes(heights: Sequence[float], width: float, run_in: float,
                       skip: float) -> List[Tuple[int, float, float, float, float]]:
         """The lanes still to work after ``skip`` m of the raster's worked length (module
@@ -1093,7 +1087,7 @@ class WallCommands:
         uu = self._unit(u, "u")
         up = np.array([0.0, 0.0, 1.0]) if across is None else self._unit(across, "across")
         o = np.asarray(origin, dtype=float)
-        heights = self._lane_heights(height, spacing)
+        heights = lane_heights(height, spacing)
         total_m = len(heights) * (width + 2.0 * run_in)
         lanes = self._raster_lanes(heights, width, run_in, skip)
         start = time.monotonic()
@@ -1215,13 +1209,13 @@ class WallCommands:
         if not lo <= pressure <= hi:
             raise BadRequest("SPRAY_AREA: pressure %.2f bar is outside the working band %.2f..%.2f bar"
                              % (pressure, lo, hi), argument="pressure")
-        total_m = len(self._lane_heights(height, spacing)) * (width + 2.0 * run_in)
+        heights = lane_heights(height, spacing)
+        total_m = len(heights) * (width + 2.0 * run_in)
         if skip > total_m + SKIP_RESOLUTION:
             raise BadRequest("SPRAY_AREA: skip %.3f m is beyond the raster's worked length %.3f m (%d lanes of "
                              "width + 2 x run_in = %.3f m); allowed 0..%.3f m"
-                             % (skip, total_m, len(self._lane_heights(height, spacing)), width + 2.0 * run_in,
-                                total_m), argument="skip")
-        if not self._raster_lanes(self._lane_heights(height, spacing), width, run_in, skip):
+                             % (skip, total_m, len(heights), width + 2.0 * run_in, total_m), argument="skip")
+        if not self._raster_lanes(heights, width, run_in, skip):
             ctx.report(1.0, progress_text(total_m, total_m))         # nothing left: no device is touched
             return {"length_m": 0.0, "lanes": 0, "skipped_m": round(min(skip, total_m), 4), "duration_s": 0.0}
         guarded = GuardedWaiter(ctx, comp.check_link)
@@ -1284,7 +1278,7 @@ class WallCommands:
                                                          skip=live["skip"], live=live, across=across))
             finally:
                 self._switch_off_safely("sander")
-            out = self._worked(out, len(self._lane_heights(extent, spacing)) * length, 0.0, resumable.suspensions)
+            out = self._worked(out, len(lane_heights(extent, spacing)) * length, 0.0, resumable.suspensions)
             out["force_n"] = force
             out["contact"] = "position"
             return out
@@ -1295,7 +1289,7 @@ class WallCommands:
         uu = self._unit(along, "u")
         up = self._unit(across, "u")
         o = np.array([ox, oy, oz], dtype=float)
-        heights = self._lane_heights(extent, spacing)          # lanes of ``length`` along uu, at heights along up
+        heights = lane_heights(extent, spacing)          # lanes of ``length`` along uu, at heights along up
         start = time.monotonic()
         total = 0.0
         samples: List[float] = []
