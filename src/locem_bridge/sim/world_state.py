@@ -48,6 +48,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from ..common.files import write_whole
 from .errors import SimConfigError
 from .outcome import OutcomeRecorder
 
@@ -400,11 +401,7 @@ class WorldState:
         arrays, meta = captured
         buf = io.BytesIO()
         np.savez(buf, meta=np.array(json.dumps(meta)), **arrays)
-        path = os.path.join(self.folder, SNAPSHOT)
-        tmp = path + ".tmp"
-        with open(tmp, "wb") as fh:
-            fh.write(buf.getvalue())
-        os.replace(tmp, path)
+        write_whole(os.path.join(self.folder, SNAPSHOT), buf.getvalue())
         for old in self.journal_files():
             if int(old.rsplit(".", 1)[1]) <= meta["seq"]:
                 os.remove(old)
