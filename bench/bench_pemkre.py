@@ -6,8 +6,10 @@ Prints, side by side and measured in the same run:
                 materialised once, incremental ABox inference;
   * rocksdb  -- the same engine on OxigraphStore (oxigraph's RocksDB backend)          } store choice
   * rdflib   -- the same engine on rdflib's in-memory Dataset + rdflib's SPARQL engine }
-  * server   -- the same engine on SparqlStore: a real SPARQL 1.1 server (`oxigraph serve` on a loopback port,
-                started here), one HTTP update per change }
+  * server   -- the same engine on a real SPARQL 1.1 server (`oxigraph serve` on a loopback port, started here)
+                as PEMKRE opens it by default (store:=sparql): MirroredSparqlStore, reads from an exact copy in the
+                process checked against the server's version marker once per decision, writes to the server
+  * server_plain -- the same server through the plain SparqlStore: every read is a request
   * naive    -- the baseline of the issue: rdflib in memory and a full owlrl OWL 2 RL closure of ontologies +
                 world + log before every decision (bounded: a closure over --closure-cap seconds is reported as
                 '>cap' and that configuration stops).
@@ -19,7 +21,7 @@ status update p99 <= 5 ms; cost growing no faster than linearly. Issue 20: the s
 <= 20 ms at 100,000 features on the embedded store.
 
 usage: python3 bench/bench_pemkre.py [--sizes 10,100,1000,10000] [--samples 200] [--budget 20] [--closure-cap 60]
-                                    [--configs ours,rocksdb,rdflib,naive,server]
+                                    [--configs ours,rocksdb,rdflib,naive,server,server_plain]
 e.g. issue 20's table: --sizes 1000,10000,100000 --configs ours,server
 """
 import argparse
@@ -76,6 +78,8 @@ class Result:
         self.world_s = float("nan")
         self.triples = 0
         self.closure_s: Optional[float] = None
+        self.reload_s: Optional[float] = None   # server: loading the whole copy from the server once
+        self.reloads = 0                        # server: copies loaded during the sampled decisions
 
 
 class NaiveReasoner:
@@ -111,14 +115,18 @@ def reset_line(engine, task: str) -> None:
     engine.store.apply(engine.reasoner.infer(engine.store, cs))
 
 
-def _server_store(path: str):
-    """A SparqlStore on a fresh ``oxigraph serve`` (the tests' helper, test/pemkre/oxigraph_server.py)."""
+def _server_store(path: str, mirror: bool):
+    """The store ``open_store("sparql", ...)`` gives (``mirror``: MirroredSparqlStore, else SparqlStore) on a fresh
+    ``oxigraph serve`` (the tests' helper, test/pemkre/oxigraph_server.py)."""
     sys.path.insert(0, os.path.join(REPO, "test", "pemkre"))
     from oxigraph_server import OxigraphServer  # noqa: E402
-    from locem_bridge.pemkre.sparql_store import SparqlStore  # noqa: E402
+    from locem_bridge.pemkre.store_factory import open_store  # noqa: E402
 
     server = OxigraphServer(path).start()
-    store = SparqlStore(server.query_url, server.update_url)
+    # the world of 10,000+ features goes in as one update request (one scan): more than the 10 s default timeout
+    # on a busy machine
+    store = open_store("sparql", "", query_url=server.query_url, update_url=server.update_url, mirror=mirror,
+                       timeout_s=120.0)
     closing = store.close
 
     def close() -> None:
@@ -132,7 +140,7 @@ def run_config(kind: str, n: int, samples: int, budget: float, cap: float, tmp: 
     res = Result()
     path = os.path.join(tmp, "%s_%d" % (kind, n))
     store = {"ours": lambda: JournaledStore(path), "rocksdb": lambda: OxigraphStore(path),
-             "rdflib": RdflibStore, "naive": RdflibStore, "server": lambda: _server_store(path)}[kind]()
+             "rdflib": RdflibStore, "naive": RdflibStore, "server": lambda: _server_store(path, True), "server_plain": lambda: _server_store(path, False)}[kind]()
     try:
         engine = ProcessEngine(store, reasoning_max_seconds=600, reasoning_max_triples=10 ** 8)
         naive = None
@@ -155,6 +163,7 @@ def run_config(kind: str, n: int, samples: int, budget: float, cap: float, tmp: 
         a = engine.next_action()           # GET_TOOL (not timed)
         engine.set_task_status(a.task, "succeeded")
         warm = 0 if kind == "naive" else 3
+        reloads = getattr(store, "reloads", 0)
         deadline = time.perf_counter() + budget
         for i in range(samples + warm):
             if i >= warm and time.perf_counter() > deadline and len(res.next) >= 2:
@@ -181,6 +190,11 @@ def run_config(kind: str, n: int, samples: int, budget: float, cap: float, tmp: 
                 res.next.append(dt)
                 res.status += [t2 - t1, t3 - t2]
                 res.decision.append(t3 - t)
+        if hasattr(store, "reload"):
+            res.reloads = store.reloads - reloads
+            t = time.perf_counter()
+            store.reload()
+            res.reload_s = time.perf_counter() - t
     finally:
         gc.unfreeze()
         store.close()
@@ -332,6 +346,15 @@ def main() -> int:
                       % (n, pct(o.next, 50) * 1e3, pct(o.next, 99) * 1e3, pct(r.next, 50) * 1e3, pct(r.next, 99) * 1e3,
                          pct(o.status, 50) * 1e3, pct(o.status, 99) * 1e3, pct(r.status, 50) * 1e3,
                          pct(r.status, 99) * 1e3, pct(r.decision, 50) / pct(o.decision, 50)))
+            if r and r.reload_s is not None:
+                print("  %6d features: the copy loaded %d times during the sampled decisions; loading it whole "
+                      "(a client that starts, or finds another writer's version) %.2f s" % (n, r.reloads, r.reload_s))
+            p = results.get("server_plain", {}).get(n)
+            if o and p and o.decision and p.decision:
+                print("  %6d features: without the copy (server_plain): next_action p50/p99 %.2f/%.2f ms, status "
+                      "p50/p99 %.2f/%.2f ms; decision p50 ratio x%.2f"
+                      % (n, pct(p.next, 50) * 1e3, pct(p.next, 99) * 1e3, pct(p.status, 50) * 1e3,
+                         pct(p.status, 99) * 1e3, pct(p.decision, 50) / pct(o.decision, 50)))
         if 10000 in results["server"] and results["server"][10000].decision and results["ours"][10000].decision:
             ratio = pct(results["server"][10000].decision, 50) / pct(results["ours"][10000].decision, 50)
             print("goal server cost per decision <= 3x the embedded store's at 10000 features: x%.2f -> %s"

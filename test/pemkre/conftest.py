@@ -45,15 +45,18 @@ def oxigraph_server(tmp_path_factory):
 
 @pytest.fixture
 def sparql_store(oxigraph_server):
-    """Factory of SparqlStores on the session's server, emptied before the test; closes them afterwards."""
+    """Factory of SparqlStores on the session's server, emptied before the test; closes them afterwards.
+    ``mirror=True``: a :class:`~locem_bridge.pemkre.mirror_store.MirroredSparqlStore` (reads from its copy)."""
+    from locem_bridge.pemkre.mirror_store import MirroredSparqlStore
     from locem_bridge.pemkre.sparql_store import SparqlStore
 
     oxigraph_server.start()  # a test may have killed it
     clear_server(oxigraph_server)
     stores = []
 
-    def factory(**kwargs) -> SparqlStore:
-        store = SparqlStore(oxigraph_server.query_url, oxigraph_server.update_url, **kwargs)
+    def factory(mirror: bool = False, **kwargs) -> SparqlStore:
+        kind = MirroredSparqlStore if mirror else SparqlStore
+        store = kind(oxigraph_server.query_url, oxigraph_server.update_url, **kwargs)
         stores.append(store)
         return store
 

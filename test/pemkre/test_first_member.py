@@ -138,6 +138,38 @@ def test_a_store_other_clients_write_to_is_left_to_the_query(sparql_store):
         index.first()
 
 
+def test_on_the_copy_of_a_server_the_index_follows_this_clients_writes_and_another_clients(sparql_store):
+    """MirroredSparqlStore (what store:=sparql opens) tells the index about its own writes and about each time it
+    loads its copy again (another client wrote): the index answers as the query on the server after every write of
+    either client."""
+    store, other = sparql_store(mirror=True), sparql_store()
+    index = FirstMember(store, C, ORDER)
+    assert index.usable and index.first() is None
+    truth = other.prepare(query_text(C, ORDER), "first pending", {})
+    rng = random.Random(11)
+    subjects = [URIRef(EX + "f%02d" % i) for i in range(12)]
+    loaded, answered = store.reloads, 0
+    for step in range(150):
+        writer = store if rng.random() < 0.6 else other
+        s = rng.choice(subjects)
+        cs = ChangeSet()
+        roll = rng.random()
+        if roll < 0.4:
+            cs.add.append((s, RDF.type, C, rng.choice([G_WORLD, G_ABOX_INFERRED])))
+        elif roll < 0.6:
+            cs.remove += list(other.quads(s, RDF.type, C, None))[:1]
+        else:
+            cs.remove += list(other.quads(s, ORDER, None, None))
+            cs.add.append((s, ORDER, Literal(rng.randint(0, 20)), G_WORLD))
+        if cs:
+            writer.apply(cs)
+        got = index.first()
+        assert got == _query_answer(other, truth), "step %d" % step
+        answered += 1
+    assert answered == 150 and index.usable
+    assert store.reloads > loaded        # the other client's writes were seen by loading the copy again
+
+
 def _scan(n):
     return {"stamp": 1.0, "walls": [{"id": "w", "p0": [0, 0], "p1": [4.8, 0], "height": 2.5}],
             "joints": [{"id": "j%d" % i, "wall": "w", "kind": "vertical", "start": [0.6 * i, 0, 0],

@@ -307,29 +307,35 @@ def test_a_server_serving_the_union_as_default_graph_needs_no_dataset(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------------ the engine
+#: the engine's tests run on both ways PEMKRE reads a server: every read a request, or from its copy (the default)
+MIRROR_OR_NOT = pytest.mark.parametrize("mirror", [False, True], ids=["plain", "mirror"])
+
 def _decide(action):
     if action.action_type == "SCAN":
         return "succeeded", json_dumps(scan_result(joints_per_wall=2))
     return "succeeded", ""
 
 
-def test_the_engine_runs_a_process_on_the_server_as_on_the_embedded_store(sparql_store, make_engine):
+@MIRROR_OR_NOT
+def test_the_engine_runs_a_process_on_the_server_as_on_the_embedded_store(mirror, sparql_store, make_engine):
     embedded = make_engine()
     embedded.start_process(str(PLB.TapingProcess), {"validateLines": False})
     expected = run_process(embedded, _decide)
-    remote = ProcessEngine(sparql_store(), clock=FakeClock())
+    remote = ProcessEngine(sparql_store(mirror=mirror), clock=FakeClock())
     remote.start_process(str(PLB.TapingProcess), {"validateLines": False})
     assert run_process(remote, _decide) == expected
     assert remote.store.value(SITE.wall_1_joint_2, PPR.tapingStatus) == PPR.processed
     assert remote.check_consistency(full_inference=True) == []
 
 
-def test_two_engines_on_one_server_racing_on_one_task_status_exactly_one_wins(sparql_store):
-    first = ProcessEngine(sparql_store(), clock=FakeClock())
+@MIRROR_OR_NOT
+def test_two_engines_on_one_server_racing_on_one_task_status_exactly_one_wins(mirror, sparql_store):
+    first = ProcessEngine(sparql_store(mirror=mirror), clock=FakeClock())
     first.start_process(str(PLB.TapingProcess), {"validateLines": False})
     task = first.next_action().task
     first.set_task_status(task, "in_progress")
-    second = ProcessEngine(sparql_store(), clock=FakeClock())  # a second PEMKRE client: finds the running process
+    # a second PEMKRE client: finds the running process
+    second = ProcessEngine(sparql_store(mirror=mirror), clock=FakeClock())
     outcome = {}
     start = threading.Barrier(2)
 
@@ -356,24 +362,26 @@ def test_two_engines_on_one_server_racing_on_one_task_status_exactly_one_wins(sp
     assert len(status) == 1 and str(status[0]).endswith(winner_status), (status, winner_status)
 
 
-def test_an_engine_restarted_on_the_server_runs_the_process_as_on_the_embedded_store(sparql_store, make_engine):
+@MIRROR_OR_NOT
+def test_an_engine_restarted_on_the_server_runs_the_process_as_on_the_embedded_store(mirror, sparql_store, make_engine):
     """The schema and ontology graphs share blank nodes (restrictions), written by separate requests: reloaded
     from the server, they must still be the same nodes (skolemised), or the restarted engine reasons wrongly."""
     embedded = make_engine()
     embedded.start_process(str(PLB.TapingProcess), {"validateLines": False})
     expected = run_process(embedded, _decide)
-    first = ProcessEngine(sparql_store(), clock=FakeClock())
+    first = ProcessEngine(sparql_store(mirror=mirror), clock=FakeClock())
     first.start_process(str(PLB.TapingProcess), {"validateLines": False})
     scan = first.next_action()
     first.set_task_status(scan.task, "in_progress")
     first.set_task_status(scan.task, *_decide(scan))
     first.store.close()
-    restarted = ProcessEngine(sparql_store(), clock=FakeClock())
+    restarted = ProcessEngine(sparql_store(mirror=mirror), clock=FakeClock())
     assert [(scan.action_type, scan.params())] + run_process(restarted, _decide) == expected
     assert restarted.store.value(SITE.wall_1_joint_2, PPR.tapingStatus) == PPR.processed
 
 
-def test_while_the_server_is_away_the_engine_answers_not_ready_naming_it_and_loses_nothing(sparql_store,
+@MIRROR_OR_NOT
+def test_while_the_server_is_away_the_engine_answers_not_ready_naming_it_and_loses_nothing(mirror, sparql_store,
                                                                                           oxigraph_server, make_engine):
     """The server killed (SIGKILL) in the middle of a process: every call of the engine fails with code NOT_READY
     in one line naming the endpoint and the reason, and changes nothing; the server back, the same calls (a status
@@ -381,7 +389,7 @@ def test_while_the_server_is_away_the_engine_answers_not_ready_naming_it_and_los
     embedded = make_engine()
     embedded.start_process(str(PLB.TapingProcess), {"validateLines": False})
     expected = run_process(embedded, _decide)
-    engine = ProcessEngine(sparql_store(retry=QUICK), clock=FakeClock())
+    engine = ProcessEngine(sparql_store(mirror=mirror, retry=QUICK), clock=FakeClock())
     engine.start_process(str(PLB.TapingProcess), {"validateLines": False}, request_id="start-1")
     scan = engine.next_action()
     engine.set_task_status(scan.task, "in_progress", request_id="r-1")
@@ -409,7 +417,8 @@ def test_while_the_server_is_away_the_engine_answers_not_ready_naming_it_and_los
     assert [(scan.action_type, scan.params())] + run_process(engine, _decide) == expected
 
 
-def test_blank_nodes_shared_by_the_ontology_and_schema_graphs_stay_shared_on_the_server(sparql_store, make_engine):
+@MIRROR_OR_NOT
+def test_blank_nodes_shared_by_the_ontology_and_schema_graphs_stay_shared_on_the_server(mirror, sparql_store, make_engine):
     from rdflib import BNode
 
     from locem_bridge.pemkre.store import G_ONTOLOGY, G_SCHEMA_INFERRED
@@ -421,12 +430,13 @@ def test_blank_nodes_shared_by_the_ontology_and_schema_graphs_stay_shared_on_the
 
     expected = shared(make_engine().store)
     assert expected > 0
-    remote = ProcessEngine(sparql_store(), clock=FakeClock())
+    remote = ProcessEngine(sparql_store(mirror=mirror), clock=FakeClock())
     assert shared(remote.store) == expected
-    assert shared(sparql_store()) == expected  # a second client reading them
+    assert shared(sparql_store(mirror=mirror)) == expected  # a second client reading them
 
 
-def test_two_clients_starting_on_an_empty_server_write_the_same_blank_node_labels(sparql_store):
+@MIRROR_OR_NOT
+def test_two_clients_starting_on_an_empty_server_write_the_same_blank_node_labels(mirror, sparql_store):
     """Two clients (two processes: no shared closure cache) starting at once: one's ontology graph and the other's
     inferred schema graph may end up together on the server; with canonical labels they still share their nodes."""
     from rdflib import BNode
@@ -439,7 +449,7 @@ def test_two_clients_starting_on_an_empty_server_write_the_same_blank_node_label
         return {q[:3] for q in store.quads(None, None, None, (g,)) if any(isinstance(t, BNode) for t in q[:3])}
 
     engine_module._CLOSURE_CACHE.clear()  # the first process
-    remote = ProcessEngine(sparql_store(), clock=FakeClock())
+    remote = ProcessEngine(sparql_store(mirror=mirror), clock=FakeClock())
     engine_module._CLOSURE_CACHE.clear()  # the second process loads the same files
     other = ProcessEngine(RdflibStore(), clock=FakeClock())
     for g in (G_ONTOLOGY, G_SCHEMA_INFERRED):
@@ -451,11 +461,13 @@ def test_a_conditional_write_that_failed_after_its_claim_can_be_retried_at_once(
                                                                                  fake_server):
     mode = ["forward"]
     forward = _proxy(oxigraph_server.update_url, mode)
-    fail_final = [True]
+    fail_final, claimed = [True], [False]
 
     def handle(h, body):
         text = urllib.parse.parse_qs(body.decode("utf-8")).get("update", [""])[0]
-        if fail_final[0] and "INSERT {" in text and "NOW()" not in text:  # the final write, after the claim
+        if "NOW()" in text:                             # the claim request
+            claimed[0] = True
+        elif fail_final[0] and claimed[0]:              # the final write, after the claim
             fail_final[0] = False
             _reply(h, 500, "text/plain", "injected failure")
             return

@@ -14,8 +14,9 @@ from locem_bridge.pemkre.store import G_LOG, G_META, G_WORLD, ChangeSet
 
 EX = "https://ex.example/"
 P = {"ex": EX}
-#: every backend of the TripleStore contract; "sparql" is a SparqlStore on the session's oxigraph server
-BACKENDS = ["journal", "oxigraph", "rdflib", "sparql"]
+#: every backend of the TripleStore contract; "sparql" is a SparqlStore on the session's oxigraph server, "mirror"
+#: a MirroredSparqlStore on it (reads from its copy)
+BACKENDS = ["journal", "oxigraph", "rdflib", "sparql", "mirror"]
 
 
 @pytest.fixture
@@ -24,8 +25,8 @@ def opener(request):
     opened = []
 
     def open_(kind, path):
-        if kind == "sparql":
-            return request.getfixturevalue("sparql_store")()
+        if kind in ("sparql", "mirror"):
+            return request.getfixturevalue("sparql_store")(mirror=kind == "mirror")
         store = _open(kind, path)
         opened.append(store)
         return store
@@ -89,7 +90,7 @@ def test_persists_and_locks(kind, tmp_path):
         s2.close()
 
 
-@pytest.mark.parametrize("kind", ["journal", "oxigraph", "sparql"])
+@pytest.mark.parametrize("kind", ["journal", "oxigraph", "sparql", "mirror"])
 def test_a_change_set_is_all_or_nothing(kind, tmp_path, opener):
     s = opener(kind, str(tmp_path / "db"))
     s.apply(ChangeSet(add=[(URIRef(EX + "a"), URIRef(EX + "p"), Literal(1), G_WORLD)]))
@@ -126,7 +127,7 @@ def test_the_default_graph_is_the_union_of_the_named_graphs(kind, tmp_path, open
 @pytest.mark.parametrize("kind", BACKENDS)
 def test_replace_graph_keeps_blank_nodes_together(kind, tmp_path, opener):
     s = opener(kind, str(tmp_path / "db"))
-    if kind == "sparql":
+    if kind in ("sparql", "mirror"):
         s.chunk_triples = 3  # several requests; the three triples around one blank node stay in one
     g = URIRef(EX + "graph/ontology")
     s.apply(ChangeSet(add=[(URIRef(EX + "old"), URIRef(EX + "p"), Literal(0), g)]))
@@ -162,12 +163,12 @@ def test_a_conditional_change_applies_only_while_the_expected_quads_are_there(ki
     assert s.count() == 1  # bookkeeping (the SPARQL store's claim tokens) is not part of the data
 
 
-@pytest.mark.parametrize("kind", ["journal", "sparql"])
+@pytest.mark.parametrize("kind", ["journal", "sparql", "mirror"])
 def test_two_writers_racing_on_one_status_exactly_one_wins(kind, tmp_path, opener, request):
     """Each round, two threads move the same task from issued to their own status; the SPARQL backend gives each
     thread its own SparqlStore (two PEMKRE clients of one server), the embedded one shares its store."""
     first = opener(kind, str(tmp_path / "db"))
-    stores = [first, request.getfixturevalue("sparql_store")() if kind == "sparql" else first]
+    stores = [first, first if kind == "journal" else request.getfixturevalue("sparql_store")(mirror=kind == "mirror")]
     status = URIRef(EX + "status")
     issued = URIRef(EX + "issued")
     for rnd in range(12):

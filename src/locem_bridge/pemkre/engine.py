@@ -466,7 +466,7 @@ class ProcessEngine:
     def match_process(self, process: str) -> ProcessMatch:
         """Every task node of the abstract ``process`` matched to this robot's skills, with the rejected
         candidates and their reasons (:mod:`locem_bridge.pemkre.matching`). Read-only."""
-        with self._lock:
+        with self._lock, self.store.reading():
             iri = check_iri(process, "process IRI")
             ap = self.model.processes.get(iri)
             if ap is None:
@@ -497,7 +497,7 @@ class ProcessEngine:
         is still running makes this fail unless ``abort_running`` (then it is marked failed first). A
         ``request_id`` seen before returns the process that request started (nothing new is started).
         """
-        with self._lock:
+        with self._lock, self.store.reading():
             rid = _check_request_id(request_id)
             iri = check_iri(process, "process IRI")
             if rid:
@@ -974,7 +974,7 @@ class ProcessEngine:
 
     def update_world(self, scan: Union[str, bytes, Mapping[str, Any]], max_seconds: Optional[float] = None) -> int:
         """Merge a SCAN result (docs/contracts.md) into the world state; returns the number of triples changed."""
-        with self._lock:
+        with self._lock, self.store.reading():
             cs = scan_changes(self._scan_argument(scan, "scan"), self.store, self.site)
             n = len(cs.add) + len(cs.remove)
             self._commit(cs, max_seconds=max_seconds)
@@ -997,7 +997,7 @@ class ProcessEngine:
 
     def abort_process(self, process: Optional[str] = None, reason: str = "aborted") -> None:
         """Mark a running specific process failed (operator abort)."""
-        with self._lock:
+        with self._lock, self.store.reading():
             sp = check_iri(process, "process IRI") if process else self._active
             if sp is None:
                 raise TaskStateError("no process is running")
@@ -1009,7 +1009,7 @@ class ProcessEngine:
     # ================================================================= checks
     def check_consistency(self, full_inference: bool = False) -> List[str]:
         """Problems found in the store (empty list = consistent); ``full_inference`` also re-derives all inferences."""
-        with self._lock:
+        with self._lock, self.store.reading():
             problems: List[str] = []
             st = self.model.status_name
             running = []

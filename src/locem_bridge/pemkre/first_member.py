@@ -20,7 +20,9 @@ The answer is the one of the equivalent query (:func:`query_text`): the lowest o
 the member's IRI. Order values must be numbers of one
 kind of arithmetic: integers with decimals, or integers with floats/doubles (SPARQL compares a decimal with a
 double as doubles, Python exactly). A value that is not a number (or NaN), decimals mixed with doubles, a blank
-node member (no parameter value: the engine refuses it), or a store that is not the only writer of its data (a SPARQL server other clients write to), and the index steps aside:
+node member (no parameter value: the engine refuses it), or a store whose changes it cannot all see (the plain
+SPARQL store: other clients write to the server; the store that keeps a copy of the server's data tells it about
+each of its own writes and each time it loads its copy again), and the index steps aside:
 :attr:`FirstMember.why_not` says why, :meth:`FirstMember.first` raises :class:`Unanswerable` and the caller runs
 the query. Once the offending values are gone the index builds again and answers.
 """
@@ -149,7 +151,9 @@ class FirstMember:
     def first(self) -> Optional[URIRef]:
         """The member with the lowest order (ties: the lowest IRI), or None when the class has no ordered member.
         Raises :class:`Unanswerable` when the index cannot answer (then run :func:`query_text`)."""
-        with self._lock:
+        # one consistent view for the whole answer: a store that keeps a copy of a server's data checks it here,
+        # once, and tells its watchers (this index) about a copy it loaded again before the lock is taken
+        with self.store.reading(), self._lock:
             if self._sole and not self._stale and (
                     self._kinds == {Decimal, float}
                     or (self._odd and not any(self._holds(s, v) for s, v in self._odd))):

@@ -110,6 +110,15 @@ P_WRITE_CLAIM = META.writeClaim
 P_CLAIM_ON = META.claimOn
 #: ... and ``<token> meta:claimAt NOW()`` (the server's clock; claims older than ``claim_ttl_s`` are dead)
 P_CLAIM_AT = META.claimAt
+#: the dataset's version marker, in the bookkeeping graph: ``meta:dataset meta:version <urn:pemkre:version:UUID>``;
+#: every data write of a PEMKRE client replaces it by a fresh version in the same request (see
+#: :meth:`SparqlStore.version_update`), so a client that keeps a copy of the data
+#: (:class:`~locem_bridge.pemkre.mirror_store.MirroredSparqlStore`) learns from one read whether anyone wrote
+VERSION_MARKER = META.dataset
+P_VERSION = META.version
+#: ``<version> meta:after <the version it replaced>``: written by the clients that keep a copy, for their own check
+P_VERSION_AFTER = META.after
+VERSION_PREFIX = "urn:pemkre:version:"
 
 _TOKEN_RE = re.compile(r"^urn:uuid:[0-9a-f-]{36}$")
 _ACCEPT_RESULTS = "application/sparql-results+json"
@@ -190,6 +199,8 @@ class SparqlStore(TripleStore):
         #: graphs), by subject; a write or a change of the graphs bumps the generation (a fetch under way when it
         #: happened is not kept)
         self._reading = threading.local()
+        #: versions this client wrote whose links (``meta:after``) no one needs any more, deleted by its next write
+        self._spent_versions: List[str] = []
         self._by_subject: Dict[Node, List[Quad]] = {}
         self._generation = 0
         self._refresh_dataset()
@@ -414,10 +425,40 @@ class SparqlStore(TripleStore):
                 if removes:
                     ops.append("DELETE DATA { %s }" % removes)
                 ops.append("INSERT DATA { %s %s }" % (adds, self._claim_text(token)))
+                ops += self._version_ops()
                 self._write(ops, token, "a change of %d removals and %d additions"
                             % (len(changes.remove), len(changes.add)))
                 self._done_tokens.append(token)
             self._know_graphs(q[3] for q in changes.add)
+
+    #: does each write note the version it replaced (``meta:after``)? Only a client that checks its own chain of
+    #: writes needs that (:class:`~locem_bridge.pemkre.mirror_store.MirroredSparqlStore`)
+    links_versions = False
+
+    @staticmethod
+    def version_update(version: str, link: bool = False) -> str:
+        """The SPARQL update operation that replaces the dataset's version marker by ``version`` (an IRI), and with
+        ``link`` also records which version(s) it replaced. Every write of PEMKRE's data carries it in its request;
+        another system that writes PEMKRE's graphs (an MES) must add it to its update requests too, with a fresh
+        ``urn:uuid:`` or ``urn:pemkre:version:`` IRI each time, or the PEMKRE clients that keep a copy of the data
+        do not see its write."""
+        g, m, v, new = term_text(G_CLAIMS), term_text(VERSION_MARKER), term_text(P_VERSION), "<%s>" % version
+        insert = "%s %s %s ." % (m, v, new) + (" %s %s ?old" % (new, term_text(P_VERSION_AFTER)) if link else "")
+        return ("DELETE { GRAPH %s { %s %s ?old } } INSERT { GRAPH %s { %s } } WHERE { OPTIONAL { GRAPH %s { %s %s "
+                "?old } } }" % (g, m, v, g, insert, g, m, v))
+
+    def _version_ops(self) -> List[str]:
+        """The operations a data write carries: a fresh version replacing the marker (:meth:`version_update`),
+        after deleting the links of this client's versions no one needs (:meth:`_wrote_version` says which)."""
+        version = "%s%s" % (VERSION_PREFIX, uuid.uuid4())
+        ops = [self._delete_tokens_text(self._spent_versions)] if self._spent_versions else []
+        self._spent_versions = []
+        ops.append(self.version_update(version, self.links_versions))
+        self._wrote_version(version)
+        return ops
+
+    def _wrote_version(self, version: str) -> None:
+        """A data write with ``version`` is about to be sent (a store that keeps a copy of the data records it)."""
 
     @staticmethod
     def claim_key(expect: Sequence[Quad]) -> URIRef:
@@ -460,6 +501,7 @@ class SparqlStore(TripleStore):
                     ops = [self._delete_tokens_text([claim]),
                            "%sINSERT { %s %s } WHERE { %s }" % ("DELETE { %s } " % removes if removes else "",
                                                                adds, self._claim_text(token), expects)]
+                    ops += self._version_ops()
                     sent = self.clock()
                     self._write(ops, token, what)
                     self._my_claims.discard(claim)  # deleted by the write
@@ -594,12 +636,12 @@ class SparqlStore(TripleStore):
         with self._lock:
             self._forget_all()
             self._settle_unknown_writes()   # a late write must not land in the graph after it was replaced
-            first = "DROP SILENT GRAPH %s" % g
+            first = ["DROP SILENT GRAPH %s" % g]
             if chunks:
-                first += " ;\nINSERT DATA { GRAPH %s { %s } }" % (g, chunks[0])
-            self._update(first, "replacing graph %s" % graph)
+                first.append("INSERT DATA { GRAPH %s { %s } }" % (g, chunks[0]))
+            self._update(" ;\n".join(first + self._version_ops()), "replacing graph %s" % graph)
             for i, body in enumerate(chunks[1:], 2):
-                self._update("INSERT DATA { GRAPH %s { %s } }" % (g, body),
+                self._update(" ;\n".join(["INSERT DATA { GRAPH %s { %s } }" % (g, body)] + self._version_ops()),
                              "replacing graph %s (part %d of %d)" % (graph, i, len(chunks)))
 
     def drop_pemkre_graphs(self) -> List[URIRef]:
@@ -611,7 +653,8 @@ class SparqlStore(TripleStore):
             self._forget_all()
             self._settle_unknown_writes()   # a late write must not bring data back into the fresh store
             self._done_tokens = []
-            self._update(" ;\n".join("DROP SILENT GRAPH %s" % term_text(g) for g in graphs),
+            self._spent_versions = []       # their links go with the claims graph
+            self._update(" ;\n".join(["DROP SILENT GRAPH %s" % term_text(g) for g in graphs] + self._version_ops()),
                          "dropping PEMKRE's graphs")
         return graphs
 

@@ -153,7 +153,9 @@ class TripleStore(ABC):
 
     #: True when an applied change survives a crash and a restart.
     persistent: bool = False
-    #: True when every write to the dataset goes through this object (then :meth:`watch` sees them all).
+    #: True when every change of the data this object's reads see goes through it (then :meth:`watch` sees them
+    #: all): the embedded stores, and the store that keeps a copy of a server's data (its copy changes only by its
+    #: own writes and by loading it again, which it tells as ``None``).
     sole_writer: bool = False
 
     def watch(self, callback: "Callable[[Optional[ChangeSet]], None]") -> bool:

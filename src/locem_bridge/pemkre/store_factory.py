@@ -2,8 +2,11 @@
 
 Kinds (:data:`STORE_KINDS`): ``journal`` (:class:`~.journal_store.JournaledStore` at ``path``: survives ``kill -9``;
 ``fsync`` also a power loss), ``rocksdb`` (:class:`~.oxigraph_store.OxigraphStore` on disk at ``path``),
-``memory`` (an in-memory Oxigraph store; ``path`` unused), ``sparql`` (:class:`~.sparql_store.SparqlStore` on a
-SPARQL 1.1 server at ``query_url`` / ``update_url``; ``path`` and ``fsync`` unused: the server keeps the data).
+``memory`` (an in-memory Oxigraph store; ``path`` unused), ``sparql`` (a SPARQL 1.1 server at ``query_url`` /
+``update_url``; ``path`` and ``fsync`` unused: the server keeps the data): by default a
+:class:`~.mirror_store.MirroredSparqlStore` (reads from an exact copy in this process, checked against the server's
+version marker once per decision); ``mirror=False``: the plain :class:`~.sparql_store.SparqlStore` (every read asks
+the server).
 ``fresh`` starts from an empty store: it removes the store folder first, or on a server drops PEMKRE's named graphs
 (those under :data:`~locem_bridge.pemkre.vocab.GRAPHS`; other graphs on the server are left alone). The caller
 closes the store it opened.
@@ -34,7 +37,7 @@ SITE_SUBJECT, SITE_PREDICATE = META.store, META.site
 
 
 def open_store(kind: str, path: str, fsync: bool = False, fresh: bool = False, query_url: str = "",
-               update_url: str = "", **sparql_options: Any) -> TripleStore:
+               update_url: str = "", mirror: bool = True, **sparql_options: Any) -> TripleStore:
     """The store of ``kind`` (see the module docstring); ValueError naming the kinds, or the missing URLs."""
     if kind not in STORE_KINDS:
         raise ValueError("store must be %s or %s, got %r" % (", ".join(STORE_KINDS[:-1]), STORE_KINDS[-1], kind))
@@ -43,9 +46,10 @@ def open_store(kind: str, path: str, fsync: bool = False, fresh: bool = False, q
             raise ValueError("store sparql needs the server's query_url and update_url (e.g. "
                              "http://127.0.0.1:7878/query and http://127.0.0.1:7878/update), got %r and %r"
                              % (query_url, update_url))
+        from .mirror_store import MirroredSparqlStore
         from .sparql_store import SparqlStore
 
-        store = SparqlStore(query_url, update_url, **sparql_options)
+        store = (MirroredSparqlStore if mirror else SparqlStore)(query_url, update_url, **sparql_options)
         if fresh:
             try:
                 store.drop_pemkre_graphs()
