@@ -6,9 +6,12 @@ without it they are skipped with that reason.
 ``job_bays.test`` needs a site and is not in the plain glob: :func:`test_job_bays` generates the bay of each of its
 seeds (:mod:`locem_bridge.sim.bays`) into the test's own folder and runs the suite on it with ``site:=FILE``. One
 seed runs everywhere (:data:`CI_BAY_SEED`, a small bay, the cheapest measured); the others are marked ``long``
-(``bash tools/test.sh --long``).
+(``bash tools/test.sh --long``). :func:`test_job_sites` runs the same suite on the fixed sites of each case of issue
+19 (``config/sites``: a door, a window over a horizontal joint, a 120 degree corner, two adjacent areas), marked
+``long`` too.
 """
 import glob
+import json
 import os
 import re
 import shutil
@@ -93,3 +96,49 @@ def test_job_bays(seed, tmp_path):
     # protective stop, the manual parts listed and untouched) and the coverage and thickness goals
     run_rostest(BAY_SUITE, tmp_path, ["site:=" + site, "time_limit:=%d" % limit, "job_timeout:=%d" % (limit - 200)],
                 timeout=limit + 300)
+
+
+# The fixed sites of issue 19, one per case (config/sites/*.yaml): a door, a window with a horizontal joint under it,
+# a 120 degree corner, two adjacent areas. Each is the 3 m x 3 m bay of the default site changed in one way, about the
+# default bay's work; job_bays.test runs them at its time scale 5 (the launch's time_scale argument is the world's,
+# it replaces the file's simulation.time_scale), with the long seeds' time limit.
+FIXED_SITES = ("door", "window", "corner120", "adjacent")
+SITES_DIR = os.path.normpath(os.path.join(HERE, "..", "..", "config", "sites"))
+
+
+def job_figures(tmp_path):
+    """One line of what the run's report.json measured (per wall thickness CV on the reachable parts, the lowest
+    joint's reachable tape coverage, spray and sand on the reachable parts, each process's status and the job's wall
+    seconds), or why there is none."""
+    reports = sorted(set(os.path.realpath(r) for r in glob.glob(str(tmp_path / "ros_home" / "job_bays_results*" / "*"
+                                                                    / "report.json"))))
+    if not reports:
+        return "no report.json under %s" % (tmp_path / "ros_home")
+    with open(reports[-1], encoding="utf-8") as handle:
+        report = json.load(handle)
+    outcome = report["outcome"]
+    reach = outcome.get("reachable", {})
+    cvs = ", ".join("%s %s" % (wid, "%.3f" % w["thickness_cv_reachable"]
+                                if w.get("thickness_cv_reachable") is not None else "-")
+                    for wid, w in sorted(outcome.get("walls", {}).items()))
+    launches = report.get("launches") or []
+    seconds = sum(float(x.get("wall_clock_s", 0.0)) for x in launches)
+    return ("%s: processes %s; thickness CV %s; tape min %s, spray %s, sand %s; collisions %s; job %.0f s" % (
+        reports[-1], ", ".join("%s %s" % (p["name"], p["status"]) for p in report.get("processes", [])), cvs,
+        reach.get("tape_coverage_min"), reach.get("spray_coverage"), reach.get("sand_coverage"),
+        outcome.get("collisions"), seconds))
+
+
+@pytest.mark.long
+@pytest.mark.parametrize("site", FIXED_SITES)
+def test_job_sites(site, tmp_path):
+    """The whole job on the fixed site ``config/sites/<site>.yaml`` (job_bays.test, job_bays_rostest.py: every goal);
+    the report's figures are printed (``-s`` or ``-rA`` shows them)."""
+    path = os.path.join(SITES_DIR, site + ".yaml")
+    assert os.path.isfile(path), path
+    limit = BAY_TIME_LIMIT_LONG
+    try:
+        run_rostest(BAY_SUITE, tmp_path, ["site:=" + path, "time_limit:=%d" % limit,
+                                          "job_timeout:=%d" % (limit - 200)], timeout=limit + 300)
+    finally:
+        print(job_figures(tmp_path))
