@@ -143,6 +143,7 @@ def test_on_the_copy_of_a_server_the_index_follows_this_clients_writes_and_anoth
     loads its copy again (another client wrote): the index answers as the query on the server after every write of
     either client."""
     store, other = sparql_store(mirror=True), sparql_store()
+    store.RELOAD_SHARE = 1.0     # load the copy whenever it is stale (no reads from the server meanwhile)
     index = FirstMember(store, C, ORDER)
     assert index.usable and index.first() is None
     truth = other.prepare(query_text(C, ORDER), "first pending", {})

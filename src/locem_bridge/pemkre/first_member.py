@@ -154,6 +154,10 @@ class FirstMember:
         # one consistent view for the whole answer: a store that keeps a copy of a server's data checks it here,
         # once, and tells its watchers (this index) about a copy it loaded again before the lock is taken
         with self.store.reading(), self._lock:
+            if self._sole and not self.store.follows_every_change():
+                # a store that keeps a copy reads from the server for now: what the index followed may be behind
+                raise Unanswerable("the first %s by %s: the store reads from the server for now"
+                                   % (self.cls.n3(), self.order.n3()))
             if self._sole and not self._stale and (
                     self._kinds == {Decimal, float}
                     or (self._odd and not any(self._holds(s, v) for s, v in self._odd))):

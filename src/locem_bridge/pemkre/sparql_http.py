@@ -58,6 +58,7 @@ class Answer:
     media_type: str
     body: bytes
     location: str = ""
+    server: str = ""        # the Server header (e.g. "Oxigraph/0.5.13")
 
     def text(self) -> str:
         return self.body.decode("utf-8", errors="replace")
@@ -280,7 +281,8 @@ class Endpoint:
             if conn is self._conn:
                 self._conn = None
         media = (resp.getheader("Content-Type") or "").split(";")[0].strip().lower()
-        return Answer(resp.status, resp.reason or "", media, data, resp.getheader("Location") or "")
+        return Answer(resp.status, resp.reason or "", media, data, resp.getheader("Location") or "",
+                      resp.getheader("Server") or "")
 
 
 def _without_credentials(parts) -> str:

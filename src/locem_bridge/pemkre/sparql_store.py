@@ -201,6 +201,8 @@ class SparqlStore(TripleStore):
         self._reading = threading.local()
         #: versions this client wrote whose links (``meta:after``) no one needs any more, deleted by its next write
         self._spent_versions: List[str] = []
+        #: the server's Server header as the check at opening saw it ("" unchecked or not sent)
+        self.server_software = ""
         self._by_subject: Dict[Node, List[Quad]] = {}
         self._generation = 0
         self._refresh_dataset()
@@ -212,7 +214,9 @@ class SparqlStore(TripleStore):
         """Make sure the endpoints are a SPARQL 1.1 server holding one dataset: the query endpoint answers an ASK
         in SPARQL JSON, a probe written through the update endpoint is seen through the query endpoint (then
         removed); learn the named graphs on the server."""
-        self._ask_text("ASK { }", "the check at opening")
+        answer = self.query_endpoint.post([("query", "ASK { }")], _ACCEPT_RESULTS)
+        self._boolean(self._json_answer(answer, "the check at opening"), "the check at opening")
+        self.server_software = answer.server
         token = self._new_token()
         self._update("INSERT DATA { %s }" % self._claim_text(token), "the write probe at opening")
         if not self._token_stored(token):
@@ -442,20 +446,37 @@ class SparqlStore(TripleStore):
         another system that writes PEMKRE's graphs (an MES) must add it to its update requests too, with a fresh
         ``urn:uuid:`` or ``urn:pemkre:version:`` IRI each time, or the PEMKRE clients that keep a copy of the data
         do not see its write."""
-        g, m, v, new = term_text(G_CLAIMS), term_text(VERSION_MARKER), term_text(P_VERSION), "<%s>" % version
-        insert = "%s %s %s ." % (m, v, new) + (" %s %s ?old" % (new, term_text(P_VERSION_AFTER)) if link else "")
-        return ("DELETE { GRAPH %s { %s %s ?old } } INSERT { GRAPH %s { %s } } WHERE { OPTIONAL { GRAPH %s { %s %s "
-                "?old } } }" % (g, m, v, g, insert, g, m, v))
+        delete, insert, where = SparqlStore._version_parts(version, link)
+        return "DELETE { %s } INSERT { %s } WHERE { %s }" % (delete, insert, where)
 
-    def _version_ops(self) -> List[str]:
-        """The operations a data write carries: a fresh version replacing the marker (:meth:`version_update`),
-        after deleting the links of this client's versions no one needs (:meth:`_wrote_version` says which)."""
+    @staticmethod
+    def _version_parts(version: str, link: bool) -> Tuple[str, str, str]:
+        """The DELETE and INSERT templates and the WHERE pattern of :meth:`version_update` (a conditional write
+        joins them to its own, so the marker moves only when its condition holds). A link carries the server's
+        time (``meta:claimAt``): links older than ``claim_ttl_s`` go with the dead claims."""
+        g, m, v, new = term_text(G_CLAIMS), term_text(VERSION_MARKER), term_text(P_VERSION), "<%s>" % version
+        insert = "%s %s %s ." % (m, v, new)
+        where = "OPTIONAL { GRAPH %s { %s %s ?old_version } }" % (g, m, v)
+        if link:
+            insert += " %s %s ?old_version ; %s ?version_at ." % (new, term_text(P_VERSION_AFTER),
+                                                                 term_text(P_CLAIM_AT))
+            where += " BIND(NOW() AS ?version_at)"
+        return ("GRAPH %s { %s %s ?old_version }" % (g, m, v), "GRAPH %s { %s }" % (g, insert), where)
+
+    def _new_version(self) -> Tuple[List[str], str]:
+        """A fresh version for a data write: the operations deleting the links of this client's versions no one
+        needs any more (to lead the request), and the version (recorded by :meth:`_wrote_version`)."""
         version = "%s%s" % (VERSION_PREFIX, uuid.uuid4())
         ops = [self._delete_tokens_text(self._spent_versions)] if self._spent_versions else []
         self._spent_versions = []
-        ops.append(self.version_update(version, self.links_versions))
         self._wrote_version(version)
-        return ops
+        return ops, version
+
+    def _version_ops(self) -> List[str]:
+        """The operations an unconditional data write carries: a fresh version replacing the marker
+        (:meth:`version_update`), after deleting the links no one needs."""
+        ops, version = self._new_version()
+        return ops + [self.version_update(version, self.links_versions)]
 
     def _wrote_version(self, version: str) -> None:
         """A data write with ``version`` is about to be sent (a store that keeps a copy of the data records it)."""
@@ -498,10 +519,12 @@ class SparqlStore(TripleStore):
                                                                     self.claim_ttl_s),
                             self.update_endpoint.name, "claim too old", applied=False)
                     token = self._new_token()
-                    ops = [self._delete_tokens_text([claim]),
-                           "%sINSERT { %s %s } WHERE { %s }" % ("DELETE { %s } " % removes if removes else "",
-                                                               adds, self._claim_text(token), expects)]
-                    ops += self._version_ops()
+                    # the marker moves with the change, only when its condition holds
+                    lead, version = self._new_version()
+                    v_delete, v_insert, v_where = self._version_parts(version, self.links_versions)
+                    ops = [self._delete_tokens_text([claim])] + lead + [
+                        "DELETE { %s %s } INSERT { %s %s %s } WHERE { %s %s }" % (
+                            removes, v_delete, adds, self._claim_text(token), v_insert, expects, v_where)]
                     sent = self.clock()
                     self._write(ops, token, what)
                     self._my_claims.discard(claim)  # deleted by the write

@@ -158,6 +158,11 @@ class TripleStore(ABC):
     #: own writes and by loading it again, which it tells as ``None``).
     sole_writer: bool = False
 
+    def follows_every_change(self) -> bool:
+        """Do the :meth:`watch` callbacks see every change of what this thread's reads see now? (The store that
+        keeps a copy of a server's data: not while it reads from the server.)"""
+        return self.sole_writer
+
     def watch(self, callback: "Callable[[Optional[ChangeSet]], None]") -> bool:
         """Call ``callback(changes)`` after each applied change and ``callback(None)`` after each replaced graph,
         in the writing thread, once the write is done. A bound method is held weakly (an index that is gone stops
