@@ -4,6 +4,7 @@
 Prints, side by side and measured in the same run:
   * ours     -- ProcessEngine on the default JournaledStore (oxigraph in memory + journal), schema closure
                 materialised once, incremental ABox inference;
+  * ours_fsync -- ours with every change flushed to the disk (fsync=True: the durability of a power loss)
   * rocksdb  -- the same engine on OxigraphStore (oxigraph's RocksDB backend)          } store choice
   * rdflib   -- the same engine on rdflib's in-memory Dataset + rdflib's SPARQL engine }
   * server   -- the same engine on a real SPARQL 1.1 server (`oxigraph serve` on a loopback port, started here)
@@ -21,7 +22,7 @@ status update p99 <= 5 ms; cost growing no faster than linearly. Issue 20: the s
 <= 20 ms at 100,000 features on the embedded store.
 
 usage: python3 bench/bench_pemkre.py [--sizes 10,100,1000,10000] [--samples 200] [--budget 20] [--closure-cap 60]
-                                    [--configs ours,rocksdb,rdflib,naive,server,server_plain]
+                                    [--configs ours,ours_fsync,rocksdb,rdflib,naive,server,server_plain]
 e.g. issue 20's table: --sizes 1000,10000,100000 --configs ours,server
 """
 import argparse
@@ -139,7 +140,8 @@ def _server_store(path: str, mirror: bool):
 def run_config(kind: str, n: int, samples: int, budget: float, cap: float, tmp: str) -> Result:
     res = Result()
     path = os.path.join(tmp, "%s_%d" % (kind, n))
-    store = {"ours": lambda: JournaledStore(path), "rocksdb": lambda: OxigraphStore(path),
+    store = {"ours": lambda: JournaledStore(path), "ours_fsync": lambda: JournaledStore(path, fsync=True),
+             "rocksdb": lambda: OxigraphStore(path),
              "rdflib": RdflibStore, "naive": RdflibStore, "server": lambda: _server_store(path, True), "server_plain": lambda: _server_store(path, False)}[kind]()
     try:
         engine = ProcessEngine(store, reasoning_max_seconds=600, reasoning_max_triples=10 ** 8)
@@ -355,6 +357,10 @@ def main() -> int:
                       "p50/p99 %.2f/%.2f ms; decision p50 ratio x%.2f"
                       % (n, pct(p.next, 50) * 1e3, pct(p.next, 99) * 1e3, pct(p.status, 50) * 1e3,
                          pct(p.status, 99) * 1e3, pct(p.decision, 50) / pct(o.decision, 50)))
+            f = results.get("ours_fsync", {}).get(n)
+            if f and r and f.decision and r.decision:
+                print("  %6d features: against ours with every change flushed to the disk (ours_fsync: decision p50 "
+                      "%.2f ms): server x%.2f" % (n, pct(f.decision, 50) * 1e3, pct(r.decision, 50) / pct(f.decision, 50)))
         if 10000 in results["server"] and results["server"][10000].decision and results["ours"][10000].decision:
             ratio = pct(results["server"][10000].decision, 50) / pct(results["ours"][10000].decision, 50)
             print("goal server cost per decision <= 3x the embedded store's at 10000 features: x%.2f -> %s"
