@@ -263,14 +263,14 @@ class MirroredSparqlStore(SparqlStore):
     @contextmanager
     def reading(self) -> Iterator[None]:
         depth = getattr(self._reading, "depth", 0)
-        if depth or self._is_direct():     # within a stretch: as the outermost one decided
+        if depth:                           # within a stretch: as the outermost one decided
             self._reading.depth = depth + 1
             try:
                 yield
             finally:
                 self._reading.depth = depth
             return
-        if self._sync():
+        if not self._is_direct() and self._sync():
             self._reading.depth = 1
             try:
                 yield
