@@ -174,13 +174,13 @@ class MirroredSparqlStore(SparqlStore):
             started = self.clock()
             try:
                 self._load(RELOAD_ATTEMPTS_WHILE_READING)
+                return True
             except _Churn:
-                self._no_load_before = self.clock() + (self.clock() - started) * (1 / self.RELOAD_SHARE - 1)
                 _log.info("PEMKRE store %s: the data kept changing while the copy was loaded; reading from the "
-                          "server for %.1f s", self.query_endpoint.name, self._no_load_before - self.clock())
+                          "server for a while", self.query_endpoint.name)
                 return False
-            self._no_load_before = self.clock() + (self.clock() - started) * (1 / self.RELOAD_SHARE - 1)
-            return True
+            finally:   # the next load not before: loading takes at most RELOAD_SHARE of the time
+                self._no_load_before = self.clock() + (self.clock() - started) * (1 / self.RELOAD_SHARE - 1)
 
     def reload(self) -> None:
         """Load the copy again from the server now: every known graph (after looking for new ones under PEMKRE's
@@ -194,9 +194,10 @@ class MirroredSparqlStore(SparqlStore):
         after: List[str] = []
         for _ in range(attempts):
             before, _ = self._marker_rows(())
-            graphs = [URIRef(g) for g in SparqlStore.refresh_graphs(self)] + self._known_graphs()
+            SparqlStore.refresh_graphs(self)       # new graphs under PEMKRE's namespace join the known ones
+            graphs = self._known_graphs()
             copy = OxigraphStore(None)
-            for graph in sorted(set(graphs)):
+            for graph in graphs:
                 self._load_graph(copy, graph)
             after, _ = self._marker_rows(())
             if before == after:
@@ -238,15 +239,21 @@ class MirroredSparqlStore(SparqlStore):
     def follows_every_change(self) -> bool:
         return not self.copy_off and not self._is_direct()
 
-    def _tell_watchers(self, changes: Optional[ChangeSet]) -> None:
-        """:meth:`watch` callbacks, reading the copy as it is now (no check of the marker in the middle of a
-        write or a load)."""
+    @contextmanager
+    def _in_stretch(self) -> Iterator[None]:
+        """Reads in here answer from the copy as it is (the check was made, or must not be made now)."""
         depth = getattr(self._reading, "depth", 0)
         self._reading.depth = depth + 1
         try:
-            self._written(changes)
+            yield
         finally:
             self._reading.depth = depth
+
+    def _tell_watchers(self, changes: Optional[ChangeSet]) -> None:
+        """:meth:`watch` callbacks, reading the copy as it is now (no check of the marker in the middle of a
+        write or a load)."""
+        with self._in_stretch():
+            self._written(changes)
 
     def _is_direct(self) -> bool:
         return bool(getattr(self._direct, "depth", 0))
@@ -262,20 +269,10 @@ class MirroredSparqlStore(SparqlStore):
     # ---------------------------------------------------------------- reads
     @contextmanager
     def reading(self) -> Iterator[None]:
-        depth = getattr(self._reading, "depth", 0)
-        if depth:                           # within a stretch: as the outermost one decided
-            self._reading.depth = depth + 1
-            try:
+        # within a stretch: as the outermost one decided; else the copy, checked once now, or the server's reads
+        if getattr(self._reading, "depth", 0) or (not self._is_direct() and self._sync()):
+            with self._in_stretch():
                 yield
-            finally:
-                self._reading.depth = depth
-            return
-        if not self._is_direct() and self._sync():
-            self._reading.depth = 1
-            try:
-                yield
-            finally:
-                self._reading.depth = 0
             return
         with self._server_reads(), SparqlStore.reading(self):   # the plain store's stretch: fetched per subject
             yield
@@ -306,12 +303,11 @@ class MirroredSparqlStore(SparqlStore):
             return result
         for row in result.rows:
             for k, t in row.items():
-                if isinstance(t, URIRef) and t.startswith(SKOLEM_PREFIX):
-                    row[k] = unskolem(t)
+                row[k] = unskolem(t)
         return result
 
     def _mirrored(self, graphs: Optional[Iterable[URIRef]]) -> bool:
-        return graphs is None or all(g in self._copy_graphs or g in self._known_graphs() for g in graphs)
+        return graphs is None or all(g in self._copy_graphs or g in self._graphs for g in graphs)
 
     def quads(self, s: Optional[Node] = None, p: Optional[Node] = None, o: Optional[Node] = None,
               graphs: Optional[Sequence[URIRef]] = None) -> Iterator[Quad]:
