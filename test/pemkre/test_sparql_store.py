@@ -778,3 +778,99 @@ def test_within_one_decision_each_subject_costs_one_round_trip_and_writes_and_ot
             assert store.value(A, q) == b and len(posts) == fetched
     assert store.value(b, P) == Literal(6)                       # the next decision sees it
     assert store.value(b, P) == Literal(6) and len(posts) == fetched + 2   # outside a decision: a request each
+
+
+# ------------------------------------------------------------------------------------------------ staged changes
+def _staging_graphs(server):
+    """The staging graphs and staging records on the server (asked directly, outside any PEMKRE client)."""
+    text = ('SELECT DISTINCT ?g WHERE { { GRAPH ?g { ?s ?p ?o } FILTER(STRSTARTS(STR(?g), "urn:pemkre:staging:")) }'
+            ' UNION { GRAPH <urn:pemkre:staging> { ?g ?p ?o } } }')
+    req = urllib.request.Request(server.query_url, data=urllib.parse.urlencode({"query": text}).encode("ascii"),
+                                 headers={"Accept": "application/sparql-results+json"})
+    with urllib.request.urlopen(req, timeout=10) as answer:
+        import json
+        return sorted(b["g"]["value"] for b in json.load(answer)["results"]["bindings"])
+
+
+def _big_change(n, old):
+    """``n`` additions over two graphs and the removal of the quads ``old``."""
+    from locem_bridge.pemkre.store import G_ABOX_INFERRED
+    add = [(URIRef(EX + "joint_%d" % i), P, Literal("line %d of a long scan" % i),
+            G_WORLD if i % 3 else G_ABOX_INFERRED) for i in range(n)]
+    return ChangeSet(remove=list(old), add=add)
+
+
+@pytest.mark.parametrize("mirror", [False, True], ids=["plain", "copy"])
+def test_a_change_longer_than_one_request_is_staged_and_shows_all_at_once(mirror, sparql_store, oxigraph_server):
+    """A change over ``max_update_chars`` (a world scan of 26,000+ features is over ``oxigraph serve``'s 128 MiB
+    body limit) is written in parts into staging graphs no query sees, then applied by one request: a reader never
+    sees part of it; afterwards no staging graph or record is left."""
+    with pytest.raises(Exception) as err:
+        sparql_store(max_update_chars=10)
+    assert "max_update_chars 10 is too small" in _one_line(err.value) and "1000 or more" in str(err.value)
+    store, reader = sparql_store(mirror=mirror, max_update_chars=2000), sparql_store()
+    old = [(URIRef(EX + "old_%d" % i), P, Literal(i), G_WORLD) for i in range(40)]
+    store.apply(ChangeSet(add=old + [(A, P, Literal("kept"), G_WORLD)]))
+    change = _big_change(300, old)
+    seen_during = []
+    send = store.update_endpoint.post
+
+    def post(params, *args, **kwargs):
+        if len(seen_during) < 50:
+            seen_during.append((reader.count(G_WORLD), len(reader.objects(URIRef(EX + "joint_1"), P))))
+        return send(params, *args, **kwargs)
+    store.update_endpoint.post = post
+    with store.reading():
+        store.apply(change)
+    store.update_endpoint.post = send
+    # parts: 340 quads of about 90 characters in parts of 2,000 characters, each its own request
+    assert len(seen_during) >= 15, len(seen_during)
+    assert set(seen_during) == {(41, 0)}, "a reader saw part of the change: %r" % sorted(set(seen_during))
+    expected = {(A, P, Literal("kept"), G_WORLD)} | set(change.add)
+    assert set(reader.quads()) == expected
+    assert _staging_graphs(oxigraph_server) == []
+    if mirror:
+        reloads = store.reloads
+        with store.reading():
+            assert set(store.quads()) == expected  # the copy followed the change without loading itself again
+        assert store.reloads == reloads
+    # another client's copy sees it from its next decision on
+    other = sparql_store(mirror=True)
+    with other.reading():
+        assert other.count() == len(expected)
+
+
+def test_a_staged_change_cut_off_by_a_dead_server_changes_nothing_and_its_parts_are_dropped_later(
+        sparql_store, oxigraph_server):
+    """The server dies while a change is being staged: the change is NOT_READY with ``applied=False`` and
+    PEMKRE's graphs are as before after the restart; the staging graphs it left are dropped by the next staged
+    change once their record is ``claim_ttl_s`` old (by the server's clock)."""
+    quick = dict(timeout_s=0.5, retry=RetryPolicy(attempts=1), claim_ttl_s=2.5, max_update_chars=2000)
+    store = sparql_store(**quick)
+    old = [(URIRef(EX + "old_%d" % i), P, Literal(i), G_WORLD) for i in range(40)]
+    store.apply(ChangeSet(add=old))
+    sent = []
+    send = store.update_endpoint.post
+
+    def post(params, *args, **kwargs):
+        sent.append(params[0][1])
+        if len(sent) == 6:
+            oxigraph_server.kill()
+        return send(params, *args, **kwargs)
+    store.update_endpoint.post = post
+    with pytest.raises(StoreUnavailable) as err:
+        store.apply(_big_change(300, old))
+    assert err.value.applied is False, str(err.value)
+    assert "nothing of it was applied" in _one_line(err.value) and store.update_endpoint.name in str(err.value)
+    oxigraph_server.start()
+    reader = sparql_store()
+    assert set(reader.quads()) == set(old)
+    left = _staging_graphs(oxigraph_server)
+    # the record (its subject) and the part staged before
+    assert any(re.fullmatch(r"urn:pemkre:staging:[0-9a-f-]{36}", g) for g in left), left
+    assert any(re.fullmatch(r"urn:pemkre:staging:[0-9a-f-]{36}:add:\d+", g) for g in left), left
+    time.sleep(3.6)  # the record is older than the claim ttl now
+    other = sparql_store(**quick)
+    other.apply(_big_change(100, []))
+    assert _staging_graphs(oxigraph_server) == []
+    assert reader.count(G_WORLD) == 40 + len([i for i in range(100) if i % 3])

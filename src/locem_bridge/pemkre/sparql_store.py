@@ -21,7 +21,11 @@ WHERE group (:func:`~locem_bridge.pemkre.sparql_text.values_position`), never as
 
 **Writes.** :meth:`SparqlStore.apply` is ONE update request, ``DELETE DATA {..} ; INSERT DATA {..}``, which servers
 that run one request as one transaction apply all or nothing (Oxigraph does, tested here; Fuseki with TDB2 and
-GraphDB say they do, not tested here). Every
+GraphDB say they do, not tested here). A change whose text is longer than ``max_update_chars`` (16 Mi characters
+by default; a world scan of more than about 26,000 features would be over ``oxigraph serve``'s 128 MiB body
+limit) is *staged*: written in parts into staging graphs outside PEMKRE's graphs (``urn:pemkre:staging:..``, no
+query sees them), then applied by one request that moves the staged quads into place and drops the staging graphs,
+so it still shows all at once or not at all (:meth:`SparqlStore._apply_staged`). Every
 write also inserts a *token* (a triple naming a fresh ``urn:uuid:`` in the bookkeeping graph :data:`G_CLAIMS`,
 which queries, :meth:`~SparqlStore.quads` and :meth:`~SparqlStore.count` never see): when the answer to a write is
 lost on the way back, the store asks the server whether the token is there and reports ``applied`` True in
@@ -79,6 +83,7 @@ through the query endpoint (both URLs name the same dataset).
 """
 import hashlib
 import json
+import logging
 import os
 import random
 import re
@@ -120,6 +125,17 @@ P_VERSION = META.version
 P_VERSION_AFTER = META.after
 VERSION_PREFIX = "urn:pemkre:version:"
 
+#: A change whose SPARQL text is longer than this many characters is staged (:meth:`SparqlStore._apply_staged`):
+#: 16 Mi characters are at most about 40 MiB as a form body, well under ``oxigraph serve``'s 128 MiB limit
+MAX_UPDATE_CHARS = 16 * 1024 * 1024
+#: the graph of staging records (outside PEMKRE's graph namespace, so no query, load or drop of PEMKRE's graphs
+#: touches it): ``<urn:pemkre:staging:UUID> meta:stagedAt NOW() ; meta:stagedBy "client" ; meta:stagedGraph <g>``
+G_STAGING = URIRef("urn:pemkre:staging")
+STAGING_PREFIX = "urn:pemkre:staging:"
+P_STAGED_AT = META.stagedAt
+P_STAGED_BY = META.stagedBy
+P_STAGED_GRAPH = META.stagedGraph
+
 _TOKEN_RE = re.compile(r"^urn:uuid:[0-9a-f-]{36}$")
 _ACCEPT_RESULTS = "application/sparql-results+json"
 _ACCEPT_GRAPH = "application/n-triples"
@@ -153,6 +169,9 @@ class _Claim:
     client: str
 
 
+_log = logging.getLogger(__name__)
+
+
 class SparqlStore(TripleStore):
     """A :class:`TripleStore` on a SPARQL 1.1 server (see the module docstring). ``close()`` drops the connection;
     the data stays on the server."""
@@ -161,11 +180,19 @@ class SparqlStore(TripleStore):
 
     def __init__(self, query_url: str, update_url: str, timeout_s: float = 10.0,
                  retry: RetryPolicy = RetryPolicy(), union_default_graph: bool = False, check: bool = True,
-                 chunk_triples: int = 5000, claim_ttl_s: Optional[float] = None, claim_attempts: int = 12) -> None:
+                 chunk_triples: int = 5000, claim_ttl_s: Optional[float] = None, claim_attempts: int = 12,
+                 max_update_chars: int = MAX_UPDATE_CHARS) -> None:
         self.query_endpoint = Endpoint(query_url, "query", timeout_s, retry)
         self.update_endpoint = Endpoint(update_url, "update", timeout_s, retry)
         self.union_default_graph = union_default_graph
         self.chunk_triples = max(1, int(chunk_triples))
+        if int(max_update_chars) < 1000:
+            raise InvalidParameterError("max_update_chars %r is too small: a staged part must hold at least one "
+                                        "triple; use 1000 or more (default %d)" % (max_update_chars,
+                                                                                  MAX_UPDATE_CHARS))
+        #: a change whose SPARQL text is longer is staged (see _apply_staged): written in parts of at most this
+        #: many characters into staging graphs, then applied by one small request
+        self.max_update_chars = int(max_update_chars)
         #: the longest a claim may have to wait for its write: reading the claims and writing, each with every
         #: retry timing out
         self.claim_path_s = sum(e.retry.attempts * timeout_s + sum(e.retry.delays())
@@ -425,15 +452,110 @@ class SparqlStore(TripleStore):
                 self._apply_conditional(changes, removes, adds, expects)
             else:
                 token = self._new_token()
-                ops = self._cleanup_ops()
-                if removes:
-                    ops.append("DELETE DATA { %s }" % removes)
-                ops.append("INSERT DATA { %s %s }" % (adds, self._claim_text(token)))
-                ops += self._version_ops()
-                self._write(ops, token, "a change of %d removals and %d additions"
-                            % (len(changes.remove), len(changes.add)))
+                what = "a change of %d removals and %d additions" % (len(changes.remove), len(changes.add))
+                if len(removes) + len(adds) > self.max_update_chars:
+                    self._apply_staged(changes, token, what)
+                else:
+                    ops = self._cleanup_ops()
+                    if removes:
+                        ops.append("DELETE DATA { %s }" % removes)
+                    ops.append("INSERT DATA { %s %s }" % (adds, self._claim_text(token)))
+                    ops += self._version_ops()
+                    self._write(ops, token, what)
                 self._done_tokens.append(token)
             self._know_graphs(q[3] for q in changes.add)
+
+    def _apply_staged(self, changes: ChangeSet, token: str, what: str) -> None:
+        """Apply a change too long for one request (over ``max_update_chars``; a world scan of tens of thousands
+        of features) all or nothing: its removals and additions go, in parts of at most ``max_update_chars``, into
+        fresh *staging graphs* (``urn:pemkre:staging:UUID:remove:N`` / ``:add:N``, one pair per target graph,
+        outside PEMKRE's graphs: no query sees them), then ONE request deletes the staged removals from their
+        graphs, inserts the staged additions, drops the staging graphs and moves the version marker, like any
+        other change. A failure while staging leaves PEMKRE's graphs untouched (``applied=False``) and drops what
+        was staged; staging graphs left by a client that died (their record older than ``claim_ttl_s`` by the
+        server's clock) are dropped by the next staged change. Called with the lock held."""
+        stage = "%s%s" % (STAGING_PREFIX, uuid.uuid4())
+        parts: Dict[Tuple[str, URIRef], List[Quad]] = {}
+        for kind, quads in (("remove", changes.remove), ("add", changes.add)):
+            for q in quads:
+                parts.setdefault((kind, q[3]), []).append(q)
+        names = {key: URIRef("%s:%s:%d" % (stage, key[0], i)) for i, key in enumerate(sorted(parts))}
+        self._drop_dead_stages()
+        g_stage = term_text(G_STAGING)
+        record = "%s %s ; %s %s" % (term_text(P_STAGED_BY), term_text(Literal(self.client)), term_text(P_STAGED_GRAPH),
+                                    ", ".join(term_text(n) for n in names.values()))
+        requests = 0
+        try:
+            self._update("INSERT { GRAPH %s { <%s> %s ?now ; %s } } WHERE { BIND(NOW() AS ?now) }"
+                         % (g_stage, stage, term_text(P_STAGED_AT), record), "staging %s (its record)" % what)
+            total = sum(len(q) for q in parts.values())
+            done = 0
+            for key in sorted(parts):
+                target = term_text(names[key])
+                body: List[str] = []
+                size = 0
+                for i, q in enumerate(parts[key]):
+                    line = "%s %s %s ." % (term_text(q[0]), term_text(q[1]), term_text(q[2]))
+                    body.append(line)
+                    size += len(line) + 1
+                    if size >= self.max_update_chars - 100 or i == len(parts[key]) - 1:
+                        requests += 1
+                        self._update("INSERT DATA { GRAPH %s { %s } }" % (target, " ".join(body)),
+                                     "staging %s (part %d)" % (what, requests))
+                        done += len(body)
+                        _log.info("PEMKRE store %s: staged %d of %d quads of %s", self.update_endpoint.name, done,
+                                  total, what)
+                        body, size = [], 0
+        except StoreError as exc:
+            try:
+                self._update(" ;\n".join(self._drop_stage_ops(stage, names.values())),
+                             "dropping the staging graphs of %s" % what)
+            except StoreError:
+                pass  # left for the next staged change of any client once the record is claim_ttl_s old
+            if isinstance(exc, StoreUnavailable):
+                raise StoreUnavailable("%s; nothing of it was applied (it was being staged: %d parts sent)"
+                                       % (exc, requests), exc.endpoint, exc.reason, applied=False,
+                                       timed_out=exc.timed_out) from None
+            raise
+        ops = self._cleanup_ops()
+        for key in sorted(parts):
+            graph, staged = term_text(key[1]), term_text(names[key])
+            if key[0] == "remove":
+                ops.append("DELETE { GRAPH %s { ?s ?p ?o } } WHERE { GRAPH %s { ?s ?p ?o } }" % (graph, staged))
+        for key in sorted(parts):
+            graph, staged = term_text(key[1]), term_text(names[key])
+            if key[0] == "add":
+                ops.append("INSERT { GRAPH %s { ?s ?p ?o } } WHERE { GRAPH %s { ?s ?p ?o } }" % (graph, staged))
+        ops += self._drop_stage_ops(stage, names.values())
+        ops.append("INSERT DATA { %s }" % self._claim_text(token))
+        ops += self._version_ops()
+        self._write(ops, token, what + " (applying its %d staged parts)" % requests)
+
+    @staticmethod
+    def _drop_stage_ops(stage: str, graphs: Iterable[URIRef]) -> List[str]:
+        return ["DROP SILENT GRAPH %s" % term_text(g) for g in graphs] + [
+            "DELETE WHERE { GRAPH %s { <%s> ?p ?o } }" % (term_text(G_STAGING), stage)]
+
+    def _drop_dead_stages(self) -> None:
+        """Drop the staging graphs of staged changes that never finished (their record is older than
+        ``claim_ttl_s`` by the server's clock: the client that wrote them died or gave up)."""
+        _, rows = json_rows(self._select_doc(
+            'SELECT ?s ?g WHERE { GRAPH %s { ?s %s ?at ; %s ?g } '
+            'FILTER(?at < NOW() - "PT%dS"^^<http://www.w3.org/2001/XMLSchema#dayTimeDuration>) }'
+            % (term_text(G_STAGING), term_text(P_STAGED_AT), term_text(P_STAGED_GRAPH), int(self.claim_ttl_s) + 1),
+            "reading the staging records", dataset=False), "reading the staging records")
+        dead: Dict[str, List[URIRef]] = {}
+        for r in rows:
+            s, g = r.get("s"), r.get("g")
+            if isinstance(s, URIRef) and isinstance(g, URIRef) and str(g).startswith(STAGING_PREFIX):
+                dead.setdefault(str(s), []).append(g)
+        if dead:
+            ops: List[str] = []
+            for stage, graphs in sorted(dead.items()):
+                ops += self._drop_stage_ops(stage, graphs)
+            _log.warning("PEMKRE store %s: dropping %d staged change(s) left unfinished by a client (%s)",
+                         self.update_endpoint.name, len(dead), ", ".join(sorted(dead)))
+            self._update(" ;\n".join(ops), "dropping staging graphs left unfinished")
 
     #: does each write note the version it replaced (``meta:after``)? Only a client that checks its own chain of
     #: writes needs that (:class:`~locem_bridge.pemkre.mirror_store.MirroredSparqlStore`)

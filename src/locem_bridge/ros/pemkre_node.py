@@ -21,7 +21,8 @@ attempt naming the endpoint); a store that answers wrongly is a configuration er
 
 Parameters: ``~store_path`` (directory of the persistent store; default ``$ROS_HOME/pemkre_store``),
 ``~store`` (``journal`` default, ``rocksdb``, ``memory``, ``sparql``: a SPARQL 1.1 server at ``~query_url`` and
-``~update_url``, read from an exact copy in the node unless ``~sparql_copy`` is false), ``~fsync`` (journal: flush
+``~update_url``, read from an exact copy in the node unless ``~sparql_copy`` is false; ``~sparql_timeout`` seconds per request,
+default 10), ``~fsync`` (journal: flush
 each change to disk),
 ``~ontology_dir`` (default: the package's ``ontologies/``), ``~extra_ontology_dirs`` (an integrator's folders of
 Turtle loaded beside it, separated by ``:`` or ``,``), ``~trees_dir`` and ``~extra_trees_dirs`` (the tree folders
@@ -191,7 +192,9 @@ def main() -> None:
         store = open_store_waiting(lambda: open_store(kind, path, param("fsync", False), param("fresh", False),
                                                       query_url=query_url,
                                                       update_url=param("update_url", ""),
-                                                      mirror=param("sparql_copy", True)),
+                                                      mirror=param("sparql_copy", True),
+                                                      **({"timeout_s": float(param("sparql_timeout", 10.0))}
+                                                         if kind == "sparql" else {})),
                                    kind, log=rospy.logwarn, stop=rospy.is_shutdown)
         if site is not None and claim_site_or_close(store, site, where, site_file):
             rospy.loginfo("PEMKRE: %s now holds site %r", where, site)
