@@ -874,3 +874,32 @@ def test_a_staged_change_cut_off_by_a_dead_server_changes_nothing_and_its_parts_
     other.apply(_big_change(100, []))
     assert _staging_graphs(oxigraph_server) == []
     assert reader.count(G_WORLD) == 40 + len([i for i in range(100) if i % 3])
+
+
+def test_a_staged_change_whose_part_fails_drops_its_parts_at_once_and_keeps_its_record_for_the_sweep(sparql_store,
+                                                                                                    oxigraph_server):
+    """A part that fails while the server still answers (here: its connection lost): the staged parts are dropped
+    at once, PEMKRE's graphs are as before; the record stays (a part whose answer was lost may still land) until a
+    staged change sweeps it once it is ``claim_ttl_s`` old."""
+    store = sparql_store(max_update_chars=2000)
+    store.apply(ChangeSet(add=[(A, P, Literal("kept"), G_WORLD)]))
+    sent = []
+    send = store.update_endpoint.post
+
+    def post(params, *args, **kwargs):
+        sent.append(params[0][1])
+        if len(sent) == 5:
+            raise StoreUnavailable("SPARQL update endpoint %s: connection lost" % oxigraph_server.update_url,
+                                   store.update_endpoint.name, "connection lost", applied=None)
+        return send(params, *args, **kwargs)
+    store.update_endpoint.post = post
+    with pytest.raises(StoreUnavailable) as err:
+        store.apply(_big_change(200, []))
+    assert err.value.applied is False and "nothing of it was applied (it was being staged" in _one_line(err.value)
+    assert sent[-1].startswith("DROP SILENT GRAPH <urn:pemkre:staging:"), sent[-1][:80]
+    left = _staging_graphs(oxigraph_server)
+    assert len(left) == 1 and re.fullmatch(r"urn:pemkre:staging:[0-9a-f-]{36}", left[0]), left  # the record only
+    assert set(sparql_store().quads()) == {(A, P, Literal("kept"), G_WORLD)}
+    store.update_endpoint.post = send
+    store.apply(_big_change(30, []))  # the record is young: a live client may still be staging, it stays
+    assert _staging_graphs(oxigraph_server) == left

@@ -472,7 +472,7 @@ class SparqlStore(TripleStore):
         outside PEMKRE's graphs: no query sees them), then ONE request deletes the staged removals from their
         graphs, inserts the staged additions, drops the staging graphs and moves the version marker, like any
         other change. A failure while staging leaves PEMKRE's graphs untouched (``applied=False``) and drops what
-        was staged; staging graphs left by a client that died (their record older than ``claim_ttl_s`` by the
+        was staged (its record stays until the sweep below: a part whose answer was lost may still land); staging graphs left by a client that died (their record older than ``claim_ttl_s`` by the
         server's clock) are dropped by the next staged change. Called with the lock held."""
         stage = "%s%s" % (STAGING_PREFIX, uuid.uuid4())
         parts: Dict[Tuple[str, URIRef], List[Quad]] = {}
@@ -507,8 +507,8 @@ class SparqlStore(TripleStore):
                                   total, what)
                         body, size = [], 0
         except StoreError as exc:
-            try:
-                self._update(" ;\n".join(self._drop_stage_ops(stage, names.values())),
+            try:  # the record stays: a part whose answer was lost may still land, the sweep drops it later
+                self._update(" ;\n".join(self._drop_stage_ops(stage, names.values(), record=False)),
                              "dropping the staging graphs of %s" % what)
             except StoreError:
                 pass  # left for the next staged change of any client once the record is claim_ttl_s old
@@ -532,9 +532,9 @@ class SparqlStore(TripleStore):
         self._write(ops, token, what + " (applying its %d staged parts)" % requests)
 
     @staticmethod
-    def _drop_stage_ops(stage: str, graphs: Iterable[URIRef]) -> List[str]:
-        return ["DROP SILENT GRAPH %s" % term_text(g) for g in graphs] + [
-            "DELETE WHERE { GRAPH %s { <%s> ?p ?o } }" % (term_text(G_STAGING), stage)]
+    def _drop_stage_ops(stage: str, graphs: Iterable[URIRef], record: bool = True) -> List[str]:
+        return ["DROP SILENT GRAPH %s" % term_text(g) for g in graphs] + (
+            ["DELETE WHERE { GRAPH %s { <%s> ?p ?o } }" % (term_text(G_STAGING), stage)] if record else [])
 
     def _drop_dead_stages(self) -> None:
         """Drop the staging graphs of staged changes that never finished (their record is older than
