@@ -243,6 +243,9 @@ def _node_cases(tmp_path):
          "%s: site: the store holds the data of site 'another_bay', not of this launch's site 'default'"
          % claimed_rocksdb),
         ("job_node", "job", ["_job:=%s" % job], "%s: steps[0]: needs a name and a process" % job),
+        ("pemkre_node", "pemkre", ["_store:=sparql", "_query_url:=http://127.0.0.1:9/query",
+                                   "_update_url:=http://127.0.0.1:9/update", "_sparql_timeout:=0"],
+         "~store: store sparql: ~sparql_timeout must be a number of seconds above 0, got 0"),
     ]
 
 

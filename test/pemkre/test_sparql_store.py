@@ -792,41 +792,61 @@ def _staging_graphs(server):
         return sorted(b["g"]["value"] for b in json.load(answer)["results"]["bindings"])
 
 
-def _big_change(n, old):
+_RECORD = r"urn:pemkre:staging:[0-9a-f-]{36}"
+
+
+def _big_change(n, old, tag="line"):
     """``n`` additions over two graphs and the removal of the quads ``old``."""
     from locem_bridge.pemkre.store import G_ABOX_INFERRED
-    add = [(URIRef(EX + "joint_%d" % i), P, Literal("line %d of a long scan" % i),
+    add = [(URIRef(EX + "joint_%d" % i), P, Literal("%s %d of a long scan" % (tag, i)),
             G_WORLD if i % 3 else G_ABOX_INFERRED) for i in range(n)]
     return ChangeSet(remove=list(old), add=add)
 
 
-@pytest.mark.parametrize("mirror", [False, True], ids=["plain", "copy"])
-def test_a_change_longer_than_one_request_is_staged_and_shows_all_at_once(mirror, sparql_store, oxigraph_server):
-    """A change over ``max_update_chars`` (a world scan of 26,000+ features is over ``oxigraph serve``'s 128 MiB
-    body limit) is written in parts into staging graphs no query sees, then applied by one request: a reader never
-    sees part of it; afterwards no staging graph or record is left."""
-    with pytest.raises(Exception) as err:
-        sparql_store(max_update_chars=10)
-    assert "max_update_chars 10 is too small" in _one_line(err.value) and "1000 or more" in str(err.value)
-    store, reader = sparql_store(mirror=mirror, max_update_chars=2000), sparql_store()
-    old = [(URIRef(EX + "old_%d" % i), P, Literal(i), G_WORLD) for i in range(40)]
-    store.apply(ChangeSet(add=old + [(A, P, Literal("kept"), G_WORLD)]))
-    change = _big_change(300, old)
-    seen_during = []
+def _counting(store, on_update=None):
+    """Wrap ``store``'s update endpoint: returns the list of update texts sent (``on_update(n)`` before the n-th)."""
+    sent = []
     send = store.update_endpoint.post
 
     def post(params, *args, **kwargs):
-        if len(seen_during) < 50:
-            seen_during.append((reader.count(G_WORLD), len(reader.objects(URIRef(EX + "joint_1"), P))))
+        sent.append(params[0][1])
+        if on_update is not None:
+            on_update(len(sent))
         return send(params, *args, **kwargs)
     store.update_endpoint.post = post
+    return sent
+
+
+@pytest.mark.parametrize("mirror", [False, True], ids=["plain", "copy"])
+def test_a_change_longer_than_one_request_is_staged_and_shows_all_at_once(mirror, sparql_store, oxigraph_server):
+    """A change over ``max_update_bytes`` (by default 16 MiB of text, a world scan of about 4,500 features;
+    ``oxigraph serve`` refuses bodies over 128 MiB) is written in parts into staging graphs no PEMKRE query sees,
+    then applied by one request: a reader never sees part of it, through look-ups or queries; a quad both removed
+    and added stays; afterwards no staging graph or record is left."""
+    with pytest.raises(Exception) as err:
+        sparql_store(max_update_bytes=10)
+    assert "max_update_bytes 10 is too small" in _one_line(err.value) and "1000 or more" in str(err.value)
+    store, reader = sparql_store(mirror=mirror, max_update_bytes=2000), sparql_store()
+    old = [(URIRef(EX + "old_%d" % i), P, Literal(i), G_WORLD) for i in range(40)]
+    both = (A, P, Literal("removed and added again"), G_WORLD)
+    store.apply(ChangeSet(add=old + [(A, P, Literal("kept"), G_WORLD), both]))
+    change = _big_change(300, old + [both])
+    change.add.append(both)
+    counting = reader.prepare("SELECT (COUNT(*) AS ?n) WHERE { ?s ?p ?o }", "count", {})
+    seen = []
+
+    def look(n):
+        reader.refresh_graphs()
+        seen.append((reader.count(G_WORLD), len(reader.objects(URIRef(EX + "joint_1"), P)),
+                     int(reader.select(counting)[0]["n"])))
+    sent = _counting(store, look)
     with store.reading():
         store.apply(change)
-    store.update_endpoint.post = send
-    # parts: 340 quads of about 90 characters in parts of 2,000 characters, each its own request
-    assert len(seen_during) >= 15, len(seen_during)
-    assert set(seen_during) == {(41, 0)}, "a reader saw part of the change: %r" % sorted(set(seen_during))
-    expected = {(A, P, Literal("kept"), G_WORLD)} | set(change.add)
+    # 341 quads of about 100 bytes in parts of at most 2,000 bytes: the record, 20+ parts, the final request
+    assert len(sent) >= 20 and sent[0].startswith("INSERT { GRAPH <urn:pemkre:staging>"), len(sent)
+    assert all(len(t.encode("utf-8")) <= 2000 + 600 for t in sent[1:-1]), max(len(t) for t in sent)
+    assert set(seen) == {(42, 0, 42)}, "a reader saw part of the change: %r" % sorted(set(seen))
+    expected = {(A, P, Literal("kept"), G_WORLD), both} | set(change.add)
     assert set(reader.quads()) == expected
     assert _staging_graphs(oxigraph_server) == []
     if mirror:
@@ -834,72 +854,139 @@ def test_a_change_longer_than_one_request_is_staged_and_shows_all_at_once(mirror
         with store.reading():
             assert set(store.quads()) == expected  # the copy followed the change without loading itself again
         assert store.reloads == reloads
-    # another client's copy sees it from its next decision on
-    other = sparql_store(mirror=True)
+    other = sparql_store(mirror=True)  # another client's copy sees it from its next decision on
     with other.reading():
         assert other.count() == len(expected)
 
 
-def test_a_staged_change_cut_off_by_a_dead_server_changes_nothing_and_its_parts_are_dropped_later(
+def test_a_staged_change_cut_off_by_a_dead_server_changes_nothing_and_its_parts_are_dropped_once_expired(
         sparql_store, oxigraph_server):
-    """The server dies while a change is being staged: the change is NOT_READY with ``applied=False`` and
-    PEMKRE's graphs are as before after the restart; the staging graphs it left are dropped by the next staged
-    change once their record is ``claim_ttl_s`` old (by the server's clock)."""
-    quick = dict(timeout_s=0.5, retry=RetryPolicy(attempts=1), claim_ttl_s=2.5, max_update_chars=2000)
+    """The server dies while a change is being staged: NOT_READY with ``applied=False``, PEMKRE's graphs as before
+    after the restart; the parts it left are dropped by the next staged change once the record has expired (the
+    server's clock, this client's claim ttl after its last part)."""
+    quick = dict(timeout_s=1.0, retry=RetryPolicy(attempts=1), claim_ttl_s=4.5, max_update_bytes=2000)
     store = sparql_store(**quick)
     old = [(URIRef(EX + "old_%d" % i), P, Literal(i), G_WORLD) for i in range(40)]
     store.apply(ChangeSet(add=old))
-    sent = []
-    send = store.update_endpoint.post
-
-    def post(params, *args, **kwargs):
-        sent.append(params[0][1])
-        if len(sent) == 6:
-            oxigraph_server.kill()
-        return send(params, *args, **kwargs)
-    store.update_endpoint.post = post
+    _counting(store, lambda n: oxigraph_server.kill() if n == 6 else None)
     with pytest.raises(StoreUnavailable) as err:
         store.apply(_big_change(300, old))
     assert err.value.applied is False, str(err.value)
-    assert "nothing of it was applied" in _one_line(err.value) and store.update_endpoint.name in str(err.value)
+    assert "nothing of it was applied (it was being staged: 4 parts stored)" in _one_line(err.value)
+    assert store.update_endpoint.name in str(err.value)
     oxigraph_server.start()
     reader = sparql_store()
     assert set(reader.quads()) == set(old)
     left = _staging_graphs(oxigraph_server)
-    # the record (its subject) and the part staged before
-    assert any(re.fullmatch(r"urn:pemkre:staging:[0-9a-f-]{36}", g) for g in left), left
-    assert any(re.fullmatch(r"urn:pemkre:staging:[0-9a-f-]{36}:add:\d+", g) for g in left), left
-    time.sleep(3.6)  # the record is older than the claim ttl now
+    assert any(re.fullmatch(_RECORD, g) for g in left), left
+    assert any(re.fullmatch(_RECORD + r":add:\d+", g) for g in left), left
     other = sparql_store(**quick)
-    other.apply(_big_change(100, []))
+    other.apply(_big_change(100, [], "fresh"))  # the record has not expired yet: a live client may be staging
+    assert _staging_graphs(oxigraph_server) == left
+    time.sleep(5.5)  # expired now (4 s after its last part)
+    other.apply(_big_change(100, [], "later"))
     assert _staging_graphs(oxigraph_server) == []
-    assert reader.count(G_WORLD) == 40 + len([i for i in range(100) if i % 3])
+    assert reader.count(G_WORLD) == 40 + 2 * len([i for i in range(100) if i % 3])  # the two later changes
 
 
-def test_a_staged_change_whose_part_fails_drops_its_parts_at_once_and_keeps_its_record_for_the_sweep(sparql_store,
-                                                                                                    oxigraph_server):
-    """A part that fails while the server still answers (here: its connection lost): the staged parts are dropped
-    at once, PEMKRE's graphs are as before; the record stays (a part whose answer was lost may still land) until a
-    staged change sweeps it once it is ``claim_ttl_s`` old."""
-    store = sparql_store(max_update_chars=2000)
+def test_a_staged_change_whose_part_fails_drops_its_parts_at_once_and_keeps_its_record_until_it_expires(
+        sparql_store, oxigraph_server):
+    """A part that fails while the server still answers (here: its connection lost): the parts are dropped at
+    once, PEMKRE's graphs are as before; the record stays (a part whose answer was lost may still land) until it
+    expires. A sweep that cannot be done does not hold a change back."""
+    store = sparql_store(max_update_bytes=2000)
     store.apply(ChangeSet(add=[(A, P, Literal("kept"), G_WORLD)]))
-    sent = []
-    send = store.update_endpoint.post
 
-    def post(params, *args, **kwargs):
-        sent.append(params[0][1])
-        if len(sent) == 5:
+    def lose(n):
+        if n == 5:
             raise StoreUnavailable("SPARQL update endpoint %s: connection lost" % oxigraph_server.update_url,
                                    store.update_endpoint.name, "connection lost", applied=None)
-        return send(params, *args, **kwargs)
-    store.update_endpoint.post = post
+    sent = _counting(store, lose)
     with pytest.raises(StoreUnavailable) as err:
         store.apply(_big_change(200, []))
-    assert err.value.applied is False and "nothing of it was applied (it was being staged" in _one_line(err.value)
+    assert err.value.applied is False and "nothing of it was applied (it was being staged: 3 parts stored)" in \
+        _one_line(err.value)
     assert sent[-1].startswith("DROP SILENT GRAPH <urn:pemkre:staging:"), sent[-1][:80]
     left = _staging_graphs(oxigraph_server)
-    assert len(left) == 1 and re.fullmatch(r"urn:pemkre:staging:[0-9a-f-]{36}", left[0]), left  # the record only
+    assert len(left) == 1 and re.fullmatch(_RECORD, left[0]), left  # the record only
     assert set(sparql_store().quads()) == {(A, P, Literal("kept"), G_WORLD)}
-    store.update_endpoint.post = send
-    store.apply(_big_change(30, []))  # the record is young: a live client may still be staging, it stays
-    assert _staging_graphs(oxigraph_server) == left
+    other = sparql_store(max_update_bytes=2000)
+    ask = other.query_endpoint.post
+
+    def no_sweep(params, *args, **kwargs):
+        if "urn:pemkre:staging" in params[0][1] and params[0][1].startswith("SELECT"):
+            raise StoreError("%s: HTTP 500: sweep refused" % other.query_endpoint.name)
+        return ask(params, *args, **kwargs)
+    other.query_endpoint.post = no_sweep
+    other.apply(_big_change(30, [], "other"))  # the sweep failed: logged, the change is applied all the same
+    assert len(list(sparql_store().quads())) == 31
+    assert _staging_graphs(oxigraph_server) == left  # the record is young: its client may still be staging
+
+
+def test_a_live_stage_is_not_swept_and_a_stage_found_dead_is_not_applied_in_part(sparql_store, oxigraph_server):
+    """Two clients staging at once: a client with a short claim ttl does not sweep the stage of one with a long
+    ttl (each record says how long it lives, renewed by every part). A client that stalls between two parts longer
+    than its own ttl finds its stage dropped by another client: its change is NOT_READY ``applied=False`` and none
+    of it is on the server, never a part."""
+    short = dict(timeout_s=1.0, retry=RetryPolicy(attempts=1), claim_ttl_s=4.5, max_update_bytes=2000)
+    slow = sparql_store(max_update_bytes=2000)  # the default ttl: about 196 s
+    sweeper = sparql_store(**short)
+
+    def meanwhile(n):
+        if n == 4:
+            time.sleep(5.5)  # longer than the sweeper's ttl, far shorter than slow's
+            sweeper.apply(_big_change(60, [], "sweeper"))
+    _counting(slow, meanwhile)
+    slow.apply(_big_change(300, [], "slow"))
+    reader = sparql_store()
+    literals = [str(q[2]) for q in reader.quads()]
+    assert len([x for x in literals if x.startswith("slow ")]) == 300  # all of slow's change
+    assert len([x for x in literals if x.startswith("sweeper ")]) == 60
+    assert _staging_graphs(oxigraph_server) == []
+
+    stalled = sparql_store(**short)
+
+    def stall(n):
+        if n == 4:
+            time.sleep(5.5)  # stalled past its own ttl: its record expires
+            sweeper.apply(_big_change(60, [], "sweeper again"))
+    sent = _counting(stalled, stall)
+    before = set(reader.quads())
+    with pytest.raises(StoreUnavailable) as err:
+        stalled.apply(_big_change(300, [], "stalled"))
+    assert err.value.applied is False and "staged parts were dropped as unfinished" in _one_line(err.value)
+    assert len(sent) > 15  # it went on staging, then its final request found the record gone
+    after = set(reader.quads())
+    assert not any("stalled" in str(q[2]) for q in after), "part of the dead stage was applied"
+    assert after - before == {q for q in _big_change(60, [], "sweeper again").add}
+    assert _staging_graphs(oxigraph_server) == []
+
+
+def test_a_staged_change_whose_final_request_is_refused_drops_its_parts_and_the_copy_stays(sparql_store,
+                                                                                           oxigraph_server):
+    """The server refuses the final request (an HTTP error: nothing written): the change is refused in one line,
+    its staged parts and record are dropped at once, and the copy of a MirroredSparqlStore stays as it was without
+    loading itself again."""
+    from locem_bridge.pemkre.sparql_http import HttpStatusError
+
+    store = sparql_store(mirror=True, max_update_bytes=2000)
+    store.apply(ChangeSet(add=[(A, P, Literal("kept"), G_WORLD)]))
+    with store.reading():
+        assert store.objects(A, P) == [Literal("kept")]  # the copy is loaded
+    reloads = store.reloads
+
+    def refuse(n):
+        text = sent[-1]
+        if text.count("DROP SILENT GRAPH") and "INSERT { GRAPH" in text and "WHERE { GRAPH <urn:pemkre:staging>" in \
+                text and not text.startswith("DROP"):
+            raise HttpStatusError("%s: HTTP 400: refused by the test" % store.update_endpoint.name, 400)
+    sent = _counting(store, refuse)
+    with pytest.raises(StoreError) as err:
+        store.apply(_big_change(200, []))
+    assert "(applying its" in _one_line(err.value) and "was refused (nothing was written)" in str(err.value)
+    assert sent[-1].startswith("DROP SILENT GRAPH <urn:pemkre:staging:") and "DELETE WHERE" in sent[-1]
+    assert _staging_graphs(oxigraph_server) == []
+    assert set(sparql_store().quads()) == {(A, P, Literal("kept"), G_WORLD)}
+    with store.reading():
+        assert set(store.quads()) == {(A, P, Literal("kept"), G_WORLD)}
+    assert store.reloads == reloads

@@ -21,11 +21,14 @@ WHERE group (:func:`~locem_bridge.pemkre.sparql_text.values_position`), never as
 
 **Writes.** :meth:`SparqlStore.apply` is ONE update request, ``DELETE DATA {..} ; INSERT DATA {..}``, which servers
 that run one request as one transaction apply all or nothing (Oxigraph does, tested here; Fuseki with TDB2 and
-GraphDB say they do, not tested here). A change whose text is longer than ``max_update_chars`` (16 Mi characters
-by default; a world scan of more than about 26,000 features would be over ``oxigraph serve``'s 128 MiB body
-limit) is *staged*: written in parts into staging graphs outside PEMKRE's graphs (``urn:pemkre:staging:..``, no
-query sees them), then applied by one request that moves the staged quads into place and drops the staging graphs,
-so it still shows all at once or not at all (:meth:`SparqlStore._apply_staged`). Every
+GraphDB say they do, not tested here). A change whose text is longer than ``max_update_bytes`` (16 MiB by
+default: a world scan of more than about 4,500 features; form-encoded, a scan of more than about 27,000 would
+be over ``oxigraph serve``'s 128 MiB body limit) is *staged*: written in parts into staging graphs outside PEMKRE's graphs
+(``urn:pemkre:staging:..``; no PEMKRE query sees them, but a client that reads every graph of the server does),
+then applied by one request that moves the staged quads into place and drops the staging graphs, so it still shows
+all at once or not at all (:meth:`SparqlStore._apply_staged`). With ``union_default_graph`` the staging graphs
+would be part of every query's default graph: there a change is always one request (a server that refuses one so
+big says so in one line, nothing is written). Every
 write also inserts a *token* (a triple naming a fresh ``urn:uuid:`` in the bookkeeping graph :data:`G_CLAIMS`,
 which queries, :meth:`~SparqlStore.quads` and :meth:`~SparqlStore.count` never see): when the answer to a write is
 lost on the way back, the store asks the server whether the token is there and reports ``applied`` True in
@@ -125,14 +128,16 @@ P_VERSION = META.version
 P_VERSION_AFTER = META.after
 VERSION_PREFIX = "urn:pemkre:version:"
 
-#: A change whose SPARQL text is longer than this many characters is staged (:meth:`SparqlStore._apply_staged`):
-#: 16 Mi characters are at most about 40 MiB as a form body, well under ``oxigraph serve``'s 128 MiB limit
-MAX_UPDATE_CHARS = 16 * 1024 * 1024
+#: A change whose SPARQL text is longer than this many bytes (UTF-8) is staged (:meth:`SparqlStore._apply_staged`):
+#: form-encoded, 16 MiB of text are at most 48 MiB on the wire, well under ``oxigraph serve``'s 128 MiB limit
+MAX_UPDATE_BYTES = 16 * 1024 * 1024
 #: the graph of staging records (outside PEMKRE's graph namespace, so no query, load or drop of PEMKRE's graphs
-#: touches it): ``<urn:pemkre:staging:UUID> meta:stagedAt NOW() ; meta:stagedBy "client" ; meta:stagedGraph <g>``
+#: touches it): ``<urn:pemkre:staging:UUID> meta:stagedAt NOW() (renewed by each part) ; meta:stagedTtl
+#: seconds (the writer's claim ttl) ; meta:stagedBy "client" ; meta:stagedGraph <g>``
 G_STAGING = URIRef("urn:pemkre:staging")
 STAGING_PREFIX = "urn:pemkre:staging:"
 P_STAGED_AT = META.stagedAt
+P_STAGED_TTL = META.stagedTtl
 P_STAGED_BY = META.stagedBy
 P_STAGED_GRAPH = META.stagedGraph
 
@@ -181,18 +186,18 @@ class SparqlStore(TripleStore):
     def __init__(self, query_url: str, update_url: str, timeout_s: float = 10.0,
                  retry: RetryPolicy = RetryPolicy(), union_default_graph: bool = False, check: bool = True,
                  chunk_triples: int = 5000, claim_ttl_s: Optional[float] = None, claim_attempts: int = 12,
-                 max_update_chars: int = MAX_UPDATE_CHARS) -> None:
+                 max_update_bytes: int = MAX_UPDATE_BYTES) -> None:
         self.query_endpoint = Endpoint(query_url, "query", timeout_s, retry)
         self.update_endpoint = Endpoint(update_url, "update", timeout_s, retry)
         self.union_default_graph = union_default_graph
         self.chunk_triples = max(1, int(chunk_triples))
-        if int(max_update_chars) < 1000:
-            raise InvalidParameterError("max_update_chars %r is too small: a staged part must hold at least one "
-                                        "triple; use 1000 or more (default %d)" % (max_update_chars,
-                                                                                  MAX_UPDATE_CHARS))
-        #: a change whose SPARQL text is longer is staged (see _apply_staged): written in parts of at most this
-        #: many characters into staging graphs, then applied by one small request
-        self.max_update_chars = int(max_update_chars)
+        if int(max_update_bytes) < 1000:
+            raise InvalidParameterError("max_update_bytes %r is too small: a staged part must hold at least one "
+                                        "triple; use 1000 or more (default %d)" % (max_update_bytes,
+                                                                                  MAX_UPDATE_BYTES))
+        #: a change whose SPARQL text is longer (UTF-8 bytes) is staged (see _apply_staged): written in parts of
+        #: at most this size into staging graphs, then applied by one small request
+        self.max_update_bytes = int(max_update_bytes)
         #: the longest a claim may have to wait for its write: reading the claims and writing, each with every
         #: retry timing out
         self.claim_path_s = sum(e.retry.attempts * timeout_s + sum(e.retry.delays())
@@ -453,7 +458,8 @@ class SparqlStore(TripleStore):
             else:
                 token = self._new_token()
                 what = "a change of %d removals and %d additions" % (len(changes.remove), len(changes.add))
-                if len(removes) + len(adds) > self.max_update_chars:
+                if not self.union_default_graph and \
+                        len(removes.encode("utf-8")) + len(adds.encode("utf-8")) > self.max_update_bytes:
                     self._apply_staged(changes, token, what)
                 else:
                     ops = self._cleanup_ops()
@@ -466,70 +472,110 @@ class SparqlStore(TripleStore):
             self._know_graphs(q[3] for q in changes.add)
 
     def _apply_staged(self, changes: ChangeSet, token: str, what: str) -> None:
-        """Apply a change too long for one request (over ``max_update_chars``; a world scan of tens of thousands
-        of features) all or nothing: its removals and additions go, in parts of at most ``max_update_chars``, into
-        fresh *staging graphs* (``urn:pemkre:staging:UUID:remove:N`` / ``:add:N``, one pair per target graph,
-        outside PEMKRE's graphs: no query sees them), then ONE request deletes the staged removals from their
-        graphs, inserts the staged additions, drops the staging graphs and moves the version marker, like any
-        other change. A failure while staging leaves PEMKRE's graphs untouched (``applied=False``) and drops what
-        was staged (its record stays until the sweep below: a part whose answer was lost may still land); staging graphs left by a client that died (their record older than ``claim_ttl_s`` by the
-        server's clock) are dropped by the next staged change. Called with the lock held."""
+        """Apply a change too big for one request (its text over ``max_update_bytes``; a world scan of more than
+        about 4,500 features) all or nothing: its removals and additions go, in parts of at most
+        ``max_update_bytes``, into fresh *staging graphs* (``urn:pemkre:staging:UUID:remove:N`` / ``:add:N``, one
+        per target graph and kind, outside PEMKRE's graphs: no PEMKRE query sees them), then ONE request deletes
+        the staged removals from their graphs, inserts the staged additions, moves the version marker and inserts
+        the token, like any other change, and drops the staging graphs.
+
+        A *record* in :data:`G_STAGING` keeps the stage alive: ``meta:stagedAt`` (the server's ``NOW()``, renewed by
+        every part) and ``meta:stagedTtl`` (this client's ``claim_ttl_s``). A stage whose record is older than its
+        ttl has expired: its client died or gave up: the next staged change of any client drops it. The final request moves data only while
+        the record is there, and its token is read back: a stage found dead is ``applied=False``, never half
+        applied. A failure while staging leaves PEMKRE's graphs untouched (``applied=False``) and drops the parts
+        at once (the record stays until it expires: a part whose answer was lost may still land). Called with the
+        lock held."""
         stage = "%s%s" % (STAGING_PREFIX, uuid.uuid4())
         parts: Dict[Tuple[str, URIRef], List[Quad]] = {}
         for kind, quads in (("remove", changes.remove), ("add", changes.add)):
             for q in quads:
                 parts.setdefault((kind, q[3]), []).append(q)
         names = {key: URIRef("%s:%s:%d" % (stage, key[0], i)) for i, key in enumerate(sorted(parts))}
-        self._drop_dead_stages()
-        g_stage = term_text(G_STAGING)
-        record = "%s %s ; %s %s" % (term_text(P_STAGED_BY), term_text(Literal(self.client)), term_text(P_STAGED_GRAPH),
-                                    ", ".join(term_text(n) for n in names.values()))
-        requests = 0
         try:
-            self._update("INSERT { GRAPH %s { <%s> %s ?now ; %s } } WHERE { BIND(NOW() AS ?now) }"
-                         % (g_stage, stage, term_text(P_STAGED_AT), record), "staging %s (its record)" % what)
+            self._drop_dead_stages()
+        except StoreError as exc:  # housekeeping: the change does not depend on it
+            _log.warning("PEMKRE store %s: could not drop the staged changes left unfinished (%s)",
+                         self.update_endpoint.name, exc)
+        g_stage, me = term_text(G_STAGING), "<%s>" % stage
+        live = "GRAPH %s { %s %s ?live }" % (g_stage, me, term_text(P_STAGED_AT))
+        renew = "DELETE { %s } INSERT { GRAPH %s { %s %s ?now } } WHERE { %s BIND(NOW() AS ?now) }" % (
+            live, g_stage, me, term_text(P_STAGED_AT), live)
+        sent = 0
+        try:
+            self._update("INSERT { GRAPH %s { %s %s ?now ; %s %s ; %s %s ; %s %s } } WHERE { BIND(NOW() AS ?now) }" % (
+                g_stage, me, term_text(P_STAGED_AT), term_text(P_STAGED_TTL), term_text(Literal(int(self.claim_ttl_s))),
+                term_text(P_STAGED_BY), term_text(Literal(self.client)),
+                term_text(P_STAGED_GRAPH), ", ".join(term_text(n) for n in names.values())),
+                "staging %s (its record)" % what)
             total = sum(len(q) for q in parts.values())
             done = 0
             for key in sorted(parts):
-                target = term_text(names[key])
                 body: List[str] = []
                 size = 0
-                for i, q in enumerate(parts[key]):
-                    line = "%s %s %s ." % (term_text(q[0]), term_text(q[1]), term_text(q[2]))
-                    body.append(line)
-                    size += len(line) + 1
-                    if size >= self.max_update_chars - 100 or i == len(parts[key]) - 1:
-                        requests += 1
-                        self._update("INSERT DATA { GRAPH %s { %s } }" % (target, " ".join(body)),
-                                     "staging %s (part %d)" % (what, requests))
+                for q in parts[key] + [None]:  # type: ignore[operator]
+                    line = "" if q is None else "%s %s %s ." % (term_text(q[0]), term_text(q[1]), term_text(q[2]))
+                    weight = len(line.encode("utf-8")) + 1
+                    if body and (q is None or size + weight > self.max_update_bytes - 400):
+                        self._update("%s ;\nINSERT DATA { GRAPH %s { %s } }" % (renew, term_text(names[key]),
+                                                                               " ".join(body)),
+                                     "staging %s (part %d)" % (what, sent + 1))
+                        sent += 1
                         done += len(body)
-                        _log.info("PEMKRE store %s: staged %d of %d quads of %s", self.update_endpoint.name, done,
-                                  total, what)
+                        _log.info("PEMKRE store %s: staged %d of %d quads of %s", self.update_endpoint.name,
+                                  done, total, what)
                         body, size = [], 0
+                    if q is not None:
+                        body.append(line)
+                        size += weight
         except StoreError as exc:
-            try:  # the record stays: a part whose answer was lost may still land, the sweep drops it later
-                self._update(" ;\n".join(self._drop_stage_ops(stage, names.values(), record=False)),
-                             "dropping the staging graphs of %s" % what)
-            except StoreError:
-                pass  # left for the next staged change of any client once the record is claim_ttl_s old
+            self._drop_stage_quietly(stage, names.values(), record=False, what=what)
             if isinstance(exc, StoreUnavailable):
-                raise StoreUnavailable("%s; nothing of it was applied (it was being staged: %d parts sent)"
-                                       % (exc, requests), exc.endpoint, exc.reason, applied=False,
+                raise StoreUnavailable("%s; nothing of it was applied (it was being staged: %d parts stored)"
+                                       % (exc, sent), exc.endpoint, exc.reason, applied=False,
                                        timed_out=exc.timed_out) from None
             raise
-        ops = self._cleanup_ops()
-        for key in sorted(parts):
-            graph, staged = term_text(key[1]), term_text(names[key])
-            if key[0] == "remove":
-                ops.append("DELETE { GRAPH %s { ?s ?p ?o } } WHERE { GRAPH %s { ?s ?p ?o } }" % (graph, staged))
-        for key in sorted(parts):
-            graph, staged = term_text(key[1]), term_text(names[key])
-            if key[0] == "add":
-                ops.append("INSERT { GRAPH %s { ?s ?p ?o } } WHERE { GRAPH %s { ?s ?p ?o } }" % (graph, staged))
+        lead, version = self._new_version()
+        v_delete, v_insert, v_where = self._version_parts(version, self.links_versions)
+        ops = self._cleanup_ops() + lead
+        for kind, template in (("remove", "DELETE { GRAPH %s { ?s ?p ?o } }"),
+                               ("add", "INSERT { GRAPH %s { ?s ?p ?o } }")):
+            for key in sorted(k for k in parts if k[0] == kind):
+                ops.append("%s WHERE { %s GRAPH %s { ?s ?p ?o } }" % (template % term_text(key[1]), live,
+                                                                     term_text(names[key])))
+        ops.append("DELETE { %s } INSERT { %s %s } WHERE { %s %s }" % (v_delete, self._claim_text(token), v_insert,
+                                                                       live, v_where))
         ops += self._drop_stage_ops(stage, names.values())
-        ops.append("INSERT DATA { %s }" % self._claim_text(token))
-        ops += self._version_ops()
-        self._write(ops, token, what + " (applying its %d staged parts)" % requests)
+        what_final = "%s (applying its %d staged parts)" % (what, sent)
+        sent_at = self.clock()
+        try:
+            self._write(ops, token, what_final)
+        except StoreError as exc:
+            if isinstance(exc, HttpStatusError) or (isinstance(exc, StoreUnavailable) and exc.applied is False):
+                self._drop_stage_quietly(stage, names.values(), record=True, what=what)
+            raise  # applied None: the final request may still land and needs the parts (they expire otherwise)
+        try:
+            stored = self._token_stored(token)
+        except StoreError as exc:
+            self._note_unknown(token, sent_at, timed_out=False, answered=True)
+            raise StoreUnavailable(
+                "%s: %s was answered, but reading its token back failed (%s); whether it was applied is unknown; "
+                "was_applied(%r) tells later" % (self.update_endpoint.name, what_final, exc, token),
+                self.update_endpoint.name, "token read failed", applied=None, token=token) from None
+        if not stored:
+            raise StoreUnavailable(
+                "%s: %s was not applied: its staged parts were dropped as unfinished before it (staging took "
+                "longer than the claim ttl of %.0f s between two parts); nothing of it was applied, try again"
+                % (self.update_endpoint.name, what_final, self.claim_ttl_s), self.update_endpoint.name,
+                "staged parts dropped", applied=False)
+
+    def _drop_stage_quietly(self, stage: str, graphs: Iterable[URIRef], record: bool, what: str) -> None:
+        """Drop a stage's parts (and with ``record`` its record), best effort: what is left expires."""
+        try:
+            self._update(" ;\n".join(self._drop_stage_ops(stage, graphs, record)),
+                         "dropping the staging graphs of %s" % what)
+        except StoreError:
+            pass  # dropped by the next staged change of any client once the record has expired
 
     @staticmethod
     def _drop_stage_ops(stage: str, graphs: Iterable[URIRef], record: bool = True) -> List[str]:
@@ -537,23 +583,26 @@ class SparqlStore(TripleStore):
             ["DELETE WHERE { GRAPH %s { <%s> ?p ?o } }" % (term_text(G_STAGING), stage)] if record else [])
 
     def _drop_dead_stages(self) -> None:
-        """Drop the staging graphs of staged changes that never finished (their record is older than
-        ``claim_ttl_s`` by the server's clock: the client that wrote them died or gave up)."""
+        """Drop the staging graphs and records of staged changes whose record has expired (``meta:stagedAt`` more
+        than its ``meta:stagedTtl`` before the server's ``NOW()``: the client that wrote them died or gave up)."""
+        where = "%s (reading the staging records)" % self.query_endpoint.name
         _, rows = json_rows(self._select_doc(
-            'SELECT ?s ?g WHERE { GRAPH %s { ?s %s ?at ; %s ?g } '
-            'FILTER(?at < NOW() - "PT%dS"^^<http://www.w3.org/2001/XMLSchema#dayTimeDuration>) }'
-            % (term_text(G_STAGING), term_text(P_STAGED_AT), term_text(P_STAGED_GRAPH), int(self.claim_ttl_s) + 1),
-            "reading the staging records", dataset=False), "reading the staging records")
+            'SELECT ?s ?g WHERE { GRAPH %s { ?s %s ?at ; %s ?ttl OPTIONAL { ?s %s ?g } } FILTER(?at < NOW() - '
+            'STRDT(CONCAT("PT", STR(?ttl), "S"), <http://www.w3.org/2001/XMLSchema#dayTimeDuration>)) }'
+            % (term_text(G_STAGING), term_text(P_STAGED_AT), term_text(P_STAGED_TTL), term_text(P_STAGED_GRAPH)),
+            "reading the staging records", dataset=False), where)
         dead: Dict[str, List[URIRef]] = {}
         for r in rows:
             s, g = r.get("s"), r.get("g")
-            if isinstance(s, URIRef) and isinstance(g, URIRef) and str(g).startswith(STAGING_PREFIX):
-                dead.setdefault(str(s), []).append(g)
+            if isinstance(s, URIRef) and str(s).startswith(STAGING_PREFIX):
+                graphs = dead.setdefault(str(s), [])
+                if isinstance(g, URIRef) and str(g).startswith(STAGING_PREFIX):
+                    graphs.append(g)
         if dead:
             ops: List[str] = []
             for stage, graphs in sorted(dead.items()):
                 ops += self._drop_stage_ops(stage, graphs)
-            _log.warning("PEMKRE store %s: dropping %d staged change(s) left unfinished by a client (%s)",
+            _log.warning("PEMKRE store %s: dropping %d staged change(s) left unfinished (%s)",
                          self.update_endpoint.name, len(dead), ", ".join(sorted(dead)))
             self._update(" ;\n".join(ops), "dropping staging graphs left unfinished")
 

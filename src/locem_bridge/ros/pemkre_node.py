@@ -21,8 +21,8 @@ attempt naming the endpoint); a store that answers wrongly is a configuration er
 
 Parameters: ``~store_path`` (directory of the persistent store; default ``$ROS_HOME/pemkre_store``),
 ``~store`` (``journal`` default, ``rocksdb``, ``memory``, ``sparql``: a SPARQL 1.1 server at ``~query_url`` and
-``~update_url``, read from an exact copy in the node unless ``~sparql_copy`` is false; ``~sparql_timeout`` seconds per request,
-default 10), ``~fsync`` (journal: flush
+``~update_url``, read from an exact copy in the node unless ``~sparql_copy`` is false; ``~sparql_timeout``: seconds per
+request, default 10), ``~fsync`` (journal: flush
 each change to disk),
 ``~ontology_dir`` (default: the package's ``ontologies/``), ``~extra_ontology_dirs`` (an integrator's folders of
 Turtle loaded beside it, separated by ``:`` or ``,``), ``~trees_dir`` and ``~extra_trees_dirs`` (the tree folders
@@ -59,6 +59,15 @@ from locem_bridge.srv import (PemkreMatchProcess, PemkreMatchProcessResponse, Pe
 from locem_bridge.ros.startup import config_guard
 from locem_bridge.sim.config import load_site
 
+
+
+def _seconds(name: str, default: float) -> float:
+    """The private parameter ``name`` as a number of seconds above 0 (``param`` refuses what is not a number);
+    ValueError naming it otherwise."""
+    value = param(name, default)
+    if not float(value) > 0:
+        raise ValueError("~%s must be a number of seconds above 0, got %r" % (name, value))
+    return float(value)
 
 def _guard(response_cls: Callable[[], Any], body: Callable[[Any, Any], None]) -> Callable[[Any], Any]:
     """Run ``body(request, response)``; turn PEMKRE errors into ``success=False`` with their code."""
@@ -193,7 +202,7 @@ def main() -> None:
                                                       query_url=query_url,
                                                       update_url=param("update_url", ""),
                                                       mirror=param("sparql_copy", True),
-                                                      **({"timeout_s": float(param("sparql_timeout", 10.0))}
+                                                      **({"timeout_s": _seconds("sparql_timeout", 10.0)}
                                                          if kind == "sparql" else {})),
                                    kind, log=rospy.logwarn, stop=rospy.is_shutdown)
         if site is not None and claim_site_or_close(store, site, where, site_file):
