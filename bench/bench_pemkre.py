@@ -84,7 +84,7 @@ class Result:
         self.requests: List[float] = []         # server: time in requests per sampled decision (answers awaited)
         self.writes: List[float] = []           # server: each update request of the sampled decisions
         self.reads: List[float] = []            # server: each query request of the sampled decisions
-        self.per_decision = (0, 0)              # server: (updates, queries) of the last sampled decision
+        self.per_decision: List[tuple] = []     # server: (updates, queries) of each sampled decision
 
 
 class RequestMeter:
@@ -113,7 +113,7 @@ class RequestMeter:
 
     def take(self) -> None:
         self.res.requests.append(self.total)
-        self.res.per_decision = (self.counts[0], self.counts[1])
+        self.res.per_decision.append((self.counts[0], self.counts[1]))
         self.total, self.counts = 0.0, [0, 0]
 
 
@@ -393,13 +393,14 @@ def main() -> int:
                       "(a client that starts, or finds another writer's version) %.2f s" % (n, r.reloads, r.reload_s))
             if o and r and r.requests and o.decision:
                 w, q = pct(r.writes, 50), pct(r.reads, 50)
-                print("  %6d features: of the server's decision (p50 %.2f ms) %.2f ms are spent awaiting its %d update "
-                      "and %d query requests (p50 per update %.2f ms, per query %.2f ms), the rest is the client's own "
-                      "work; the requests alone are x%.2f of ours' whole decision. Any protocol sends at least the "
-                      "decision's 3 changes (issue, 2 status reports) and one read: at these times x%.2f"
-                      % (n, pct(r.decision, 50) * 1e3, pct(r.requests, 50) * 1e3, r.per_decision[0],
-                         r.per_decision[1], w * 1e3, q * 1e3, pct(r.requests, 50) / pct(o.decision, 50),
-                         (3 * w + q) / pct(o.decision, 50)))
+                counts = max(set(r.per_decision), key=r.per_decision.count)
+                print("  %6d features: of the server's decision (p50 %.2f ms) %.2f ms are spent in its requests "
+                      "(most decisions: %d updates and %d queries; p50 per update %.2f ms, per query %.2f ms, each "
+                      "from sending to the answer read), the rest is the client's own work; the requests alone are "
+                      "x%.2f of ours' whole decision. Any protocol sends at least the decision's 3 changes (issue, 2 "
+                      "status reports) and one read: at these times x%.2f"
+                      % (n, pct(r.decision, 50) * 1e3, pct(r.requests, 50) * 1e3, counts[0], counts[1], w * 1e3,
+                         q * 1e3, pct(r.requests, 50) / pct(o.decision, 50), (3 * w + q) / pct(o.decision, 50)))
             p = results.get("server_plain", {}).get(n)
             if o and p and o.decision and p.decision:
                 print("  %6d features: without the copy (server_plain): next_action p50/p99 %.2f/%.2f ms, status "

@@ -303,6 +303,12 @@ def test_a_server_serving_the_union_as_default_graph_needs_no_dataset(tmp_path):
         s.apply(ChangeSet(add=[(A, P, Literal(1), G_WORLD), (A, URIRef(EX + "q"), Literal(2), URIRef(EX + "g"))]))
         q = s.prepare("SELECT ?x ?y WHERE { ex:a ex:p ?x ; ex:q ?y }", "union", {"ex": EX})
         assert s.select(q) == [{"x": Literal(1), "y": Literal(2)}]
+        # a big change is not staged there (the staging graphs would be part of every query): one request
+        s.max_update_bytes = 1000
+        sent = _counting(s)
+        s.apply(ChangeSet(add=[(URIRef(EX + "j%d" % i), P, Literal(i), G_WORLD) for i in range(100)]))
+        assert len(sent) == 1 and "urn:pemkre:staging" not in sent[0]
+        assert s.count(G_WORLD) == 101
         s.close()
 
 
