@@ -21,14 +21,14 @@ WHERE group (:func:`~locem_bridge.pemkre.sparql_text.values_position`), never as
 
 **Writes.** :meth:`SparqlStore.apply` is ONE update request, ``DELETE DATA {..} ; INSERT DATA {..}``, which servers
 that run one request as one transaction apply all or nothing (Oxigraph does, tested here; Fuseki with TDB2 and
-GraphDB say they do, not tested here). A change whose text is longer than ``max_update_bytes`` (16 MiB by
-default: a world scan of more than about 4,500 features; form-encoded, a scan of more than about 27,000 would
-be over ``oxigraph serve``'s 128 MiB body limit) is *staged*: written in parts into staging graphs outside PEMKRE's graphs
-(``urn:pemkre:staging:..``; no PEMKRE query sees them, but a client that reads every graph of the server does),
-then applied by one request that moves the staged quads into place and drops the staging graphs, so it still shows
-all at once or not at all (:meth:`SparqlStore._apply_staged`). With ``union_default_graph`` the staging graphs
-would be part of every query's default graph: there a change is always one request (a server that refuses one so
-big says so in one line, nothing is written). Every
+GraphDB say they do, not tested here). A change whose text is longer than ``max_update_bytes`` (16 MiB by default: a
+world scan of more than about 4,500 features; form-encoded, a scan of more than about 27,000 would be over
+``oxigraph serve``'s 128 MiB body limit) is *staged*: written in parts into staging graphs outside PEMKRE's graphs
+(``urn:pemkre:staging:..``; no PEMKRE query sees them, but a client that reads every graph of the server does), then
+applied by one request that moves the staged quads into place and drops the staging graphs, so it still shows all at
+once or not at all (:meth:`SparqlStore._apply_staged`). With ``union_default_graph`` the staging graphs would be
+part of every query's default graph: there a change is always one request (a server that refuses one so big says so
+in one line, nothing is written). Every
 write also inserts a *token* (a triple naming a fresh ``urn:uuid:`` in the bookkeeping graph :data:`G_CLAIMS`,
 which queries, :meth:`~SparqlStore.quads` and :meth:`~SparqlStore.count` never see): when the answer to a write is
 lost on the way back, the store asks the server whether the token is there and reports ``applied`` True in
@@ -61,7 +61,8 @@ win: a winner's claim is visible from before its read until its change is commit
 sees it (and steps back) or reads after the change (and its own conditional write finds the quads changed). The
 loser gets :class:`~locem_bridge.pemkre.errors.StoreConflict` naming the expected quad that was not there. A claim
 older than ``claim_ttl_s`` (a client that died between claim and write) no longer counts and is deleted by the next claim request; the ttl must exceed twice the longest read-and-write path (default: that plus 30 s), and a client that took more than half the ttl since its claim withdraws instead of writing. Cost: four requests for
-a conditional change (claim, read claims, write, read token), one for any other change.
+a conditional change (claim, read claims, write, read token), one for any other change (a staged one: one for its
+record, one per part, the final request and a token read).
 
 **Blank nodes are skolem IRIs on the server.** The store takes blank nodes only through
 :meth:`~SparqlStore.replace_graph` (the ontology graphs' restrictions and lists) and writes each as the IRI
@@ -481,11 +482,11 @@ class SparqlStore(TripleStore):
 
         A *record* in :data:`G_STAGING` keeps the stage alive: ``meta:stagedAt`` (the server's ``NOW()``, renewed by
         every part) and ``meta:stagedTtl`` (this client's ``claim_ttl_s``). A stage whose record is older than its
-        ttl has expired: its client died or gave up: the next staged change of any client drops it. The final request moves data only while
-        the record is there, and its token is read back: a stage found dead is ``applied=False``, never half
-        applied. A failure while staging leaves PEMKRE's graphs untouched (``applied=False``) and drops the parts
-        at once (the record stays until it expires: a part whose answer was lost may still land). Called with the
-        lock held."""
+        ttl has expired (its client died or gave up): the next staged change of any client drops it. The final
+        request moves data only while the record is there, and its token is read back: a stage found dead is
+        ``applied=False``, never half applied. A failure while staging leaves PEMKRE's graphs untouched
+        (``applied=False``) and drops the parts at once (the record stays until it expires: a part whose answer was
+        lost may still land). Called with the lock held."""
         stage = "%s%s" % (STAGING_PREFIX, uuid.uuid4())
         parts: Dict[Tuple[str, URIRef], List[Quad]] = {}
         for kind, quads in (("remove", changes.remove), ("add", changes.add)):
@@ -503,11 +504,12 @@ class SparqlStore(TripleStore):
             live, g_stage, me, term_text(P_STAGED_AT), live)
         sent = 0
         try:
-            self._update("INSERT { GRAPH %s { %s %s ?now ; %s %s ; %s %s ; %s %s } } WHERE { BIND(NOW() AS ?now) }" % (
-                g_stage, me, term_text(P_STAGED_AT), term_text(P_STAGED_TTL), term_text(Literal(int(self.claim_ttl_s))),
+            record = "%s %s ?now ; %s %s ; %s %s ; %s %s" % (
+                me, term_text(P_STAGED_AT), term_text(P_STAGED_TTL), term_text(Literal(int(self.claim_ttl_s))),
                 term_text(P_STAGED_BY), term_text(Literal(self.client)),
-                term_text(P_STAGED_GRAPH), ", ".join(term_text(n) for n in names.values())),
-                "staging %s (its record)" % what)
+                term_text(P_STAGED_GRAPH), ", ".join(term_text(n) for n in names.values()))
+            self._update("INSERT { GRAPH %s { %s } } WHERE { BIND(NOW() AS ?now) }" % (g_stage, record),
+                         "staging %s (its record)" % what)
             total = sum(len(q) for q in parts.values())
             done = 0
             for key in sorted(parts):
