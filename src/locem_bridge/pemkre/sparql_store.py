@@ -556,20 +556,24 @@ class SparqlStore(TripleStore):
             if isinstance(exc, HttpStatusError) or (isinstance(exc, StoreUnavailable) and exc.applied is False):
                 self._drop_stage_quietly(stage, names.values(), record=True, what=what)
             raise  # applied None: the final request may still land and needs the parts (they expire otherwise)
-        try:
-            stored = self._token_stored(token)
-        except StoreError as exc:
-            self._note_unknown(token, sent_at, timed_out=False, answered=True)
-            raise StoreUnavailable(
-                "%s: %s was answered, but reading its token back failed (%s); whether it was applied is unknown; "
-                "was_applied(%r) tells later" % (self.update_endpoint.name, what_final, exc, token),
-                self.update_endpoint.name, "token read failed", applied=None, token=token) from None
-        if not stored:
+        if not self._condition_held(token, sent_at, what_final):
             raise StoreUnavailable(
                 "%s: %s was not applied: its staged parts were dropped as unfinished before it (staging took "
                 "longer than the claim ttl of %.0f s between two parts); nothing of it was applied, try again"
                 % (self.update_endpoint.name, what_final, self.claim_ttl_s), self.update_endpoint.name,
                 "staged parts dropped", applied=False)
+
+    def _condition_held(self, token: str, sent: float, what: str) -> bool:
+        """After an answered conditional write: was it applied (its token is there)? When the token cannot be
+        read, the write is done but its fate unknown: noted, and StoreUnavailable with ``applied=None``."""
+        try:
+            return self._token_stored(token)
+        except StoreError as exc:
+            self._note_unknown(token, sent, timed_out=False, answered=True)
+            raise StoreUnavailable(
+                "%s: %s was answered, but reading its token back failed (%s); whether it was applied is unknown; "
+                "was_applied(%r) tells later" % (self.update_endpoint.name, what, exc, token),
+                self.update_endpoint.name, "token read failed", applied=None, token=token) from None
 
     def _drop_stage_quietly(self, stage: str, graphs: Iterable[URIRef], record: bool, what: str) -> None:
         """Drop a stage's parts (and with ``record`` its record), best effort: what is left expires."""
@@ -701,16 +705,7 @@ class SparqlStore(TripleStore):
                     sent = self.clock()
                     self._write(ops, token, what)
                     self._my_claims.discard(claim)  # deleted by the write
-                    try:
-                        stored = self._token_stored(token)
-                    except StoreError as exc:
-                        # the server answered the write (it is done), but whether its condition held is unknown
-                        self._note_unknown(token, sent, timed_out=False, answered=True)
-                        raise StoreUnavailable(
-                            "%s: %s was answered, but reading its token back failed (%s); whether it was applied "
-                            "is unknown; was_applied(%r) tells later" % (self.update_endpoint.name, what, exc, token),
-                            self.update_endpoint.name, "token read failed", applied=None, token=token) from None
-                    if not stored:
+                    if not self._condition_held(token, sent, what):
                         self._raise_conflict(changes)
                     self._done_tokens.append(token)
                     return
